@@ -1,0 +1,85 @@
+"""Messages the allocation agents exchange.  Plain frozen dataclasses, no I/O.
+
+Every message carries ``sender`` (robot id, 1..250) and ``dest`` (0 = every peer).  The comms layer
+maps each class to one MAVLink message of the private dialect with the same field names
+(see ``runtime/comms/codec.py``); the in-memory bus in tests passes the objects as they are.
+
+Ids: ``task`` and ``auction`` are unsigned 16/32-bit integers chosen by the sender; an auction id
+is unique per auctioneer, so (sender, auction) names one auction fleet-wide.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+BROADCAST = 0
+
+
+@dataclass(frozen=True)
+class TaskInfo:
+    """A task exists at (x, y) in the fleet frame; ``n_tasks`` is the size of the task set
+    (RTMA uses it for each robot's mean cost)."""
+    sender: int
+    dest: int
+    task: int
+    x: float
+    y: float
+    n_tasks: int
+
+
+@dataclass(frozen=True)
+class Announce:
+    """Auctioneer offers ``task``.  ``reserve`` is the auctioneer's own cost for it (+inf if it has
+    none); BS sells a task back only to a bid worse than that."""
+    sender: int
+    dest: int
+    auction: int
+    task: int
+    x: float
+    y: float
+    reserve: float
+
+
+@dataclass(frozen=True)
+class Bid:
+    sender: int
+    dest: int
+    auction: int
+    task: int
+    cost: float
+
+
+@dataclass(frozen=True)
+class Award:
+    """``winner`` gets ``task`` at ``cost``; ``mean`` is the mean of all bids heard (RTMA)."""
+    sender: int
+    dest: int
+    auction: int
+    task: int
+    winner: int
+    cost: float
+    mean: float
+
+
+@dataclass(frozen=True)
+class Price:
+    """Auction-algorithm price update: ``holder`` holds ``task`` at ``price`` (epsilon-scaling
+    phase ``phase``)."""
+    sender: int
+    dest: int
+    task: int
+    holder: int
+    price: float
+    phase: int
+
+
+@dataclass(frozen=True)
+class Status:
+    """A robot's allocation state: the task it holds (or 0xFFFF for none) and whether it believes
+    the allocation has converged."""
+    sender: int
+    dest: int
+    task: int
+    converged: bool
+
+
+AGENT_MESSAGES = (TaskInfo, Announce, Bid, Award, Price, Status)

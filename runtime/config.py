@@ -97,12 +97,21 @@ class LocalizationConfig:
     odom_sigma_v: float = field(default=0.02, metadata=rng(0.0, 10))       # m/s
     odom_sigma_w: float = field(default=0.05, metadata=rng(0.0, 10))       # rad/s
     gate: float = field(default=13.8, metadata=rng(0.1, 1000))             # chi^2(2) 99.9 %
+    # x, y, heading in the fleet frame where the operator placed the robot; null: from the first GPS fix
+    # with heading unknown until the robot has moved
+    initial_pose: Optional[tuple[float, float, float]] = None
+
+
+@dataclass(frozen=True)
+class Peer:
+    id: int = field(metadata=rng(1, 250))
+    address: str = field(default="127.0.0.1:14601")
 
 
 @dataclass(frozen=True)
 class CommsConfig:
     listen: str = "127.0.0.1:14601"
-    peers: tuple[str, ...] = ()
+    peers: tuple[Peer, ...] = ()
     gcs: Optional[str] = "127.0.0.1:14550"
     signing_key: Optional[str] = None     # path to a fleet key file (32 bytes hex)
     heartbeat_timeout: float = field(default=3.0, metadata=rng(0.1, 60))
@@ -121,6 +130,8 @@ class ControlConfig:
 class AllocationConfig:
     method: Literal["bs", "rtma", "auction"] = "bs"
     bid_timeout: float = field(default=1.0, metadata=rng(0.01, 60))
+    formation: tuple[tuple[float, float], ...] = ()   # task positions in the fleet frame (m)
+    initiator: bool = False        # this robot announces the formation (one robot per fleet)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,35 @@
+"""`mrta experiment NAME`: one module per paper table/figure.
+
+Each experiment module exposes ``add_arguments(parser)`` and ``run(args) -> int`` and writes
+CSV + PNG + a markdown table (with the paper's numbers beside ours) under ``--out``.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+
+EXPERIMENTS = {
+    "wdp-tables": ("sitl.experiments.wdp_tables", "paper 001 Tables 3-6: IDA* and BFS nodes/seconds"),
+    "formation-ideal": ("sitl.experiments.formation_ideal", "paper 002 Fig. 6 and 7: error vs Hungarian, 2-20 robots"),
+    "formation-twobox": ("sitl.experiments.formation_twobox", "paper 002 Fig. 9: the two-box distribution"),
+    "formation-world": ("sitl.experiments.formation_world", "paper 002 Tables I-II: A*/RRT in the pybullet world"),
+}
+
+
+def _available() -> dict[str, tuple[str, str]]:
+    out = {}
+    for name, (module, help_) in EXPERIMENTS.items():
+        if importlib.util.find_spec(module) is not None:
+            out[name] = (module, help_)
+    return out
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser("experiment", help="reproduce a paper's table or figure")
+    exp_sub = parser.add_subparsers(dest="experiment", metavar="NAME", required=True)
+    for name, (module_name, help_) in _available().items():
+        module = importlib.import_module(module_name)
+        p = exp_sub.add_parser(name, help=help_)
+        p.add_argument("--out", default=f"out/{name}", help="output directory (default: out/%(default)s)")
+        module.add_arguments(p)
+        p.set_defaults(func=module.run)

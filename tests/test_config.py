@@ -1,0 +1,128 @@
+"""Configs: every shipped file loads; every kind of mistake is one line naming file and key."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+from hypothesis import given, settings, strategies as st
+
+from runtime import config as C
+from runtime.config import ConfigError
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIGS = ROOT / "configs"
+
+
+@pytest.mark.parametrize("path", sorted((CONFIGS / "robots").glob("*.yaml")), ids=lambda p: p.name)
+def test_shipped_robot_configs_load(path):
+    cfg = C.load_robot(path)
+    assert cfg.source == str(path)
+    assert 1 <= cfg.robot.id <= 250
+
+
+@pytest.mark.parametrize("path", sorted((CONFIGS / "worlds").glob("*.yaml")), ids=lambda p: p.name)
+def test_shipped_world_configs_load(path):
+    cfg = C.load_world(path)
+    assert cfg.size[0] > 0 and cfg.size[1] > 0
+
+
+@pytest.mark.parametrize("path", sorted((CONFIGS / "fleets").glob("*.yaml")), ids=lambda p: p.name)
+def test_shipped_fleet_configs_load(path):
+    fleet = C.load_fleet(path)
+    C.load_world(fleet.world)
+    C.load_robot(fleet.robot)
+    assert len(fleet.robots) == len(fleet.formation)
+
+
+def test_every_shipped_config_is_covered():
+    kinds = {p.parent.name for p in CONFIGS.rglob("*.yaml")}
+    assert kinds <= {"robots", "worlds", "fleets"}
+
+
+def _write(tmp_path, data, name="robot.yaml"):
+    p = tmp_path / name
+    p.write_text(yaml.safe_dump(data) if not isinstance(data, str) else data)
+    return p
+
+
+@pytest.mark.parametrize(
+    "data, key, expected",
+    [
+        ({"robot": {"idd": 3}}, "robot.idd", "no such key"),
+        ({"robot": {"id": 0}}, "robot.id", "[1, 250]"),
+        ({"robot": {"id": 2.5}}, "robot.id", "an integer"),
+        ({"base": {"model": "roomba"}}, "base.model", "one of create1|create2"),
+        ({"base": {"max_speed": 0.9}}, "base.max_speed", "[0.01, 0.5]"),
+        ({"control": {"lookahead": "far"}}, "control.lookahead", "a number"),
+        ({"gps": {"enabled": "yes"}}, "gps.enabled", "true/false"),
+        ({"comms": {"peers": [{"id": 2}, {"address": "x"}]}}, "comms.peers[1].id", "required"),
+        ({"localization": {"initial_pose": [1, 2]}}, "localization.initial_pose", "a list of 3 numbers"),
+        ({"datum": {"lat": 91}}, "datum.lat", "[-90, 90]"),
+        ({"control": {"rate": float("nan")}}, "control.rate", "a number"),
+        ([1, 2], "<top>", "a mapping"),
+    ],
+)
+def test_bad_robot_config_names_file_and_key(tmp_path, data, key, expected):
+    path = _write(tmp_path, data)
+    with pytest.raises(ConfigError) as info:
+        C.load_robot(path)
+    msg = str(info.value)
+    assert msg.startswith(f"{path}: {key}: expected"), msg
+    assert expected in msg
+    assert "\n" not in msg
+
+
+def test_bad_yaml_and_missing_file(tmp_path):
+    path = _write(tmp_path, "robot: [1, 2\n")
+    with pytest.raises(ConfigError, match="line 2: expected valid YAML"):
+        C.load_robot(path)
+    with pytest.raises(ConfigError, match="readable YAML file"):
+        C.load_robot(tmp_path / "nope.yaml")
+
+
+def test_fleet_checks_paths_and_ids(tmp_path):
+    good = yaml.safe_load((CONFIGS / "fleets" / "create2_4.yaml").read_text())
+    bad = dict(good, world="../nowhere.yaml")
+    path = _write(tmp_path, bad, "fleet.yaml")
+    with pytest.raises(ConfigError, match=r"fleet.yaml: world: expected a path"):
+        C.load_fleet(path)
+    dup = dict(good, world=str(CONFIGS / "worlds" / "arena_10m.yaml"),
+               robot=str(CONFIGS / "robots" / "create2.yaml"),
+               robots=[{"id": 1}, {"id": 1}])
+    path = _write(tmp_path, dup, "fleet.yaml")
+    with pytest.raises(ConfigError, match="robots: expected unique robot ids"):
+        C.load_fleet(path)
+
+
+def test_cli_exits_2_with_one_line(tmp_path, capsys):
+    from runtime.cli import main
+    path = _write(tmp_path, {"robot": {"id": 999}})
+    code = main(["daemon", str(path), "--check"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert err.count("\n") == 0 and "robot.id" in err and str(path) in err
+
+
+def test_round_trip_to_dict():
+    cfg = C.load_robot(CONFIGS / "robots" / "create2.yaml")
+    again = C.from_dict(C.RobotConfig, C.to_dict(cfg), cfg.source)
+    assert again == cfg
+
+
+yaml_values = st.recursive(
+    st.none() | st.booleans() | st.integers(-10**6, 10**6) | st.floats(allow_nan=True) | st.text(max_size=8),
+    lambda children: st.lists(children, max_size=4) | st.dictionaries(st.text(max_size=8), children, max_size=4),
+    max_leaves=20,
+)
+section_names = st.sampled_from(["robot", "base", "gps", "localization", "comms", "control", "allocation", "datum"])
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.dictionaries(section_names | st.text(max_size=6), yaml_values, max_size=5))
+def test_random_config_data_never_crashes(data):
+    """Whatever the YAML holds, loading gives a config or a ConfigError - nothing else."""
+    try:
+        C.from_dict(C.RobotConfig, data, "random.yaml")
+    except ConfigError as exc:
+        assert str(exc).startswith("random.yaml: ")

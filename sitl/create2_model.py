@@ -1,0 +1,252 @@
+"""A simulated iRobot Create 2: a dynamic pybullet multibody and the readings its emulator serves.
+
+The body is built from primitives (no URDF file): a cylinder shell, two velocity-controlled wheel
+joints (sphere collision shapes, cheap and single-contact on the floor) and two frictionless caster
+spheres on fixed joints.  Everything the device emulators read comes from the physics: wheel joint
+angles, contact points, base velocity, motor torques.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet as p
+
+from runtime.errors import InputError
+
+# Geometry and mass (iRobot Create 2 Open Interface spec and the robot's published dimensions).
+SHELL_RADIUS = 0.17           # m (340 mm diameter)
+SHELL_TOP = 0.092             # m above the floor
+SHELL_CLEARANCE = 0.010       # m, floor to the underside of the shell
+WHEEL_RADIUS = 0.036          # m (72 mm wheels)
+WHEEL_TRACK = 0.235           # m between wheel contact points
+CASTER_RADIUS = 0.012         # m
+CASTER_X = 0.13               # m ahead of / behind the axle
+MASS_SHELL = 3.2              # kg
+MASS_WHEEL = 0.15             # kg each
+MASS_CASTER = 0.05            # kg each
+MAX_WHEEL_SPEED = 0.5         # m/s
+MAX_WHEEL_TORQUE = 0.3        # N m per wheel at the wheel shaft (below the traction limit ~0.6)
+WHEEL_FRICTION = 1.0
+SHELL_FRICTION = 0.3
+
+# Bumper: contacts on the shell within +-BUMPER_ARC of the heading count; inside +-BUMPER_CENTRE
+# both switches close (the bumper is one piece on two switches).
+BUMPER_ARC = math.radians(90.0)
+BUMPER_CENTRE = math.radians(15.0)
+CONTACT_MARGIN = 0.002        # m: manifold points farther apart than this are not touching
+
+# Battery (OI packets 21-26): Create 2 capacity as the robot reports it.
+CAPACITY_MAH = 2696.0
+V_FULL_MV = 16800.0
+V_EMPTY_MV = 13200.0
+R_INTERNAL = 0.15             # ohm
+IDLE_CURRENT_MA = 180.0       # electronics, sensors, OI
+MOTOR_KT = 0.3                # N m per A at the wheel (incl. gearbox)
+MOTOR_R = 2.0                 # ohm winding resistance
+MOTOR_EFFICIENCY = 0.6
+MOTOR_NO_LOAD_MA = 120.0      # per motor at full speed (gearbox and brush losses), scales with speed
+THERMAL_TAU = 600.0           # s
+THERMAL_GAIN = 2.0            # K per W of battery loss at steady state
+
+SHELL_CENTRE_Z = (SHELL_CLEARANCE + SHELL_TOP) / 2      # base frame height above the floor
+SHELL_HEIGHT = SHELL_TOP - SHELL_CLEARANCE
+LEFT, RIGHT = 0, 1            # link indices of the wheel joints
+CASTERS = (2, 3)
+
+
+def build_body(client: int, start: tuple[float, float, float], gui: bool = False) -> int:
+    """Create the multibody at ``start`` = (x, y, yaw) on the floor and return its body id."""
+    kw = {"physicsClientId": client}
+    shell = p.createCollisionShape(p.GEOM_CYLINDER, radius=SHELL_RADIUS, height=SHELL_HEIGHT, **kw)
+    wheel = p.createCollisionShape(p.GEOM_SPHERE, radius=WHEEL_RADIUS, **kw)
+    caster = p.createCollisionShape(p.GEOM_SPHERE, radius=CASTER_RADIUS, **kw)
+    vis_shell = vis_wheel = vis_caster = -1
+    if gui:
+        vis_shell = p.createVisualShape(p.GEOM_CYLINDER, radius=SHELL_RADIUS, length=SHELL_HEIGHT,
+                                        rgbaColor=(0.2, 0.2, 0.2, 1), **kw)
+        vis_wheel = p.createVisualShape(p.GEOM_SPHERE, radius=WHEEL_RADIUS, rgbaColor=(0.1, 0.1, 0.1, 1), **kw)
+        vis_caster = p.createVisualShape(p.GEOM_SPHERE, radius=CASTER_RADIUS, rgbaColor=(0.6, 0.6, 0.6, 1), **kw)
+    axle_z = WHEEL_RADIUS - SHELL_CENTRE_Z
+    caster_z = CASTER_RADIUS - SHELL_CENTRE_Z
+    half = WHEEL_TRACK / 2
+    x, y, yaw = start
+    body = p.createMultiBody(
+        baseMass=MASS_SHELL, baseCollisionShapeIndex=shell, baseVisualShapeIndex=vis_shell,
+        basePosition=(x, y, SHELL_CENTRE_Z), baseOrientation=p.getQuaternionFromEuler((0, 0, yaw)),
+        linkMasses=[MASS_WHEEL, MASS_WHEEL, MASS_CASTER, MASS_CASTER],
+        linkCollisionShapeIndices=[wheel, wheel, caster, caster],
+        linkVisualShapeIndices=[vis_wheel, vis_wheel, vis_caster, vis_caster],
+        linkPositions=[(0, half, axle_z), (0, -half, axle_z), (CASTER_X, 0, caster_z), (-CASTER_X, 0, caster_z)],
+        linkOrientations=[(0, 0, 0, 1)] * 4,
+        linkInertialFramePositions=[(0, 0, 0)] * 4,
+        linkInertialFrameOrientations=[(0, 0, 0, 1)] * 4,
+        linkParentIndices=[0, 0, 0, 0],
+        linkJointTypes=[p.JOINT_REVOLUTE, p.JOINT_REVOLUTE, p.JOINT_FIXED, p.JOINT_FIXED],
+        linkJointAxis=[(0, 1, 0), (0, 1, 0), (0, 0, 1), (0, 0, 1)],
+        **kw)
+    # contactProcessingThreshold=0: only touching manifold points become solver constraints.  A rolling
+    # sphere leaves stale points behind in the manifold; solving those too costs half the step time.
+    p.changeDynamics(body, -1, lateralFriction=SHELL_FRICTION, restitution=0.0, contactProcessingThreshold=0.0,
+                     activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING, **kw)
+    for link in (LEFT, RIGHT):
+        p.changeDynamics(body, link, lateralFriction=WHEEL_FRICTION, spinningFriction=0.0,
+                         rollingFriction=0.0, restitution=0.0, jointDamping=0.0,
+                         contactProcessingThreshold=0.0, **kw)
+    for link in CASTERS:
+        p.changeDynamics(body, link, lateralFriction=0.0, spinningFriction=0.0, rollingFriction=0.0,
+                         restitution=0.0, contactProcessingThreshold=0.0, **kw)
+    # Revolute joints start with a default velocity motor of small force; replace it with ours.
+    p.setJointMotorControlArray(body, [LEFT, RIGHT], p.VELOCITY_CONTROL, targetVelocities=[0.0, 0.0],
+                                forces=[MAX_WHEEL_TORQUE] * 2, **kw)
+    return body
+
+
+@dataclass
+class Battery:
+    """Charge, terminal voltage and temperature of the pack, integrated from the motor load."""
+    charge_mah: float
+    temperature_c: float
+    ambient_c: float
+    current_ma: float = -IDLE_CURRENT_MA
+
+    def soc(self) -> float:
+        return min(1.0, max(0.0, self.charge_mah / CAPACITY_MAH))
+
+    def open_circuit_mv(self) -> float:
+        return V_EMPTY_MV + (V_FULL_MV - V_EMPTY_MV) * self.soc()
+
+    def voltage_mv(self) -> float:
+        return max(0.0, self.open_circuit_mv() + self.current_ma * R_INTERNAL)
+
+    def integrate(self, motor_power_w: float, motor_ma: float, dt: float) -> None:
+        """Draw idle current, ``motor_ma`` and ``motor_power_w`` (at pack voltage) for ``dt`` seconds."""
+        volts = self.open_circuit_mv() / 1000.0
+        amps = (IDLE_CURRENT_MA + motor_ma) / 1000.0 + (motor_power_w / volts if volts > 0 else 0.0)
+        self.current_ma = -amps * 1000.0 if self.charge_mah > 0 else 0.0
+        self.charge_mah = max(0.0, self.charge_mah - amps * 1000.0 * dt / 3600.0)
+        loss_w = amps * amps * R_INTERNAL
+        target = self.ambient_c + THERMAL_GAIN * loss_w
+        self.temperature_c += (target - self.temperature_c) * min(1.0, dt / THERMAL_TAU)
+
+
+class SimCreate2:
+    """One Create 2 body in a :class:`sitl.world.World`; the device emulators call these methods."""
+
+    def __init__(self, client: int, robot_id: int, start: tuple[float, float, float],
+                 rng: np.random.Generator, gui: bool = False):
+        self.robot_id = robot_id
+        self._client = client
+        self._kw = {"physicsClientId": client}
+        self.body_id = build_body(client, start, gui)
+        self._targets = (0.0, 0.0)
+        self._torques = (0.0, 0.0)
+        self._rates = (0.0, 0.0)
+        ambient = float(rng.uniform(22.0, 26.0))
+        self._battery = Battery(charge_mah=float(rng.uniform(0.9, 1.0)) * CAPACITY_MAH,
+                                temperature_c=ambient, ambient_c=ambient)
+
+    # -------------------------------------------------------------- commands
+    def set_wheel_speeds(self, left_mps: float, right_mps: float) -> None:
+        """Wheel motor targets (m/s at the rim), clipped to +-0.5 m/s."""
+        for name, v in (("left", left_mps), ("right", right_mps)):
+            if not math.isfinite(v):
+                raise InputError(f"robot {self.robot_id}: {name} wheel speed: expected a finite number, got {v!r}")
+        left = max(-MAX_WHEEL_SPEED, min(MAX_WHEEL_SPEED, float(left_mps)))
+        right = max(-MAX_WHEEL_SPEED, min(MAX_WHEEL_SPEED, float(right_mps)))
+        if (left, right) == self._targets:
+            return
+        self._targets = (left, right)
+        p.setJointMotorControlArray(self.body_id, [LEFT, RIGHT], p.VELOCITY_CONTROL,
+                                    targetVelocities=[left / WHEEL_RADIUS, right / WHEEL_RADIUS],
+                                    forces=[MAX_WHEEL_TORQUE] * 2, **self._kw)
+
+    def wheel_targets(self) -> tuple[float, float]:
+        """The commanded wheel speeds after clipping (m/s)."""
+        return self._targets
+
+    # -------------------------------------------------------------- physics hook
+    def after_step(self, dt: float) -> None:
+        """Sample the motor load and draw its charge over the last ``dt`` seconds (called by the world)."""
+        states = p.getJointStates(self.body_id, [LEFT, RIGHT], **self._kw)
+        self._rates = (states[0][1], states[1][1])
+        self._torques = (states[0][3], states[1][3])
+        power = no_load = 0.0
+        for tau, omega in zip(self._torques, self._rates):
+            amps = abs(tau) / MOTOR_KT
+            power += abs(tau * omega) / MOTOR_EFFICIENCY + amps * amps * MOTOR_R
+            no_load += MOTOR_NO_LOAD_MA * min(1.0, abs(omega) * WHEEL_RADIUS / MAX_WHEEL_SPEED)
+        self._battery.integrate(power, no_load, dt)
+
+    # -------------------------------------------------------------- sensors
+    def wheel_travel(self) -> tuple[float, float]:
+        """Cumulative signed distance each wheel rolled (m): joint angle x wheel radius."""
+        states = p.getJointStates(self.body_id, [LEFT, RIGHT], **self._kw)
+        return states[0][0] * WHEEL_RADIUS, states[1][0] * WHEEL_RADIUS
+
+    def motor_currents_ma(self) -> tuple[int, int]:
+        """Left/right motor current (mA) from the present wheel motor torques."""
+        states = p.getJointStates(self.body_id, [LEFT, RIGHT], **self._kw)
+        return tuple(int(round(abs(s[3]) / MOTOR_KT * 1000.0)) for s in states)
+
+    def bumps(self) -> tuple[bool, bool]:
+        """Left/right bumper: any other body touching the front arc of the shell."""
+        x, y, yaw = self.pose()
+        c, s = math.cos(yaw), math.sin(yaw)
+        left = right = False
+        for cp in p.getContactPoints(bodyA=self.body_id, linkIndexA=-1, **self._kw):
+            if cp[2] == self.body_id or cp[8] > CONTACT_MARGIN:
+                continue
+            dx, dy = cp[5][0] - x, cp[5][1] - y
+            lx, ly = c * dx + s * dy, -s * dx + c * dy
+            bearing = math.atan2(ly, lx)
+            if abs(bearing) > BUMPER_ARC:
+                continue
+            if bearing >= -BUMPER_CENTRE:
+                left = True
+            if bearing <= BUMPER_CENTRE:
+                right = True
+        return left, right
+
+    def wheel_drop(self) -> tuple[bool, bool]:
+        """Left/right wheel not touching anything (lifted)."""
+        return (not self._touching(LEFT), not self._touching(RIGHT))
+
+    def _touching(self, link: int) -> bool:
+        for cp in p.getContactPoints(bodyA=self.body_id, linkIndexA=link, **self._kw):
+            if cp[2] != self.body_id and cp[8] <= CONTACT_MARGIN:
+                return True
+        return False
+
+    def pose(self) -> tuple[float, float, float]:
+        """Ground truth x, y (m) and yaw (rad), ENU."""
+        pos, orn = p.getBasePositionAndOrientation(self.body_id, **self._kw)
+        qx, qy, qz, qw = orn
+        yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+        return pos[0], pos[1], yaw
+
+    def height(self) -> float:
+        """Ground truth height of the base frame above the floor (m); ~0.051 when resting."""
+        return p.getBasePositionAndOrientation(self.body_id, **self._kw)[0][2]
+
+    def velocity(self) -> tuple[float, float]:
+        """Ground truth vx, vy (m/s), ENU."""
+        lin, _ = p.getBaseVelocity(self.body_id, **self._kw)
+        return lin[0], lin[1]
+
+    def yaw_rate(self) -> float:
+        """Ground truth turn rate (rad/s, counter-clockwise)."""
+        return p.getBaseVelocity(self.body_id, **self._kw)[1][2]
+
+    def battery(self) -> dict:
+        """charge_mah, capacity_mah, voltage_mv, current_ma (negative discharging), temperature_c."""
+        b = self._battery
+        return {"charge_mah": b.charge_mah, "capacity_mah": CAPACITY_MAH, "voltage_mv": b.voltage_mv(),
+                "current_ma": b.current_ma, "temperature_c": b.temperature_c}
+
+    def place(self, x: float, y: float, yaw: float, z: float | None = None) -> None:
+        """Teleport the body (test and launcher use only; zeroes its velocity)."""
+        p.resetBasePositionAndOrientation(self.body_id, (x, y, SHELL_CENTRE_Z if z is None else z),
+                                          p.getQuaternionFromEuler((0, 0, yaw)), **self._kw)
+        p.resetBaseVelocity(self.body_id, (0, 0, 0), (0, 0, 0), **self._kw)

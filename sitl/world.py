@@ -1,0 +1,137 @@
+"""The pybullet SITL world: floor, arena walls, static box obstacles and Create 2 bodies.
+
+Each :class:`World` owns its own pybullet DIRECT (or GUI) client, so several worlds can live in one
+process.  Time only moves in :meth:`World.step`; with the same seed and the same call sequence a run
+is bit-for-bit repeatable.  Robots interact only through pybullet contacts.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pybullet as p
+
+from runtime.config import WorldConfig
+from runtime.errors import InputError
+from runtime.log import get_logger
+from sitl.create2_model import SHELL_RADIUS, SimCreate2
+
+__all__ = ["World", "SimCreate2"]
+
+GRAVITY = 9.81
+WALL_THICKNESS = 0.1
+WALL_HEIGHT = 0.3
+SOLVER_ITERATIONS = 10          # default 50; 10 keeps wheel/contact errors < 1 % at dt = 5 ms
+FLOOR_FRICTION = 1.0
+OBSTACLE_FRICTION = 0.5
+MOTOR_SAMPLE_PERIOD = 0.02      # s of sim time between motor-load samples for the battery model
+
+
+class World:
+    """A lock-stepped pybullet world built from a :class:`runtime.config.WorldConfig`."""
+
+    def __init__(self, cfg: WorldConfig, seed: int = 0, dt: float = 1 / 200, gui: bool = False):
+        if not (isinstance(dt, (int, float)) and math.isfinite(dt) and 0 < dt <= 0.05):
+            raise InputError(f"world dt: expected a time step in (0, 0.05] s, got {dt!r}")
+        self.cfg = cfg
+        self.seed = int(seed)
+        self.dt = float(dt)
+        self.gui = gui
+        self._steps = 0
+        self._unsampled = 0
+        self._sample_every = max(1, int(round(MOTOR_SAMPLE_PERIOD / self.dt)))
+        self._bodies: dict[int, SimCreate2] = {}
+        self._log = get_logger("sitl.world")
+        self._client = p.connect(p.GUI if gui else p.DIRECT)
+        if self._client < 0:
+            raise RuntimeError("pybullet: could not connect a physics client")
+        kw = self._kw = {"physicsClientId": self._client}
+        p.resetSimulation(**kw)
+        p.setPhysicsEngineParameter(fixedTimeStep=self.dt, numSubSteps=0, numSolverIterations=SOLVER_ITERATIONS,
+                                    deterministicOverlappingPairs=1, **kw)
+        p.setGravity(0, 0, -GRAVITY, **kw)
+        self.floor_id = self._static_body(p.createCollisionShape(p.GEOM_PLANE, **kw), (0, 0, 0), 0.0,
+                                          visual=p.createVisualShape(p.GEOM_PLANE, **kw) if gui else -1)
+        p.changeDynamics(self.floor_id, -1, lateralFriction=FLOOR_FRICTION, restitution=0.0, **kw)
+        self.wall_ids: list[int] = []
+        if cfg.walls:
+            sx, sy = cfg.size
+            t = WALL_THICKNESS
+            for cx, cy, hx, hy in ((0, sy / 2 + t / 2, sx / 2 + t, t / 2), (0, -sy / 2 - t / 2, sx / 2 + t, t / 2),
+                                   (sx / 2 + t / 2, 0, t / 2, sy / 2), (-sx / 2 - t / 2, 0, t / 2, sy / 2)):
+                self.wall_ids.append(self._box((cx, cy), (2 * hx, 2 * hy), WALL_HEIGHT, 0.0))
+        self.obstacle_ids = [self._box(b.center, b.size, b.height, b.yaw) for b in cfg.obstacles]
+        self._log.debug("world %s: %d walls, %d obstacles, dt %.4f s", cfg.source or "<config>",
+                        len(self.wall_ids), len(self.obstacle_ids), self.dt)
+
+    # -------------------------------------------------------------- building
+    def _static_body(self, shape: int, pos, yaw: float, visual: int = -1) -> int:
+        return p.createMultiBody(baseMass=0, baseCollisionShapeIndex=shape, baseVisualShapeIndex=visual,
+                                 basePosition=pos, baseOrientation=p.getQuaternionFromEuler((0, 0, yaw)),
+                                 **self._kw)
+
+    def _box(self, center, size, height: float, yaw: float) -> int:
+        half = (size[0] / 2, size[1] / 2, height / 2)
+        shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, **self._kw)
+        vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=(0.7, 0.5, 0.3, 1),
+                                  **self._kw) if self.gui else -1
+        body = self._static_body(shape, (center[0], center[1], height / 2), yaw, vis)
+        p.changeDynamics(body, -1, lateralFriction=OBSTACLE_FRICTION, restitution=0.0, **self._kw)
+        return body
+
+    def add_create2(self, robot_id: int, start: tuple[float, float, float]) -> SimCreate2:
+        """Put a Create 2 on the floor at ``start`` = (x, y, yaw) and return it."""
+        if robot_id in self._bodies:
+            raise InputError(f"robot {robot_id}: expected a unique robot id, it is already in the world")
+        if len(start) != 3 or not all(math.isfinite(v) for v in start):
+            raise InputError(f"robot {robot_id} start: expected (x, y, yaw) finite numbers, got {start!r}")
+        x, y, yaw = (float(v) for v in start)
+        sx, sy = self.cfg.size
+        if self.cfg.walls and (abs(x) > sx / 2 - SHELL_RADIUS or abs(y) > sy / 2 - SHELL_RADIUS):
+            raise InputError(f"robot {robot_id} start ({x}, {y}): expected inside the {sx:g} x {sy:g} m arena "
+                             f"by at least the robot radius {SHELL_RADIUS} m")
+        rng = np.random.default_rng([self.seed, int(robot_id)])
+        body = SimCreate2(self._client, robot_id, (x, y, yaw), rng, gui=self.gui)
+        self._bodies[robot_id] = body
+        return body
+
+    # -------------------------------------------------------------- running
+    @property
+    def t(self) -> float:
+        """Simulated time (s)."""
+        return self._steps * self.dt
+
+    @property
+    def bodies(self) -> dict[int, SimCreate2]:
+        return self._bodies
+
+    @property
+    def client_id(self) -> int:
+        return self._client
+
+    def step(self, n: int = 1) -> None:
+        """Advance ``n`` physics steps of ``dt``; every ``MOTOR_SAMPLE_PERIOD`` of sim time, update every
+        body's motor load and battery over the steps since the last update."""
+        for _ in range(n):
+            p.stepSimulation(**self._kw)
+        self._steps += n
+        self._unsampled += n
+        if self._unsampled >= self._sample_every:
+            elapsed = self._unsampled * self.dt
+            self._unsampled = 0
+            for body in self._bodies.values():
+                body.after_step(elapsed)
+
+    def close(self) -> None:
+        if self._client is not None and self._client >= 0:
+            try:
+                p.disconnect(**self._kw)
+            except p.error:
+                pass
+            self._client = -1
+
+    def __enter__(self) -> "World":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

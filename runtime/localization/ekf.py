@@ -1,0 +1,303 @@
+"""Pose EKF: unicycle model fusing wheel odometry and GPS, on filterpy's ExtendedKalmanFilter.
+
+State ``(x, y, heading, v, w)`` in the fleet ENU frame (x east, y north, heading counter-clockwise
+from east).  ``predict(dt)`` moves the state along the unicycle (midpoint heading) with white
+linear and angular acceleration noise.
+
+Odometry is a *measurement* of ``(v, w)``, not a control input.  Chosen because the base reports
+body velocities (``Odometry.v, w``) at its own rate, independent of the control cycle that calls
+``predict``; as a measurement its noise (``odom_sigma_v``, ``odom_sigma_w``) is weighed against GPS,
+so the filter still predicts through an odometry dropout and a wheel that slips is outvoted
+instead of being integrated blindly.
+
+GPS ``(e, n)`` is gated: the squared Mahalanobis distance of the innovation against chi-square with
+2 dof (``gate``, default 13.8 = 99.9 %).  Outliers are dropped and counted (``gps_rejected``);
+after ``max_rejections`` in a row the position is reset to the fix (``stats.gps_resets``), since
+then the filter, not the receiver, is the one that is wrong.
+
+Heading may start unknown (initialised from a GPS fix).  Until it is known the position is a random
+walk whose step is the odometry speed, and the odometry path since then is kept beside the GPS
+fixes; once the path has spread enough that the least-squares rotation aligning it with the fixes
+has a standard deviation below ``resolve_sigma``, heading (and position) are set from that fit and
+the full unicycle model takes over.  Heading is wrapped to (-pi, pi] after every step and in the
+heading innovation.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter
+
+from runtime.config import LocalizationConfig
+from runtime.localization.enu import wrap_angle
+from runtime.log import get_logger
+
+_H_POS = np.array([[1.0, 0, 0, 0, 0], [0, 1.0, 0, 0, 0]])
+_H_VW = np.array([[0, 0, 0, 1.0, 0], [0, 0, 0, 0, 1.0]])
+_H_HEADING = np.array([[0, 0, 1.0, 0, 0]])
+_MIN_SIGMA = 1e-3          # floor on measurement sigmas (a zero sigma makes S singular)
+_MAX_STEP = 0.1            # s; longer predictions are split
+
+
+@dataclass
+class EkfStats:
+    predictions: int = 0
+    odometry_updates: int = 0
+    gps_accepted: int = 0
+    gps_rejected: int = 0      # dropped by the Mahalanobis gate
+    gps_resets: int = 0        # position reset after max_rejections rejections in a row
+    heading_updates: int = 0
+    heading_rejected: int = 0
+    heading_resolved: int = 0  # times heading was found from motion
+    nonfinite: int = 0         # measurements or dt with nan/inf, ignored
+
+
+class _UnicycleEKF(ExtendedKalmanFilter):
+    """filterpy EKF whose state transition is the unicycle; ``u = (dt, heading_known)``."""
+
+    def predict_x(self, u=0):
+        dt, known = u
+        x, y, th, v, w = self.x
+        if known:
+            thm = th + 0.5 * w * dt
+            self.x = np.array([x + v * math.cos(thm) * dt, y + v * math.sin(thm) * dt,
+                               wrap_angle(th + w * dt), v, w])
+        else:
+            self.x = np.array([x, y, th, v, w])
+
+
+class PoseEKF:
+    """Unicycle EKF over (x, y, heading, v, w); see the module docstring for the model."""
+
+    def __init__(self, cfg: LocalizationConfig = LocalizationConfig(), *, accel_sigma: float = 0.5,
+                 yaw_accel_sigma: float = 1.0, heading_noise: float = 0.05, resolve_sigma: float = 0.1,
+                 heading_gate: float = 10.83, max_rejections: int = 10, robot_id=None):
+        self.cfg = cfg
+        self.accel_sigma = accel_sigma            # m/s^2, white linear acceleration
+        self.yaw_accel_sigma = yaw_accel_sigma    # rad/s^2, white angular acceleration
+        self.heading_noise = heading_noise        # rad/sqrt(s), slip not seen by the odometry
+        self.resolve_sigma = resolve_sigma        # rad; heading-from-motion accepted below this
+        self.heading_gate = heading_gate          # chi^2(1) for update_heading, default 99.9 %
+        self.max_rejections = max_rejections
+        self.stats = EkfStats()
+        self.log = get_logger("ekf", robot_id)
+        self.kf = _UnicycleEKF(dim_x=5, dim_z=2)
+        self.kf.x = np.zeros(5)
+        self.initialised = False
+        self.heading_known = False
+        self._in_a_row = 0
+        self._rel = np.zeros(3)                   # odometry path since heading became unknown
+        self._track: deque = deque(maxlen=100)    # (rel x, rel y, e, n, sigma^2) per accepted fix
+
+    # ------------------------------------------------------------------ state
+    @property
+    def x(self) -> np.ndarray:
+        """State vector (x, y, heading, v, w)."""
+        return self.kf.x
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """5x5 state covariance (a copy)."""
+        return self.kf.P.copy()
+
+    @property
+    def gps_rejected(self) -> int:
+        return self.stats.gps_rejected
+
+    def pose(self) -> tuple[float, float, float]:
+        """(x, y, heading); heading is a placeholder 0.0 while ``heading_known`` is False."""
+        if not self.initialised:
+            raise RuntimeError("PoseEKF.pose() before initialise() or the first GPS fix")
+        x, y, th = self.kf.x[:3]
+        return float(x), float(y), float(th)
+
+    def initialise(self, x: float, y: float, heading: float | None = None, sigma_xy: float | None = None,
+                   sigma_heading: float = 0.1) -> None:
+        """Start at (x, y); heading None means unknown until the robot has moved.  Non-finite input
+        is counted and leaves the filter as it was."""
+        if not all(math.isfinite(v) for v in (x, y, 0.0 if heading is None else heading)):
+            self.stats.nonfinite += 1
+            return
+        sxy = self.cfg.gps_sigma if sigma_xy is None else sigma_xy
+        known = heading is not None
+        self.kf.x = np.array([x, y, wrap_angle(heading) if known else 0.0, 0.0, 0.0], dtype=float)
+        self.kf.P = np.diag([sxy ** 2, sxy ** 2, sigma_heading ** 2 if known else math.pi ** 2, 0.1 ** 2, 0.1 ** 2])
+        self.initialised, self.heading_known = True, known
+        self._in_a_row = 0
+        self._rel[:] = 0.0
+        self._track.clear()
+
+    # ------------------------------------------------------------------ predict
+    def predict(self, dt: float) -> None:
+        """Advance the state by ``dt`` seconds (no-op before initialisation or for dt <= 0)."""
+        if not self.initialised:
+            return
+        if not math.isfinite(dt):
+            self.stats.nonfinite += 1
+            return
+        if dt <= 0:
+            return
+        steps = max(1, math.ceil(dt / _MAX_STEP))
+        for _ in range(steps):
+            self._predict_step(dt / steps)
+        self.stats.predictions += 1
+
+    def _predict_step(self, dt: float) -> None:
+        _, _, th, v, w = self.kf.x
+        qa, qw = self.accel_sigma ** 2, self.yaw_accel_sigma ** 2
+        F = np.eye(5)
+        if self.heading_known:
+            thm = th + 0.5 * w * dt
+            c, s = math.cos(thm), math.sin(thm)
+            F[0, 2], F[0, 3], F[0, 4] = -v * s * dt, c * dt, -v * s * dt * dt / 2
+            F[1, 2], F[1, 3], F[1, 4] = v * c * dt, s * dt, v * c * dt * dt / 2
+            F[2, 4] = dt
+            G = np.array([[c * dt * dt / 2, 0], [s * dt * dt / 2, 0], [0, dt * dt / 2], [dt, 0], [0, dt]])
+            Q = G @ np.diag([qa, qw]) @ G.T
+            Q[2, 2] += self.heading_noise ** 2 * dt
+        else:
+            # direction unknown: the position diffuses at the odometry speed (1 s correlation time)
+            thm = self._rel[2] + 0.5 * w * dt
+            self._rel += (v * math.cos(thm) * dt, v * math.sin(thm) * dt, w * dt)
+            walk = (v * v * 1.0 + qa * dt ** 2 / 4) * dt
+            Q = np.diag([walk, walk, 0.0, qa * dt * dt, qw * dt * dt])
+        self.kf.F = F
+        self.kf.Q = Q
+        self.kf.predict(u=(dt, self.heading_known))
+        self._tidy()
+
+    # ------------------------------------------------------------------ updates
+    def update_odometry(self, v: float, w: float) -> None:
+        """Wheel odometry as a measurement of (v, w) with ``odom_sigma_v``, ``odom_sigma_w``."""
+        if not self.initialised:
+            return
+        if not (math.isfinite(v) and math.isfinite(w)):
+            self.stats.nonfinite += 1
+            return
+        R = np.diag([max(self.cfg.odom_sigma_v, _MIN_SIGMA) ** 2, max(self.cfg.odom_sigma_w, _MIN_SIGMA) ** 2])
+        self.kf.update(np.array([v, w], dtype=float), lambda s: _H_VW, lambda s: _H_VW @ s, R=R)
+        self._tidy()
+        self.stats.odometry_updates += 1
+
+    def update_gps(self, e: float, n: float, sigma: float | None = None) -> bool:
+        """Fuse a GPS position (ENU metres, ``sigma`` per axis, default ``gps_sigma``).  Returns False
+        if it was gated out (or not finite); the first fix initialises the filter."""
+        if not (math.isfinite(e) and math.isfinite(n)) or (sigma is not None and not math.isfinite(sigma)):
+            self.stats.nonfinite += 1
+            return False
+        sigma = max(self.cfg.gps_sigma if sigma is None else sigma, _MIN_SIGMA)
+        if not self.initialised:
+            self.initialise(e, n, None, sigma)
+            self.stats.gps_accepted += 1
+            return True
+        z = np.array([e, n], dtype=float)
+        R = np.eye(2) * sigma ** 2
+        d2 = self._mahalanobis2(z - self.kf.x[:2], _H_POS, R)
+        if d2 > self.cfg.gate:
+            self.stats.gps_rejected += 1
+            self._in_a_row += 1
+            self.log.debug("gps fix (%.2f, %.2f) rejected: d2 %.1f > gate %.1f", e, n, d2, self.cfg.gate)
+            if self._in_a_row >= self.max_rejections:
+                self._reset_position(e, n, sigma)
+            return False
+        self._in_a_row = 0
+        self.kf.update(z, lambda s: _H_POS, lambda s: _H_POS @ s, R=R)
+        self._tidy()
+        self.stats.gps_accepted += 1
+        if not self.heading_known:
+            self._track.append((self._rel[0], self._rel[1], e, n, sigma ** 2))
+            self._resolve_heading()
+        return True
+
+    def update_heading(self, heading: float, sigma: float) -> bool:
+        """Fuse an absolute heading (compass, GPS course when driving forward); the innovation is
+        wrapped.  Gated with chi-square 1 dof (``heading_gate``).  If heading is still unknown it is
+        taken as is."""
+        if not self.initialised:
+            return False
+        if not (math.isfinite(heading) and math.isfinite(sigma)):
+            self.stats.nonfinite += 1
+            return False
+        sigma = max(sigma, _MIN_SIGMA)
+        if not self.heading_known:
+            self._set_heading(wrap_angle(heading), sigma ** 2)
+            self.stats.heading_updates += 1
+            return True
+        R = np.array([[sigma ** 2]])
+        y = np.array([wrap_angle(heading - self.kf.x[2])])
+        if self._mahalanobis2(y, _H_HEADING, R) > self.heading_gate:
+            self.stats.heading_rejected += 1
+            return False
+        self.kf.update(np.array([heading], dtype=float), lambda s: _H_HEADING, lambda s: _H_HEADING @ s, R=R,
+                       residual=lambda a, b: np.array([wrap_angle(float(a[0] - b[0]))]))
+        self._tidy()
+        self.stats.heading_updates += 1
+        return True
+
+    # ------------------------------------------------------------------ internals
+    def _mahalanobis2(self, y: np.ndarray, H: np.ndarray, R: np.ndarray) -> float:
+        S = H @ self.kf.P @ H.T + R
+        return float(y @ np.linalg.solve(S, y))
+
+    def _tidy(self) -> None:
+        self.kf.x = np.asarray(self.kf.x, dtype=float).reshape(5)
+        self.kf.x[2] = wrap_angle(float(self.kf.x[2]))
+        self.kf.P = 0.5 * (self.kf.P + self.kf.P.T)
+
+    def _set_heading(self, heading: float, var: float) -> None:
+        P = self.kf.P
+        P[2, :] = 0.0
+        P[:, 2] = 0.0
+        P[2, 2] = var
+        self.kf.x[2] = heading
+        self.heading_known = True
+        self._track.clear()
+
+    def _reset_position(self, e: float, n: float, sigma: float) -> None:
+        self.stats.gps_resets += 1
+        self.log.warning("%d gps fixes in a row outside the gate: position reset to (%.2f, %.2f)",
+                         self._in_a_row, e, n)
+        P = self.kf.P
+        P[:2, :] = 0.0
+        P[:, :2] = 0.0
+        P[0, 0] = P[1, 1] = sigma ** 2
+        P[2, 2] += 0.3 ** 2
+        self.kf.x[:2] = (e, n)
+        self._in_a_row = 0
+        self._rel[:] = 0.0
+        self._track.clear()
+
+    def _resolve_heading(self) -> None:
+        """Least-squares rotation between the odometry path and the GPS fixes since heading was lost."""
+        if len(self._track) < 5:
+            return
+        t = np.array(self._track)
+        p, g = t[:, 0:2], t[:, 2:4]
+        pm, gm = p.mean(axis=0), g.mean(axis=0)
+        pc, gc = p - pm, g - gm
+        spread = float((pc ** 2).sum())
+        if spread <= 0:
+            return
+        var = 2.0 * float(t[:, 4].mean()) / spread    # x2 for the odometry's own error
+        if var > self.resolve_sigma ** 2:
+            return
+        rot = math.atan2(float((pc[:, 0] * gc[:, 1] - pc[:, 1] * gc[:, 0]).sum()),
+                         float((pc * gc).sum()))
+        c, s = math.cos(rot), math.sin(rot)
+        lever = self._rel[:2] - pm
+        pos = gm + np.array([c * lever[0] - s * lever[1], s * lever[0] + c * lever[1]])
+        heading = wrap_angle(rot + self._rel[2])
+        P = self.kf.P
+        P[:3, :] = 0.0
+        P[:, :3] = 0.0
+        P[0, 0] = P[1, 1] = float(t[:, 4].mean()) / len(t) + var * float(lever @ lever)
+        P[2, 2] = var
+        self.kf.x[:3] = (pos[0], pos[1], heading)
+        self.heading_known = True
+        self.stats.heading_resolved += 1
+        self.log.info("heading %.2f rad found from %d fixes over %.1f m of motion (sigma %.3f rad)",
+                      heading, len(t), math.sqrt(spread / len(t)) * 2, math.sqrt(var))
+        self._track.clear()

@@ -1,0 +1,395 @@
+"""MAVLink over UDP unicast between robots, and to the ground station.
+
+One non-blocking UDP socket per robot, bound to ``listen``.  Agent messages are encoded once and sent
+to every peer address; receivers keep those whose ``target_system`` is 0 or their own id.  Frames are
+parsed with the generated pymavlink parser (robust mode), one datagram at a time: garbage, bad CRCs,
+truncated frames and refused signatures are counted in :class:`LinkCounters`, never raised.
+
+Liveness: :meth:`MavlinkLink.poll` sends a HEARTBEAT to every peer once per ``heartbeat_period`` and
+records the HEARTBEATs it hears; :meth:`MavlinkLink.peers_lost` names peers silent for more than
+``heartbeat_timeout`` (once per silence).
+
+Signing (MAVLink 2, pymavlink's implementation): with a key, every frame sent is signed (link id 0,
+timestamp in 10 us units since 2015-01-01 UTC, never behind the wall clock).  Incoming frames must be
+signed with the same key, with one exception: an *unsigned* HEARTBEAT whose type is MAV_TYPE_GCS is
+accepted, so a stock ground station without the key can still be seen; it never counts as peer
+liveness.  Unsigned robot HEARTBEATs and any wrongly signed frame are dropped and counted.  A refused
+frame cannot advance pymavlink's per-stream replay window (see :class:`_SigningGuard`).
+"""
+from __future__ import annotations
+
+import ipaddress
+import socket
+import time
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Callable, Iterable
+
+from runtime.comms import codec, dialect
+from runtime.errors import InputError
+from runtime.log import get_logger
+
+COMPONENT_ID = 1                       # MAV_COMP_ID_AUTOPILOT1
+SIGNING_EPOCH = 1420070400             # 2015-01-01T00:00:00Z as a Unix time
+MAX_DATAGRAMS_PER_POLL = 1024          # bounds one poll's work under a flood
+_IFLAG_SIGNED = 0x01
+
+
+def signing_timestamp(unix_time: float) -> int:
+    """MAVLink 2 signing timestamp: 10 us units since 2015-01-01 00:00 UTC."""
+    return max(0, int((unix_time - SIGNING_EPOCH) * 100_000))
+
+
+def load_key(path: str | Path) -> bytes:
+    """The 32-byte signing key in ``path`` (64 hex characters; surrounding whitespace ignored)."""
+    expected = "expected 64 hex characters (a 32-byte MAVLink signing key)"
+    try:
+        text = Path(path).read_text(encoding="ascii")
+    except FileNotFoundError:
+        raise InputError(f"{path}: signing key file not found") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: {expected}, got non-ASCII data") from None
+    except OSError as e:
+        raise InputError(f"{path}: cannot read signing key ({e.strerror})") from None
+    s = text.strip()
+    if len(s) != 64:
+        raise InputError(f"{path}: {expected}, got {len(s)} characters")
+    try:
+        return bytes.fromhex(s)
+    except ValueError:
+        raise InputError(f"{path}: {expected}, got a non-hex character") from None
+
+
+def parse_address(text: str, what: str, *, allow_port_zero: bool = False) -> tuple[str, int]:
+    """``"host:port"`` (IPv6 as ``"[::1]:port"``) -> ``(host, port)``; InputError naming ``what``."""
+    expected = f"{what}: expected host:port"
+    if not isinstance(text, str) or ":" not in text:
+        raise InputError(f"{expected}, got {text!r}")
+    host, _, port_s = text.rpartition(":")
+    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    try:
+        port = int(port_s)
+    except ValueError:
+        raise InputError(f"{expected} with a numeric port, got {text!r}") from None
+    lo = 0 if allow_port_zero else 1
+    if not host or not lo <= port <= 65535:
+        raise InputError(f"{expected} with port {lo}..65535, got {text!r}")
+    return host, port
+
+
+def _resolve(text: str, what: str, family: int | None = None, *, listen: bool = False):
+    host, port = parse_address(text, what, allow_port_zero=listen)
+    try:
+        infos = socket.getaddrinfo(host, port, family or 0, socket.SOCK_DGRAM)
+    except socket.gaierror as e:
+        raise InputError(f"{what}: cannot resolve {text!r} ({e.strerror})") from None
+    fam, _, _, _, sockaddr = infos[0]
+    if not listen:
+        ip = ipaddress.ip_address(sockaddr[0].split("%")[0])
+        if ip.is_multicast or ip.is_unspecified or str(ip) == "255.255.255.255":
+            raise InputError(f"{what}: expected a unicast address, got {text!r}")
+    return fam, sockaddr
+
+
+@dataclass
+class LinkCounters:
+    datagrams: int = 0              # UDP datagrams read
+    received: int = 0               # frames accepted (good CRC and, with a key, good signature)
+    agent_received: int = 0         # agent messages returned by poll
+    heartbeats: int = 0             # HEARTBEATs accepted (peers and ground station)
+    bad_crc: int = 0                # frames with a wrong checksum
+    parse_errors: int = 0           # runs of junk bytes, bad lengths or flags, truncated frames
+    unsigned_dropped: int = 0       # unsigned frames refused because signing is on
+    bad_signature_dropped: int = 0  # signed frames whose signature or timestamp is wrong
+    not_for_us: int = 0             # agent messages addressed to another robot, or our own echo
+    unknown: int = 0                # frames with a message id the dialect does not define
+    ignored: int = 0                # valid frames of messages the link has no use for
+    sent: int = 0                   # datagrams sent (one per message and destination)
+    send_errors: int = 0
+    encode_errors: int = 0          # agent messages whose values do not fit the wire types
+
+    def as_dict(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+_guarded: dict[type, type] = {}
+
+
+def _signing_guard(base: type) -> type:
+    """Subclass of a generated ``MAVLink`` class whose refused signatures leave the replay window alone.
+
+    pymavlink records a stream's timestamp before it checks the signature, so a forged frame with a
+    large timestamp would make every later genuine frame of that stream look like a replay.
+    """
+    cls = _guarded.get(base)
+    if cls is None:
+        class _SigningGuard(base):
+            def check_signature(self, msgbuf, srcSystem, srcComponent):
+                key = (msgbuf[-13], srcSystem, srcComponent)
+                before = self.signing.stream_timestamps.get(key)
+                ok = super().check_signature(msgbuf, srcSystem, srcComponent)
+                if not ok:
+                    if before is None:
+                        self.signing.stream_timestamps.pop(key, None)
+                    else:
+                        self.signing.stream_timestamps[key] = before
+                return ok
+
+        cls = _guarded[base] = _SigningGuard
+    return cls
+
+
+class MavlinkLink:
+    """UDP MAVLink endpoint of one robot: agent messages to peers, common messages to the GCS."""
+
+    def __init__(self, robot_id: int, listen: str, peers: Iterable[str], gcs: str | None = None,
+                 signing_key: bytes | None = None, heartbeat_timeout: float = 3.0, *,
+                 heartbeat_period: float = 1.0, wallclock: Callable[[], float] = time.time):
+        if not 1 <= int(robot_id) <= 250:
+            raise InputError(f"robot id: expected 1..250, got {robot_id!r}")
+        if signing_key is not None and len(signing_key) != 32:
+            raise InputError(f"signing key: expected 32 bytes, got {len(signing_key)}")
+        self.robot_id = int(robot_id)
+        self.heartbeat_timeout = float(heartbeat_timeout)
+        self.heartbeat_period = float(heartbeat_period)
+        self.counters = LinkCounters()
+        self.log = get_logger("comms.link", self.robot_id)
+        self._wallclock = wallclock
+
+        self.module = dialect.load()
+        codec.check(self.module)
+        self._hb_id = self.module.MAVLINK_MSG_ID_HEARTBEAT
+        self._gcs_type = self.module.MAV_TYPE_GCS
+        self.mav = _signing_guard(self.module.MAVLink)(None, srcSystem=self.robot_id,
+                                                        srcComponent=COMPONENT_ID)
+        self.mav.robust_parsing = True
+        self.signing = signing_key is not None
+        if self.signing:
+            s = self.mav.signing
+            s.secret_key = bytes(signing_key)
+            s.sign_outgoing = True
+            s.link_id = 0
+            s.timestamp = signing_timestamp(self._wallclock())
+            s.allow_unsigned_callback = self._allow_unsigned
+
+        family, self._listen_addr = _resolve(listen, "comms.listen", listen=True)
+        self._peers = [_resolve(p, f"comms.peers[{i}]", family)[1] for i, p in enumerate(peers)]
+        self._gcs = _resolve(gcs, "comms.gcs", family)[1] if gcs else None
+        self.sock = socket.socket(family, socket.SOCK_DGRAM)
+        try:
+            self.sock.bind(self._listen_addr)
+        except OSError as e:
+            self.sock.close()
+            raise InputError(f"comms.listen: cannot bind {listen!r} ({e.strerror})") from None
+        self.sock.setblocking(False)
+
+        # what the peer HEARTBEAT says; GcsTelemetry keeps these current
+        self.base_mode = self.module.MAV_MODE_FLAG_AUTO_ENABLED
+        self.custom_mode = 0
+        self.system_status = self.module.MAV_STATE_STANDBY
+
+        self._next_heartbeat: float | None = None
+        self._last_seen: dict[int, float] = {}
+        self._lost: set[int] = set()
+        self._now = float("-inf")
+        self.gcs_last_heartbeat: float | None = None
+
+    # ------------------------------------------------------------------ addresses
+    @property
+    def address(self) -> tuple[str, int]:
+        """The bound (host, port); the port is the real one when ``listen`` asked for port 0."""
+        return self.sock.getsockname()[:2]
+
+    @property
+    def peers(self) -> list[tuple]:
+        return list(self._peers)
+
+    # ------------------------------------------------------------------ sending
+    def _stamp(self) -> None:
+        if self.signing:
+            s = self.mav.signing
+            s.timestamp = max(s.timestamp, signing_timestamp(self._wallclock()))
+
+    def _pack(self, mavmsg) -> bytes:
+        self._stamp()
+        frame = mavmsg.pack(self.mav)
+        self.mav.seq = (self.mav.seq + 1) % 256
+        return frame
+
+    def _sendto(self, frame: bytes, addr) -> bool:
+        try:
+            self.sock.sendto(frame, addr)
+        except OSError as e:
+            self.counters.send_errors += 1
+            self.log.debug("send to %s failed: %s", addr, e)
+            return False
+        self.counters.sent += 1
+        return True
+
+    def send_agent(self, msgs: Iterable, now: float) -> None:
+        """Encode each agent message once and send it to every peer (the wire sender is our id)."""
+        for msg in msgs:
+            self._stamp()
+            try:
+                frame = codec.encode(msg, self.mav)
+            except (ValueError, TypeError) as e:
+                self.counters.encode_errors += 1
+                self.log.error("not sent: %s", e)
+                continue
+            for addr in self._peers:
+                self._sendto(frame, addr)
+
+    def send_gcs(self, mavmsg) -> bool:
+        """Send a message built from ``self.mav``'s dialect to the ground station, if there is one."""
+        if self._gcs is None:
+            return False
+        try:
+            frame = self._pack(mavmsg)
+        except Exception as e:            # struct.error: a value outside its wire type
+            self.counters.encode_errors += 1
+            self.log.error("not sent to the GCS: %s %s", mavmsg.get_type(), e)
+            return False
+        return self._sendto(frame, self._gcs)
+
+    def heartbeat(self):
+        """The HEARTBEAT this robot sends: ground rover, generic autopilot, current mode and state."""
+        m = self.module
+        return self.mav.heartbeat_encode(m.MAV_TYPE_GROUND_ROVER, m.MAV_AUTOPILOT_GENERIC,
+                                         self.base_mode, self.custom_mode, self.system_status)
+
+    def _heartbeat_peers(self, now: float) -> None:
+        if self._next_heartbeat is not None and now < self._next_heartbeat:
+            return
+        frame = self._pack(self.heartbeat())
+        for addr in self._peers:
+            self._sendto(frame, addr)
+        nxt = (now if self._next_heartbeat is None else self._next_heartbeat) + self.heartbeat_period
+        self._next_heartbeat = nxt if nxt > now else now + self.heartbeat_period
+
+    # ------------------------------------------------------------------ receiving
+    def poll(self, now: float) -> list:
+        """Heartbeat the peers when due, drain the socket, return the agent messages for us."""
+        self._now = max(self._now, now)
+        self._heartbeat_peers(now)
+        out: list = []
+        for _ in range(MAX_DATAGRAMS_PER_POLL):
+            try:
+                data, _addr = self.sock.recvfrom(65535)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError as e:          # e.g. ICMP errors reported on some platforms
+                self.log.debug("recv: %s", e)
+                continue
+            out += self.feed(data, now)
+        return out
+
+    def feed(self, data: bytes, now: float) -> list:
+        """Parse one datagram; return the agent messages addressed to us.  Never raises."""
+        c = self.counters
+        c.datagrams += 1
+        mav = self.mav
+        mav.buf, mav.buf_index = bytearray(), 0
+        mav.expected_length = self.module.HEADER_LEN_V1 + 2
+        try:
+            msgs = mav.parse_buffer(data) or []
+        except Exception as e:            # robust parsing should not raise; count it if it does
+            self.log.debug("parser raised: %r", e)
+            c.parse_errors += 1
+            msgs = []
+        if mav.buf_len() > 0:             # a frame cut short at the end of the datagram
+            c.parse_errors += 1
+        mav.buf, mav.buf_index = bytearray(), 0
+        mav.expected_length = self.module.HEADER_LEN_V1 + 2
+        out: list = []
+        for m in msgs:
+            try:
+                agent = self._dispatch(m, now)
+            except Exception as e:        # a field that will not convert; count, keep going
+                self.log.debug("dropped %s: %r", m.get_type(), e)
+                c.parse_errors += 1
+                continue
+            if agent is not None:
+                out.append(agent)
+        return out
+
+    def _allow_unsigned(self, mav, msg_id: int) -> bool:
+        # only HEARTBEAT gets past pymavlink unsigned; _dispatch keeps it only if it is a GCS's
+        return msg_id == self._hb_id
+
+    def _dispatch(self, m, now: float):
+        c = self.counters
+        kind = m.get_type()
+        if kind == "BAD_DATA":
+            reason = str(getattr(m, "reason", ""))
+            if "signature" in reason:
+                if _was_signed(m.data):
+                    c.bad_signature_dropped += 1
+                else:
+                    c.unsigned_dropped += 1
+            elif "CRC" in reason:
+                c.bad_crc += 1
+            else:
+                c.parse_errors += 1
+            return None
+        if kind.startswith("UNKNOWN"):
+            c.unknown += 1
+            return None
+        if kind == "HEARTBEAT":
+            self._on_heartbeat(m, now)
+            return None
+        c.received += 1
+        agent = codec.from_mavlink(m)
+        if agent is None:
+            c.ignored += 1
+            return None
+        if agent.sender == self.robot_id or agent.dest not in (0, self.robot_id):
+            c.not_for_us += 1
+            return None
+        c.agent_received += 1
+        return agent
+
+    def _on_heartbeat(self, m, now: float) -> None:
+        c = self.counters
+        is_gcs = m.type == self._gcs_type
+        if self.signing and not m.get_signed():
+            if m.get_header().incompat_flags & _IFLAG_SIGNED:
+                c.bad_signature_dropped += 1
+                return
+            if not is_gcs:
+                c.unsigned_dropped += 1
+                return
+        c.received += 1
+        c.heartbeats += 1
+        if is_gcs:
+            self.gcs_last_heartbeat = now
+            return
+        src = m.get_srcSystem()
+        if src == self.robot_id or not 1 <= src <= 250:
+            return
+        self._last_seen[src] = max(now, self._last_seen.get(src, now))
+        if src in self._lost:
+            self._lost.discard(src)
+            self.log.info("peer %d is back", src)
+
+    # ------------------------------------------------------------------ liveness
+    def peers_lost(self, now: float) -> list[int]:
+        """Peers silent for more than ``heartbeat_timeout`` at ``now`` and not reported before."""
+        self._now = max(self._now, now)
+        lost = sorted(p for p, t in self._last_seen.items()
+                      if p not in self._lost and now - t > self.heartbeat_timeout)
+        self._lost.update(lost)
+        return lost
+
+    @property
+    def peers_alive(self) -> list[int]:
+        """Peers heard within ``heartbeat_timeout`` of the latest ``now`` given to poll/peers_lost."""
+        return sorted(p for p, t in self._last_seen.items()
+                      if p not in self._lost and self._now - t <= self.heartbeat_timeout)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+def _was_signed(frame) -> bool:
+    """True if a raw frame is MAVLink 2 with the 'signed' incompat flag set."""
+    return len(frame) > 2 and frame[0] == 0xFD and bool(frame[2] & _IFLAG_SIGNED)

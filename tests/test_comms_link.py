@@ -1,0 +1,386 @@
+"""MavlinkLink on loopback: exchange, addressing, signing, liveness, and a parser that never raises."""
+from __future__ import annotations
+
+import os
+import time
+
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from runtime.allocation import messages as M
+from runtime.comms import codec, dialect
+from runtime.comms.link import LinkCounters, MavlinkLink, load_key, parse_address, signing_timestamp
+from runtime.errors import InputError
+
+KEY = bytes(range(32))
+OTHER_KEY = bytes(range(1, 33))
+DROPS = ("bad_crc", "parse_errors", "unsigned_dropped", "bad_signature_dropped", "not_for_us", "unknown")
+
+
+@pytest.fixture(scope="module", autouse=True)
+def cache_dir(tmp_path_factory):
+    old = os.environ.get("MRTA_CACHE_DIR")
+    os.environ["MRTA_CACHE_DIR"] = str(tmp_path_factory.getbasetemp() / "mrta-cache")
+    yield
+    if old is None:
+        os.environ.pop("MRTA_CACHE_DIR", None)
+    else:
+        os.environ["MRTA_CACHE_DIR"] = old
+
+
+@pytest.fixture
+def links():
+    made = []
+
+    def make(robot_id, peers=(), key=None, **kw):
+        link = MavlinkLink(robot_id, "127.0.0.1:0", [f"127.0.0.1:{p.address[1]}" for p in peers],
+                           None, signing_key=key, **kw)
+        made.append(link)
+        return link
+
+    yield make
+    for link in made:
+        link.close()
+
+
+def pump(link, now, done, limit=2.0) -> list:
+    """Poll until ``done(messages so far)`` (loopback delivery is near-immediate); return the messages."""
+    got, t0 = [], time.monotonic()
+    while True:
+        got += link.poll(now)
+        if done(got) or time.monotonic() - t0 > limit:
+            return got
+        time.sleep(0.001)
+
+
+def drain(link, now, want=1):
+    return pump(link, now, lambda got: len(got) >= want)
+
+
+def settle(link, now, attr, value) -> int:
+    pump(link, now, lambda got: getattr(link.counters, attr) >= value)
+    return getattr(link.counters, attr)
+
+
+ALL = [M.TaskInfo(2, 0, 3, 1.5, -2.0, 4), M.Announce(2, 0, 11, 3, 1.5, -2.0, float("inf")),
+       M.Bid(2, 0, 11, 3, 0.75), M.Award(2, 0, 11, 3, 1, 0.75, 1.25), M.Price(2, 0, 3, 1, 0.5, 2),
+       M.Status(2, 0, 3, True)]
+
+
+# ---------------------------------------------------------------------------------------- exchange
+
+def test_two_links_exchange_every_agent_message(links):
+    a = links(1)
+    b = links(2, peers=[a])
+    b.send_agent(ALL, 0.0)
+    got = drain(a, 0.0, want=len(ALL))
+    assert got == ALL
+    assert a.counters.agent_received == len(ALL) and b.counters.sent == len(ALL)
+
+
+def test_addressing_and_own_echo(links):
+    a = links(1)
+    b = links(2, peers=[a])
+    b.send_agent([M.Bid(2, 1, 1, 1, 1.0), M.Bid(2, 3, 1, 1, 2.0), M.Bid(2, 0, 1, 1, 3.0)], 0.0)
+    got = drain(a, 0.0, want=2)
+    assert [m.cost for m in got] == [1.0, 3.0]             # dest 1 and broadcast; dest 3 is not ours
+    assert a.counters.not_for_us == 1
+    echo = links(1, peers=[a])                             # a frame claiming our own id
+    echo.send_agent([M.Bid(1, 0, 1, 1, 4.0)], 0.0)
+    assert settle(a, 0.0, "not_for_us", 2) == 2
+
+
+def test_sender_on_the_wire_is_the_link_id(links):
+    a = links(1)
+    b = links(7, peers=[a])
+    b.send_agent([M.Bid(99, 0, 1, 1, 1.0)], 0.0)
+    assert drain(a, 0.0)[0].sender == 7
+
+
+def test_bad_values_are_counted_not_sent(links):
+    a = links(1)
+    b = links(2, peers=[a])
+    b.send_agent([M.Bid(2, 0, -5, 1, 1.0), M.Bid(2, 0, 5, 1, 1.0)], 0.0)
+    assert b.counters.encode_errors == 1 and b.counters.sent == 1
+    assert drain(a, 0.0)[0].auction == 5
+
+
+# ---------------------------------------------------------------------------------------- signing
+
+def test_signing_drops_unsigned_and_wrong_key_senders(links):
+    a = links(1, key=KEY)
+    good = links(2, peers=[a], key=KEY)
+    unsigned = links(3, peers=[a])
+    wrong = links(4, peers=[a], key=OTHER_KEY)
+    for s in (unsigned, wrong, good):
+        s.send_agent([M.Bid(s.robot_id, 0, 1, 1, float(s.robot_id))], 0.0)
+    c = a.counters
+    got = pump(a, 0.0, lambda got: got and c.unsigned_dropped and c.bad_signature_dropped)
+    assert [m.sender for m in got] == [2]
+    assert a.counters.unsigned_dropped == 1
+    assert a.counters.bad_signature_dropped == 1
+    assert a.counters.agent_received == 1
+
+
+def test_signed_frames_carry_link_id_zero_and_a_current_timestamp(links):
+    fixed = 1_700_000_000.0
+    a = links(1)
+    b = links(2, peers=[a], key=KEY, wallclock=lambda: fixed)
+    b.send_agent([M.Bid(2, 0, 1, 1, 1.0)], 0.0)
+    data = None
+    t0 = time.monotonic()
+    while data is None and time.monotonic() - t0 < 2:
+        try:
+            data, _ = a.sock.recvfrom(65535)
+        except BlockingIOError:
+            time.sleep(0.001)
+    assert data[2] & 0x01                                  # signed
+    link_id = data[-13]
+    stamp = int.from_bytes(data[-12:-6], "little")
+    assert link_id == 0
+    assert stamp == signing_timestamp(fixed) == int((fixed - 1420070400) * 100_000)
+
+
+def test_forged_frame_does_not_block_the_genuine_sender(links):
+    a = links(1, key=KEY)
+    good = links(2, peers=[a], key=KEY)
+    forger = links(2, peers=[a], key=OTHER_KEY, wallclock=lambda: time.time() + 30)  # same id, later stamps
+    forger.send_agent([M.Bid(2, 0, 1, 1, 66.0)], 0.0)
+    settle(a, 0.0, "bad_signature_dropped", 1)
+    good.send_agent([M.Bid(2, 0, 1, 1, 1.0)], 0.0)
+    got = drain(a, 0.0)
+    assert [m.cost for m in got] == [1.0]
+    assert a.counters.bad_signature_dropped == 1
+
+
+def test_replayed_frame_is_dropped(links):
+    a = links(1, key=KEY)
+    b = links(2, peers=[a], key=KEY)
+    b.send_agent([M.Bid(2, 0, 1, 1, 1.0)], 0.0)
+    frame = None
+    t0 = time.monotonic()
+    while frame is None and time.monotonic() - t0 < 2:
+        try:
+            frame, _ = a.sock.recvfrom(65535)
+        except BlockingIOError:
+            time.sleep(0.001)
+    assert len(a.feed(frame, 0.0)) == 1
+    assert a.feed(frame, 0.0) == []
+    assert a.counters.bad_signature_dropped == 1
+
+
+def test_unsigned_gcs_heartbeat_is_accepted_but_is_no_peer(links):
+    a = links(1, key=KEY)
+    mod = dialect.load()
+    gcs = mod.MAVLink(None, srcSystem=255, srcComponent=190)
+    rover = mod.MAVLink(None, srcSystem=9, srcComponent=1)
+    a.feed(gcs.heartbeat_encode(mod.MAV_TYPE_GCS, mod.MAV_AUTOPILOT_INVALID, 0, 0, 4).pack(gcs), 5.0)
+    a.feed(rover.heartbeat_encode(mod.MAV_TYPE_GROUND_ROVER, mod.MAV_AUTOPILOT_GENERIC, 0, 0, 4)
+           .pack(rover), 5.0)
+    assert a.gcs_last_heartbeat == 5.0
+    assert a.counters.unsigned_dropped == 1
+    a.poll(5.0)
+    assert a.peers_alive == []
+
+
+def test_load_key(tmp_path):
+    p = tmp_path / "fleet.key"
+    p.write_text(KEY.hex() + "\n")
+    assert load_key(p) == KEY
+    for text, why in [(KEY.hex()[:-1], "63 characters"), ("zz" * 32, "non-hex"), ("", "0 characters")]:
+        p.write_text(text)
+        with pytest.raises(InputError, match=why) as e:
+            load_key(p)
+        assert str(p) in str(e.value) and "\n" not in str(e.value)
+    with pytest.raises(InputError, match="not found"):
+        load_key(tmp_path / "missing.key")
+    p.write_bytes(b"\xff" * 64)
+    with pytest.raises(InputError, match="non-ASCII"):
+        load_key(p)
+
+
+@pytest.mark.parametrize("text, what", [("127.0.0.1", "host:port"), ("127.0.0.1:x", "numeric"),
+                                        ("127.0.0.1:70000", "port"), (":14550", "host:port")])
+def test_bad_addresses_name_the_key(text, what):
+    with pytest.raises(InputError, match=what) as e:
+        parse_address(text, "comms.gcs")
+    assert str(e.value).startswith("comms.gcs:")
+
+
+def test_multicast_and_broadcast_peers_are_refused():
+    for addr in ("224.0.0.1:14550", "255.255.255.255:14550"):
+        with pytest.raises(InputError, match="unicast"):
+            MavlinkLink(1, "127.0.0.1:0", [addr])
+
+
+def test_listen_port_in_use(links):
+    a = links(1)
+    with pytest.raises(InputError, match="cannot bind"):
+        MavlinkLink(2, f"127.0.0.1:{a.address[1]}", [])
+
+
+# ---------------------------------------------------------------------------------------- liveness
+
+def test_heartbeats_once_per_period(links):
+    a = links(1)
+    b = links(2, peers=[a])
+    for t in (0.0, 0.3, 0.6, 0.9):
+        b.poll(t)
+    assert settle(a, 0.0, "heartbeats", 1) == 1
+    b.poll(1.0)
+    assert settle(a, 1.0, "heartbeats", 2) == 2
+
+
+def test_peer_loss_after_heartbeat_timeout_with_injected_clock(links):
+    a = links(1, heartbeat_timeout=3.0)
+    b = links(2, peers=[a])
+    b.poll(0.0)                                            # b heartbeats
+    settle(a, 0.0, "heartbeats", 1)
+    assert a.peers_alive == [2]
+    b.close()                                              # b goes silent
+    assert a.peers_lost(2.0) == [] and a.peers_lost(3.0) == []
+    a.poll(3.01)
+    assert a.peers_alive == []
+    assert a.peers_lost(3.01) == [2]
+    assert a.peers_lost(10.0) == []                        # reported once
+    b2 = links(2, peers=[a])                               # b comes back
+    b2.poll(20.0)
+    settle(a, 20.0, "heartbeats", 2)
+    assert a.peers_alive == [2]
+    assert a.peers_lost(23.0) == [] and a.peers_lost(23.5) == [2]
+
+
+def test_signed_fleet_ignores_unsigned_and_wrongly_signed_heartbeats(links):
+    a = links(1, key=KEY)
+    stranger = links(3, peers=[a])
+    stranger.poll(0.0)
+    settle(a, 0.0, "unsigned_dropped", 1)
+    assert a.peers_alive == []
+    impostor = links(4, peers=[a], key=OTHER_KEY)
+    impostor.poll(0.0)
+    settle(a, 0.0, "bad_signature_dropped", 1)
+    assert a.peers_alive == [] and a.counters.heartbeats == 0
+    friend = links(2, peers=[a], key=KEY)
+    friend.poll(0.0)
+    settle(a, 0.0, "heartbeats", 1)
+    assert a.peers_alive == [2]
+
+
+# ---------------------------------------------------------------------------------------- parser
+
+@pytest.fixture(scope="module")
+def rx_plain():
+    link = MavlinkLink(1, "127.0.0.1:0", [])
+    yield link
+    link.close()
+
+
+@pytest.fixture(scope="module")
+def rx_signed():
+    link = MavlinkLink(1, "127.0.0.1:0", [], signing_key=KEY)
+    yield link
+    link.close()
+
+
+robot = st.integers(2, 250)
+u16 = st.integers(0, 0xFFFF)
+f32 = st.floats(width=32, allow_nan=False)
+AGENT = st.one_of(
+    st.builds(M.TaskInfo, robot, st.just(0), u16, f32, f32, u16),
+    st.builds(M.Bid, robot, st.just(1), st.integers(0, 2**32 - 1), u16, f32),
+    st.builds(M.Award, robot, st.just(0), st.integers(0, 2**32 - 1), u16, robot, f32, f32),
+    st.builds(M.Status, robot, st.just(1), u16, st.booleans()),
+)
+_stamp = [signing_timestamp(time.time())]
+
+
+def frame_of(msg, key=None) -> bytes:
+    mod = dialect.load()
+    mav = mod.MAVLink(None, srcSystem=msg.sender, srcComponent=1)
+    if key:
+        mav.signing.secret_key, mav.signing.sign_outgoing = key, True
+        _stamp[0] += 1                                     # fresh stamp: never a replay
+        mav.signing.timestamp = _stamp[0]
+    return codec.encode(msg, mav)
+
+
+def snapshot(link) -> dict:
+    return link.counters.as_dict()
+
+
+def dropped(before, after) -> int:
+    return sum(after[k] - before[k] for k in DROPS)
+
+
+def after_parse_errors(link, before) -> int:
+    return link.counters.parse_errors - before["parse_errors"]
+
+
+FUZZ = settings(max_examples=300, deadline=None)
+
+
+@FUZZ
+@given(st.binary(min_size=1, max_size=600))
+def test_random_datagrams_never_raise_and_are_counted(rx_plain, data):
+    before = snapshot(rx_plain)
+    out = rx_plain.feed(data, 0.0)
+    after = snapshot(rx_plain)
+    assert after["datagrams"] == before["datagrams"] + 1
+    accepted = after["received"] - before["received"]
+    assert accepted + dropped(before, after) + (after["ignored"] - before["ignored"]) >= 1
+    assert len(out) <= accepted
+
+
+@FUZZ
+@given(AGENT, st.data())
+def test_truncated_frames_are_counted_never_delivered(rx_plain, msg, data):
+    frame = frame_of(msg)
+    cut = data.draw(st.integers(1, len(frame) - 1))
+    before = snapshot(rx_plain)
+    assert rx_plain.feed(frame[:cut], 0.0) == []
+    assert after_parse_errors(rx_plain, before) >= 1
+
+
+
+@FUZZ
+@given(AGENT, st.data())
+def test_bit_flipped_signed_frames_are_counted_never_delivered(rx_signed, msg, data):
+    frame = bytearray(frame_of(msg, KEY))
+    bit = data.draw(st.integers(0, len(frame) * 8 - 1))
+    frame[bit // 8] ^= 1 << (bit % 8)
+    before = snapshot(rx_signed)
+    assert rx_signed.feed(bytes(frame), 0.0) == []
+    assert dropped(before, snapshot(rx_signed)) >= 1
+
+
+@FUZZ
+@given(AGENT, st.data())
+def test_bit_flipped_unsigned_frames_are_counted_never_delivered(rx_plain, msg, data):
+    frame = bytearray(frame_of(msg))
+    bit = data.draw(st.integers(0, len(frame) * 8 - 1))
+    frame[bit // 8] ^= 1 << (bit % 8)
+    before = snapshot(rx_plain)
+    assert rx_plain.feed(bytes(frame), 0.0) == []          # CRC-16 catches every single-bit error
+    assert dropped(before, snapshot(rx_plain)) >= 1
+
+
+@FUZZ
+@given(st.binary(min_size=1, max_size=50).filter(lambda b: 0xFD not in b and 0xFE not in b), AGENT)
+def test_junk_before_a_frame_is_counted_and_the_frame_survives(rx_plain, junk, msg):
+    before = snapshot(rx_plain)
+    assert rx_plain.feed(junk + frame_of(msg), 0.0) == [msg]
+    assert after_parse_errors(rx_plain, before) == 1
+
+
+def test_frames_of_one_datagram_all_arrive_and_partial_state_does_not_leak(rx_plain):
+    msgs = [M.Bid(2, 0, i, 1, float(i)) for i in range(5)]
+    assert rx_plain.feed(b"".join(frame_of(m) for m in msgs), 0.0) == msgs
+    whole = frame_of(msgs[0])
+    assert rx_plain.feed(whole[:7], 0.0) == []              # cut short ...
+    assert rx_plain.feed(whole, 0.0) == [msgs[0]]           # ... and the next datagram is clean
+
+
+def test_counters_are_plain_numbers():
+    c = LinkCounters()
+    assert set(c.as_dict()) >= {"received", "bad_crc", "parse_errors", "unsigned_dropped",
+                                "bad_signature_dropped", "not_for_us"}

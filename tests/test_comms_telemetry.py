@@ -1,0 +1,215 @@
+"""Ground-station telemetry: what a stock pymavlink client sees, rates, frames and units."""
+from __future__ import annotations
+
+import math
+import os
+import socket
+import time
+
+import pymap3d
+import pytest
+
+from runtime.allocation.messages import Status
+from runtime.comms import codec, dialect
+from runtime.comms.link import MavlinkLink
+from runtime.comms.telemetry import (CUSTOM_MODE_ALLOCATING, CUSTOM_MODE_CONVERGED,
+                                     CUSTOM_MODE_LOCALIZING, GcsTelemetry)
+from runtime.config import Datum
+from runtime.drivers.base import BaseSensors
+
+DATUM = Datum(lat=33.7756, lon=-84.3963, alt=300.0)
+BATTERY = BaseSensors(voltage=14.2, current=-0.8, battery_charge=2.0, battery_capacity=2.7)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def cache_dir(tmp_path_factory):
+    old = os.environ.get("MRTA_CACHE_DIR")
+    os.environ["MRTA_CACHE_DIR"] = str(tmp_path_factory.getbasetemp() / "mrta-cache")
+    yield
+    if old is None:
+        os.environ.pop("MRTA_CACHE_DIR", None)
+    else:
+        os.environ["MRTA_CACHE_DIR"] = old
+
+
+class Gcs:
+    """A UDP socket that decodes everything sent to it with the dialect's own parser."""
+
+    def __init__(self):
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.2)
+        mod = dialect.load()
+        self.mav = mod.MAVLink(None, srcSystem=255, srcComponent=190)
+
+    @property
+    def address(self) -> str:
+        return "127.0.0.1:%d" % self.sock.getsockname()[1]
+
+    def receive(self, count: int) -> list:
+        out = []
+        while len(out) < count:
+            try:
+                data, _ = self.sock.recvfrom(65535)
+            except socket.timeout:
+                break
+            out += self.mav.parse_buffer(data) or []
+        return out
+
+
+@pytest.fixture
+def gcs():
+    g = Gcs()
+    yield g
+    g.sock.close()
+
+
+@pytest.fixture
+def make(gcs):
+    made = []
+
+    def _make(robot_id=3, key=None):
+        link = MavlinkLink(robot_id, "127.0.0.1:0", [], gcs.address, signing_key=key)
+        made.append(link)
+        return link, GcsTelemetry(link, robot_id, DATUM)
+
+    yield _make
+    for link in made:
+        link.close()
+
+
+def _free_udp_port() -> int:
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+@pytest.mark.parametrize("key", [None, bytes(range(32))], ids=["unsigned", "signed"])
+def test_stock_pymavlink_client_sees_a_ground_rover_that_moves(key):
+    from pymavlink import mavutil
+
+    port = _free_udp_port()
+    conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}")
+    link = MavlinkLink(7, "127.0.0.1:0", [], f"127.0.0.1:{port}", signing_key=key)
+    try:
+        tel = GcsTelemetry(link, 7, DATUM)
+        tel.tick(0.0, (0.0, 0.0, 0.0), (0.0, 0.0), BATTERY, None, False)
+        hb = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=5)
+        assert hb is not None
+        assert hb.type == mavutil.mavlink.MAV_TYPE_GROUND_ROVER
+        assert hb.autopilot == mavutil.mavlink.MAV_AUTOPILOT_GENERIC
+        assert hb.get_srcSystem() == 7 and hb.get_srcComponent() == 1
+        p1 = conn.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=5)
+        tel.tick(0.2, (25.0, -40.0, 0.0), (0.0, 0.0), BATTERY, None, False)
+        p2 = conn.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=5)
+        assert p1 is not None and p2 is not None and p2.get_srcSystem() == 7
+        assert (p1.lat, p1.lon) == (round(DATUM.lat * 1e7), round(DATUM.lon * 1e7))
+        assert p2.lat < p1.lat and p2.lon > p1.lon              # moved south-east
+        assert p2.time_boot_ms == 200
+    finally:
+        link.close()
+        conn.close()
+
+
+def test_rates_over_ten_seconds_of_injected_time(make, gcs):
+    link, tel = make()
+    for i in range(200):                                          # 20 Hz for 10 s
+        tel.tick(i * 0.05, (1.0, 2.0, 0.5), (0.1, 0.0), BATTERY, 4, True)
+    got = gcs.receive(10 * 3 + 50 * 2)
+    counts: dict[str, int] = {}
+    for m in got:
+        counts[m.get_type()] = counts.get(m.get_type(), 0) + 1
+    assert counts == {"HEARTBEAT": 10, "SYS_STATUS": 10, "MRTA_STATUS": 10,
+                      "GLOBAL_POSITION_INT": 50, "LOCAL_POSITION_NED": 50}
+    status = [codec.from_mavlink(m) for m in got if m.get_type() == "MRTA_STATUS"]
+    assert status[0] == Status(3, 0, 4, True)
+
+
+def test_positions_are_geodetic_and_ned(make, gcs):
+    link, tel = make()
+    pose, vel = (12.5, -7.25, math.radians(30)), (0.3, -0.4)        # ENU
+    tel.tick(12.345, pose, vel, BATTERY, None, False)
+    msgs = {m.get_type(): m for m in gcs.receive(5)}
+    g, n = msgs["GLOBAL_POSITION_INT"], msgs["LOCAL_POSITION_NED"]
+    e, nn, u = pymap3d.geodetic2enu(g.lat / 1e7, g.lon / 1e7, g.alt / 1000, DATUM.lat, DATUM.lon, DATUM.alt)
+    assert (e, nn) == (pytest.approx(12.5, abs=0.02), pytest.approx(-7.25, abs=0.02))
+    assert abs(u) < 0.01 and abs(g.relative_alt) <= 10
+    assert (g.vx, g.vy, g.vz) == (-40, 30, 0)                     # cm/s north, east, down
+    assert g.hdg == 6000                                          # 30 deg CCW from east = 060 true
+    assert (n.x, n.y, n.z) == (pytest.approx(-7.25), pytest.approx(12.5), 0.0)
+    assert (n.vx, n.vy) == (pytest.approx(-0.4), pytest.approx(0.3))
+    assert g.time_boot_ms == n.time_boot_ms == 12345
+
+
+@pytest.mark.parametrize("theta, hdg", [(0.0, 9000), (math.pi / 2, 0), (math.pi, 27000),
+                                        (-math.pi / 2, 18000), (math.radians(135), 31500),
+                                        (float("nan"), 65535)])
+def test_heading_from_enu_yaw(make, gcs, theta, hdg):
+    link, tel = make()
+    tel.tick(0.0, (0.0, 0.0, theta), (0.0, 0.0), BATTERY, None, False)
+    g = next(m for m in gcs.receive(5) if m.get_type() == "GLOBAL_POSITION_INT")
+    assert g.hdg == hdg
+
+
+def test_mode_and_state_follow_the_robot(make, gcs):
+    link, tel = make()
+    mod = link.module
+    tel.tick(0.0, None, (0.0, 0.0), BATTERY, None, False)        # no pose yet
+    first = gcs.receive(3)
+    assert {m.get_type() for m in first} == {"HEARTBEAT", "SYS_STATUS", "MRTA_STATUS"}
+    hb = next(m for m in first if m.get_type() == "HEARTBEAT")
+    assert hb.system_status == mod.MAV_STATE_CALIBRATING and hb.custom_mode == CUSTOM_MODE_LOCALIZING
+    assert not hb.base_mode & mod.MAV_MODE_FLAG_SAFETY_ARMED
+
+    tel.tick(1.0, (0.0, 0.0, 0.0), (0.0, 0.0), BATTERY, None, False)
+    hb = next(m for m in gcs.receive(5) if m.get_type() == "HEARTBEAT")
+    assert hb.system_status == mod.MAV_STATE_STANDBY and hb.custom_mode == CUSTOM_MODE_ALLOCATING
+
+    tel.tick(2.0, (0.0, 0.0, 0.0), (0.0, 0.0), BATTERY, Status(3, 0, 6, True))
+    got = gcs.receive(5)
+    hb = next(m for m in got if m.get_type() == "HEARTBEAT")
+    assert hb.system_status == mod.MAV_STATE_ACTIVE and hb.custom_mode == CUSTOM_MODE_CONVERGED
+    assert hb.base_mode & mod.MAV_MODE_FLAG_SAFETY_ARMED and hb.base_mode & mod.MAV_MODE_FLAG_AUTO_ENABLED
+    assert codec.from_mavlink(next(m for m in got if m.get_type() == "MRTA_STATUS")).task == 6
+    # the peer HEARTBEAT the link sends carries the same mode
+    assert (link.base_mode, link.custom_mode, link.system_status) == (hb.base_mode, hb.custom_mode,
+                                                                      hb.system_status)
+
+    low = BaseSensors(voltage=12.0, current=-0.5, battery_charge=0.2, battery_capacity=2.7)
+    tel.tick(3.0, (0.0, 0.0, 0.0), (0.0, 0.0), low, 6, True)
+    got = {m.get_type(): m for m in gcs.receive(5)}
+    assert got["HEARTBEAT"].system_status == mod.MAV_STATE_CRITICAL
+    assert not got["SYS_STATUS"].onboard_control_sensors_health & mod.MAV_SYS_STATUS_SENSOR_BATTERY
+
+
+def test_sys_status_battery_units(make, gcs):
+    link, tel = make()
+    mod = link.module
+    tel.tick(0.0, None, None, BATTERY, None, False)
+    s = next(m for m in gcs.receive(3) if m.get_type() == "SYS_STATUS")
+    assert (s.voltage_battery, s.current_battery, s.battery_remaining) == (14200, 80, 74)
+    assert s.onboard_control_sensors_present & mod.MAV_SYS_STATUS_SENSOR_BATTERY
+    tel.tick(1.0, None, None, BaseSensors(), None, False)         # a base that reports nothing
+    s = next(m for m in gcs.receive(3) if m.get_type() == "SYS_STATUS")
+    assert (s.voltage_battery, s.current_battery, s.battery_remaining) == (65535, -1, -1)
+
+
+def test_sys_status_reports_comm_errors(make, gcs):
+    link, tel = make()
+    link.feed(b"\x01\x02garbage", 0.0)
+    link.feed(b"\x03more", 0.0)
+    tel.tick(0.0, None, None, BATTERY, None, False)
+    s = next(m for m in gcs.receive(3) if m.get_type() == "SYS_STATUS")
+    assert s.errors_comm == 2 and s.drop_rate_comm == 10000
+
+
+def test_no_gcs_means_nothing_sent():
+    link = MavlinkLink(2, "127.0.0.1:0", [], None)
+    try:
+        tel = GcsTelemetry(link, 2, (33.0, -84.0, 10.0))
+        tel.tick(0.0, (0.0, 0.0, 0.0), (0.0, 0.0), BATTERY, None, False)
+        assert tel.sent == {} and link.counters.sent == 0
+    finally:
+        link.close()

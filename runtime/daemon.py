@@ -1,0 +1,319 @@
+"""The robot daemon: driver -> localization -> control, allocation agent <-> comms.
+
+One :class:`Daemon` per robot.  It is a polled object: :meth:`Daemon.step` does one control cycle at
+time ``now`` and never blocks, so the same object runs in its own process against real devices
+(:func:`run`, wall or scaled clock) or lock-stepped inside the SITL process (tests, experiments).
+
+Cycle: read the base (odometry, bumpers) and GPS -> EKF -> drain MAVLink (agent messages, peer
+liveness) -> agent tick -> send agent messages -> follow the path to the held task (pure pursuit under
+the arbiter) -> command the base -> ground-station telemetry.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import signal
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from runtime import config as C
+from runtime.clock import Clock, ScaledClock, WallClock
+from runtime.log import get_logger
+
+
+@dataclass
+class DaemonStats:
+    cycles: int = 0
+    missed_deadlines: int = 0      # cycles that started after the next cycle was due
+    worst_lateness: float = 0.0    # s (clock time)
+    agent_sent: int = 0
+    agent_received: int = 0
+    peers_lost: list = field(default_factory=list)
+    cpu_seconds: float = 0.0
+    wall_seconds: float = 0.0
+
+
+def make_agent(cfg: C.RobotConfig, cost):
+    """The allocation agent named by ``cfg.allocation.method``."""
+    peers = [p.id for p in cfg.comms.peers]
+    method = cfg.allocation.method
+    if method == "bs":
+        from runtime.allocation.bs import BSAgent as Agent
+    elif method == "rtma":
+        from runtime.allocation.rtma import RTMAAgent as Agent
+    else:
+        from runtime.allocation.eps_auction import EpsAuctionAgent as Agent
+    return Agent(cfg.robot.id, peers, cost, bid_timeout=cfg.allocation.bid_timeout)
+
+
+class Daemon:
+    def __init__(self, cfg: C.RobotConfig, *, base=None, gps=None, link=None):
+        from runtime.control.pure_pursuit import PurePursuit
+        from runtime.localization.ekf import PoseEKF
+        from runtime.localization.enu import geodetic_to_enu
+
+        self.cfg = cfg
+        self.id = cfg.robot.id
+        self.log = get_logger("daemon", self.id)
+        self.stats = DaemonStats()
+        self._geodetic_to_enu = geodetic_to_enu
+        if base is None:
+            from runtime.drivers.create_oi import CreateOI
+            b = cfg.base
+            base = CreateOI(b.port, model=b.model, baudrate=b.baudrate, mode=b.mode,
+                            watchdog=b.watchdog, max_speed=b.max_speed, robot_id=self.id)
+        self.base = base
+        if gps is None and cfg.gps.enabled:
+            from runtime.drivers.nmea_gps import NmeaGps
+            gps = NmeaGps(cfg.gps.port, baudrate=cfg.gps.baudrate, robot_id=self.id)
+        self.gps = gps
+        if link is None:
+            from runtime.comms.link import MavlinkLink, load_key
+            key = load_key(cfg.comms.signing_key) if cfg.comms.signing_key else None
+            link = MavlinkLink(self.id, cfg.comms.listen, [p.address for p in cfg.comms.peers],
+                               cfg.comms.gcs, signing_key=key,
+                               heartbeat_timeout=cfg.comms.heartbeat_timeout)
+        self.link = link
+        from runtime.comms.telemetry import GcsTelemetry
+        self.telemetry = GcsTelemetry(link, self.id, cfg.datum)
+        self.ekf = PoseEKF(cfg.localization)
+        if cfg.localization.initial_pose is not None:
+            self.ekf.initialise(*cfg.localization.initial_pose)
+        self.tasks = {i: tuple(xy) for i, xy in enumerate(cfg.allocation.formation)}
+        self.agent = make_agent(cfg, self._cost)
+        c = cfg.control
+        self.pursuit = PurePursuit(lookahead=c.lookahead, cruise_speed=c.cruise_speed,
+                                   max_turn_rate=c.max_turn_rate, goal_tolerance=c.goal_tolerance)
+        self.period = 1.0 / c.rate
+        self._last_step: float | None = None
+        self._last_odom_t: float | None = None
+        self._started = False
+        self._target: int | None = None
+        self._path: list[tuple[float, float]] = []
+        self._arrived = False
+        self._backoff_until = -1.0
+        self._backoff_turn = 0.0
+
+    # ------------------------------------------------------------------ costs and pose
+    def pose(self) -> tuple[float, float, float] | None:
+        return self.ekf.pose() if self.ekf.initialised else None
+
+    def _cost(self, task: int) -> float:
+        """Straight-line bid cost from the current pose estimate (planner costs: issue 4)."""
+        pose = self.pose()
+        if pose is None or task not in self.tasks:
+            return math.inf
+        tx, ty = self.tasks[task]
+        return math.hypot(tx - pose[0], ty - pose[1])
+
+    # ------------------------------------------------------------------ lifecycle
+    def open(self, now: float) -> None:
+        self.base.open(now)
+        if self.gps is not None:
+            self.gps.open(now) if hasattr(self.gps, "open") else None
+        self.log.info("open: base %s, gps %s, listening %s", self.cfg.base.port,
+                      self.cfg.gps.port if self.gps else "off", self.cfg.comms.listen)
+
+    def close(self) -> None:
+        try:
+            self.base.close()
+        finally:
+            for part in (self.gps, self.link):
+                if part is not None and hasattr(part, "close"):
+                    part.close()
+
+    # ------------------------------------------------------------------ one cycle
+    def step(self, now: float) -> None:
+        self.stats.cycles += 1
+        dt = 0.0 if self._last_step is None else now - self._last_step
+        self._last_step = now
+        self._sense(now, dt)
+        self._allocate(now)
+        self._control(now)
+        self.telemetry.tick(now, self.pose(), self._velocity(), self.base.sensors,
+                            self.agent.assignment, self.agent.converged)
+
+    def _sense(self, now: float, dt: float) -> None:
+        if dt > 0 and self.ekf.initialised:
+            self.ekf.predict(dt)
+        if self.base.poll(now):
+            odo = self.base.odometry
+            if self.ekf.initialised:
+                self.ekf.update_odometry(odo.v, odo.w)
+        if self.gps is not None:
+            for fix in self.gps.poll(now):
+                if not fix.valid:
+                    continue
+                e, n, _ = self._geodetic_to_enu(fix.lat, fix.lon, fix.alt, self.cfg.datum)
+                if not self.ekf.initialised:
+                    self.ekf.initialise(e, n, None)
+                else:
+                    self.ekf.update_gps(e, n, self.cfg.localization.gps_sigma)
+
+    def _velocity(self) -> tuple[float, float]:
+        if not self.ekf.initialised:
+            return (0.0, 0.0)
+        x, y, th = self.ekf.pose()
+        v = self.ekf.x[3]
+        return (float(v * math.cos(th)), float(v * math.sin(th)))
+
+    def _allocate(self, now: float) -> None:
+        out = []
+        if not self._started and self.ekf.initialised:
+            self._started = True
+            if self.cfg.allocation.initiator and self.tasks:
+                out += self.agent.start(self.tasks, now)
+        for msg in self.link.poll(now):
+            self.stats.agent_received += 1
+            if hasattr(msg, "x") and hasattr(msg, "task"):
+                self.tasks.setdefault(msg.task, (msg.x, msg.y))
+            if self._started:
+                out += self.agent.on_message(msg, now)
+        for lost in self.link.peers_lost(now):
+            self.stats.peers_lost.append(lost)
+            self.log.warning("peer %d lost (no heartbeat for %.1f s): re-auctioning its work",
+                             lost, self.cfg.comms.heartbeat_timeout)
+            out += self.agent.on_peer_lost(lost, now)
+        if self._started:
+            out += self.agent.on_tick(now)
+        if out:
+            self.stats.agent_sent += len(out)
+            self.link.send_agent(out, now)
+
+    def _control(self, now: float) -> None:
+        pose = self.pose()
+        task = self.agent.assignment
+        if pose is None or task is None or task not in self.tasks:
+            self.base.set_velocity(0.0, 0.0, now)
+            return
+        goal = self.tasks[task]
+        if task != self._target:
+            self._target, self._arrived = task, False
+            self._path = [(pose[0], pose[1]), goal]
+            self.log.info("driving to task %d at (%.2f, %.2f)", task, *goal)
+        sensors = self.base.sensors
+        if sensors.bump_left or sensors.bump_right:
+            # back off and turn away from the side that hit; then re-plan from where we are
+            self._backoff_until = now + 0.6
+            self._backoff_turn = -1.2 if sensors.bump_left and not sensors.bump_right else 1.2
+            self._path = [(pose[0], pose[1]), goal]
+        if now < self._backoff_until:
+            self.base.set_velocity(-0.08, self._backoff_turn, now)
+            return
+        if self._arrived and math.hypot(goal[0] - pose[0], goal[1] - pose[1]) < 3 * self.cfg.control.goal_tolerance:
+            self.base.set_velocity(0.0, 0.0, now)
+            return
+        v, w, done = self.pursuit.command(pose, self._path)
+        if done:
+            self._arrived = True
+            v, w = 0.0, 0.0
+        self.base.set_velocity(v, w, now)
+
+    def snapshot(self) -> dict:
+        pose = self.pose()
+        s = self.stats
+        return {
+            "robot": self.id, "pose": pose, "task": self.agent.assignment,
+            "converged": bool(self.agent.converged), "arrived": self._arrived,
+            "cycles": s.cycles, "missed_deadlines": s.missed_deadlines,
+            "worst_lateness": s.worst_lateness, "agent_sent": s.agent_sent,
+            "agent_received": s.agent_received, "peers_lost": s.peers_lost,
+            "cpu_seconds": s.cpu_seconds, "wall_seconds": s.wall_seconds,
+            "base": vars(self.base.stats) if hasattr(self.base, "stats") else {},
+        }
+
+
+# ---------------------------------------------------------------------- process main loop
+
+def run(daemon: Daemon, clock: Clock, duration: float | None = None, stats_path: str | None = None) -> None:
+    """Run ``daemon`` at its control rate until ``duration`` (clock seconds) or SIGTERM/SIGINT."""
+    stop = {"flag": False}
+
+    def _stop(signum, frame):
+        stop["flag"] = True
+
+    signal.signal(signal.SIGTERM, _stop)
+    signal.signal(signal.SIGINT, _stop)
+    t0 = clock.now()
+    wall0, cpu0 = time.monotonic(), time.process_time()
+    daemon.open(t0)
+    next_t = t0
+    last_dump = t0
+    try:
+        while not stop["flag"] and (duration is None or clock.now() - t0 < duration):
+            now = clock.now()
+            late = now - next_t
+            if late > daemon.period:       # the cycle that was due is a whole period late
+                daemon.stats.missed_deadlines += 1
+                next_t = now
+            daemon.stats.worst_lateness = max(daemon.stats.worst_lateness, late)
+            daemon.step(now)
+            next_t += daemon.period
+            if stats_path and now - last_dump > 1.0:
+                last_dump = now
+                daemon.stats.cpu_seconds = time.process_time() - cpu0
+                daemon.stats.wall_seconds = time.monotonic() - wall0
+                _dump(stats_path, daemon.snapshot())
+            clock.sleep_until(next_t)
+    finally:
+        daemon.close()
+        daemon.stats.cpu_seconds = time.process_time() - cpu0
+        daemon.stats.wall_seconds = time.monotonic() - wall0
+        if stats_path:
+            _dump(stats_path, daemon.snapshot())
+        daemon.log.info("stopped after %d cycles, %d missed deadlines", daemon.stats.cycles,
+                        daemon.stats.missed_deadlines)
+
+
+def _dump(path: str, data: dict) -> None:
+    tmp = f"{path}.tmp{os.getpid()}"
+    with open(tmp, "w") as fh:
+        json.dump(data, fh, default=str)
+    os.replace(tmp, path)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("daemon", help="run one robot's daemon from its robot config")
+    p.add_argument("config", help="robot config YAML")
+    p.add_argument("--check", action="store_true", help="validate the config and exit")
+    p.add_argument("--speedup", type=float, default=None,
+                   help="SITL only: run on a scaled clock this many times faster than real time")
+    p.add_argument("--epoch", type=float, default=None,
+                   help="SITL only: monotonic-clock epoch shared with the simulator")
+    p.add_argument("--epoch-file", default=None,
+                   help="SITL only: when built, write FILE.ready.ID and wait for FILE to hold the epoch")
+    p.add_argument("--duration", type=float, default=None, help="stop after this many (clock) seconds")
+    p.add_argument("--stats", default=None, help="write a JSON status snapshot here every second")
+    p.set_defaults(func=_main)
+
+
+def _wait_for_epoch(path: str, robot_id: int, timeout: float = 120.0) -> float:
+    """SITL start barrier: say we are built, then wait for the simulator's clock epoch."""
+    Path(f"{path}.ready.{robot_id}").touch()
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            return float(Path(path).read_text())
+        except (OSError, ValueError):
+            time.sleep(0.01)
+    raise C.ConfigError(path, "epoch", f"the simulator to start within {timeout:.0f} s")
+
+
+def _main(args) -> int:
+    cfg = C.load_robot(args.config)
+    if args.check:
+        print(f"{args.config}: ok (robot {cfg.robot.id}, {cfg.base.model} on {cfg.base.port})")
+        return 0
+    daemon = Daemon(cfg)
+    epoch = args.epoch
+    if args.epoch_file:
+        epoch = _wait_for_epoch(args.epoch_file, cfg.robot.id)
+    if args.speedup is not None or epoch is not None:
+        clock: Clock = ScaledClock(args.speedup or 1.0, epoch)
+    else:
+        clock = WallClock()
+    run(daemon, clock, args.duration, args.stats)
+    return 0

@@ -20,6 +20,7 @@ SHELL_RADIUS = 0.17           # m (340 mm diameter)
 SHELL_TOP = 0.092             # m above the floor
 SHELL_CLEARANCE = 0.010       # m, floor to the underside of the shell
 WHEEL_RADIUS = 0.036          # m (72 mm wheels)
+WHEEL_RADIUS_SIGMA = 0.004    # relative spread of the tyres' effective rolling radius
 WHEEL_TRACK = 0.235           # m between wheel contact points
 CASTER_RADIUS = 0.012         # m
 CASTER_X = 0.13               # m ahead of / behind the axle
@@ -56,11 +57,15 @@ LEFT, RIGHT = 0, 1            # link indices of the wheel joints
 CASTERS = (2, 3)
 
 
-def build_body(client: int, start: tuple[float, float, float], gui: bool = False) -> int:
-    """Create the multibody at ``start`` = (x, y, yaw) on the floor and return its body id."""
+def build_body(client: int, start: tuple[float, float, float], gui: bool = False,
+               wheel_radii: tuple[float, float] = (WHEEL_RADIUS, WHEEL_RADIUS)) -> int:
+    """Create the multibody at ``start`` = (x, y, yaw) on the floor and return its body id.
+
+    ``wheel_radii`` are the tyres' effective rolling radii (left, right); the motors and encoders
+    work in joint angle, so a radius off the nominal 36 mm is real odometry error."""
     kw = {"physicsClientId": client}
     shell = p.createCollisionShape(p.GEOM_CYLINDER, radius=SHELL_RADIUS, height=SHELL_HEIGHT, **kw)
-    wheel = p.createCollisionShape(p.GEOM_SPHERE, radius=WHEEL_RADIUS, **kw)
+    wheels = [p.createCollisionShape(p.GEOM_SPHERE, radius=r, **kw) for r in wheel_radii]
     caster = p.createCollisionShape(p.GEOM_SPHERE, radius=CASTER_RADIUS, **kw)
     vis_shell = vis_wheel = vis_caster = -1
     if gui:
@@ -68,7 +73,6 @@ def build_body(client: int, start: tuple[float, float, float], gui: bool = False
                                         rgbaColor=(0.2, 0.2, 0.2, 1), **kw)
         vis_wheel = p.createVisualShape(p.GEOM_SPHERE, radius=WHEEL_RADIUS, rgbaColor=(0.1, 0.1, 0.1, 1), **kw)
         vis_caster = p.createVisualShape(p.GEOM_SPHERE, radius=CASTER_RADIUS, rgbaColor=(0.6, 0.6, 0.6, 1), **kw)
-    axle_z = WHEEL_RADIUS - SHELL_CENTRE_Z
     caster_z = CASTER_RADIUS - SHELL_CENTRE_Z
     half = WHEEL_TRACK / 2
     x, y, yaw = start
@@ -76,9 +80,10 @@ def build_body(client: int, start: tuple[float, float, float], gui: bool = False
         baseMass=MASS_SHELL, baseCollisionShapeIndex=shell, baseVisualShapeIndex=vis_shell,
         basePosition=(x, y, SHELL_CENTRE_Z), baseOrientation=p.getQuaternionFromEuler((0, 0, yaw)),
         linkMasses=[MASS_WHEEL, MASS_WHEEL, MASS_CASTER, MASS_CASTER],
-        linkCollisionShapeIndices=[wheel, wheel, caster, caster],
+        linkCollisionShapeIndices=[wheels[0], wheels[1], caster, caster],
         linkVisualShapeIndices=[vis_wheel, vis_wheel, vis_caster, vis_caster],
-        linkPositions=[(0, half, axle_z), (0, -half, axle_z), (CASTER_X, 0, caster_z), (-CASTER_X, 0, caster_z)],
+        linkPositions=[(0, half, wheel_radii[0] - SHELL_CENTRE_Z), (0, -half, wheel_radii[1] - SHELL_CENTRE_Z),
+                       (CASTER_X, 0, caster_z), (-CASTER_X, 0, caster_z)],
         linkOrientations=[(0, 0, 0, 1)] * 4,
         linkInertialFramePositions=[(0, 0, 0)] * 4,
         linkInertialFrameOrientations=[(0, 0, 0, 1)] * 4,
@@ -135,11 +140,15 @@ class SimCreate2:
     """One Create 2 body in a :class:`sitl.world.World`; the device emulators call these methods."""
 
     def __init__(self, client: int, robot_id: int, start: tuple[float, float, float],
-                 rng: np.random.Generator, gui: bool = False):
+                 rng: np.random.Generator, gui: bool = False, wheel_radius_sigma: float = WHEEL_RADIUS_SIGMA):
         self.robot_id = robot_id
         self._client = client
         self._kw = {"physicsClientId": client}
-        self.body_id = build_body(client, start, gui)
+        # tyre tolerance and wear: each wheel's rolling radius is off the nominal by ~0.4 % (1 sigma)
+        sigma = wheel_radius_sigma
+        scale = np.clip(rng.normal(1.0, sigma, size=2), 1 - 3 * sigma, 1 + 3 * sigma) if sigma > 0 else (1.0, 1.0)
+        self.wheel_radii = (WHEEL_RADIUS * float(scale[0]), WHEEL_RADIUS * float(scale[1]))
+        self.body_id = build_body(client, start, gui, self.wheel_radii)
         self._targets = (0.0, 0.0)
         self._torques = (0.0, 0.0)
         self._rates = (0.0, 0.0)
@@ -181,7 +190,8 @@ class SimCreate2:
 
     # -------------------------------------------------------------- sensors
     def wheel_travel(self) -> tuple[float, float]:
-        """Cumulative signed distance each wheel rolled (m): joint angle x wheel radius."""
+        """Cumulative signed distance each wheel rolled as its encoder sees it (m): joint angle x the
+        nominal 36 mm radius.  The true distance differs by the tyre's radius error (``wheel_radii``)."""
         states = p.getJointStates(self.body_id, [LEFT, RIGHT], **self._kw)
         return states[0][0] * WHEEL_RADIUS, states[1][0] * WHEEL_RADIUS
 

@@ -30,10 +30,13 @@ MOTOR_SAMPLE_PERIOD = 0.02      # s of sim time between motor-load samples for t
 class World:
     """A lock-stepped pybullet world built from a :class:`runtime.config.WorldConfig`."""
 
-    def __init__(self, cfg: WorldConfig, seed: int = 0, dt: float = 1 / 200, gui: bool = False):
+    def __init__(self, cfg: WorldConfig, seed: int = 0, dt: float = 1 / 200, gui: bool = False,
+                 wheel_radius_sigma: float = 0.004):
+        # wheel_radius_sigma: relative 1-sigma spread of each tyre's rolling radius (0 = ideal wheels)
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and 0 < dt <= 0.05):
             raise InputError(f"world dt: expected a time step in (0, 0.05] s, got {dt!r}")
         self.cfg = cfg
+        self.wheel_radius_sigma = float(wheel_radius_sigma)
         self.seed = int(seed)
         self.dt = float(dt)
         self.gui = gui
@@ -91,7 +94,8 @@ class World:
             raise InputError(f"robot {robot_id} start ({x}, {y}): expected inside the {sx:g} x {sy:g} m arena "
                              f"by at least the robot radius {SHELL_RADIUS} m")
         rng = np.random.default_rng([self.seed, int(robot_id)])
-        body = SimCreate2(self._client, robot_id, (x, y, yaw), rng, gui=self.gui)
+        body = SimCreate2(self._client, robot_id, (x, y, yaw), rng, gui=self.gui,
+                          wheel_radius_sigma=self.wheel_radius_sigma)
         self._bodies[robot_id] = body
         return body
 

@@ -21,7 +21,7 @@ ARENA = WorldConfig(size=(10.0, 10.0))
 
 @pytest.fixture
 def world():
-    w = World(ARENA, seed=3)
+    w = World(ARENA, seed=3, wheel_radius_sigma=0.0)
     yield w
     w.close()
 
@@ -276,7 +276,7 @@ def test_bad_inputs_raise_one_line_input_errors(world):
 
 
 def test_close_is_idempotent():
-    w = World(ARENA)
+    w = World(ARENA, wheel_radius_sigma=0.0)
     w.close()
     w.close()
 
@@ -298,7 +298,7 @@ def test_body_has_create2_dimensions_and_mass(world):
 
 @pytest.fixture(scope="module")
 def shared():
-    w = World(ARENA, seed=5)
+    w = World(ARENA, seed=5, wheel_radius_sigma=0.0)
     bot = w.add_create2(1, (0.0, 0.0, 0.0))
     yield w, bot
     w.close()
@@ -320,3 +320,21 @@ def test_any_finite_wheel_command_is_clipped_and_the_body_stays_upright(shared, 
     assert abs(l1 - l0) <= 0.5 * 0.2 + 1e-3 and abs(r1 - r0) <= 0.5 * 0.2 + 1e-3
     assert bot.height() == pytest.approx(M.SHELL_CENTRE_Z, abs=0.01)
     assert bot.wheel_drop() == (False, False)
+
+
+def test_tyre_tolerance_makes_encoder_odometry_drift():
+    """With real tyre spread the encoders (nominal radius) disagree with the ground truth distance
+    by each wheel's radius error: odometry error comes from the physics, not a formula."""
+    w = World(ARENA, seed=11, wheel_radius_sigma=0.004)
+    try:
+        r = w.add_create2(1, (0.0, 0.0, 0.0))
+        assert r.wheel_radii[0] != r.wheel_radii[1]
+        r.set_wheel_speeds(0.2, 0.2)
+        w.step(1000)
+        left, right = r.wheel_travel()
+        x, y, _ = r.pose()
+        true_dist = math.hypot(x, y)
+        mean_scale = (r.wheel_radii[0] + r.wheel_radii[1]) / (2 * 0.036)
+        assert abs((left + right) / 2 * mean_scale - true_dist) < 0.01 * true_dist
+    finally:
+        w.close()

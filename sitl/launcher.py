@@ -239,8 +239,9 @@ def _done(f: Fleet, status: dict[int, dict], tol: float) -> bool:
     return True
 
 
-def run_lockstep(f: Fleet, timeout: float | None = None, tol: float = 0.2, progress=None) -> dict:
-    """Daemons in this process on a simulated clock: deterministic for a given seed."""
+def run_lockstep(f: Fleet, timeout: float | None = None, tol: float = 0.2, progress=None, on_step=None) -> dict:
+    """Daemons in this process on a simulated clock: deterministic for a given seed.
+    ``on_step(fleet)`` is called after every control cycle (tests attach observers there)."""
     from runtime.daemon import Daemon
 
     clock = SimClock(f.world.t)
@@ -256,6 +257,8 @@ def run_lockstep(f: Fleet, timeout: float | None = None, tol: float = 0.2, progr
         clock.sleep_until(f.world.t)
         for r in f.robots.values():
             r.daemon.step(clock.now())
+        if on_step is not None:
+            on_step(f)
         status = {r.id: {"task": r.daemon.agent.assignment, "converged": r.daemon.agent.converged}
                   for r in f.robots.values()}
         if _done(f, status, tol):

@@ -1,0 +1,229 @@
+"""iRobot Create 2 / Create (1) base driver over the Open Interface.
+
+A thin shell around :mod:`runtime.drivers.create_oi_protocol`: it opens the link with
+``serial.serial_for_url`` (a device path, a pty, ``socket://host:port`` and ``loop://`` all work),
+starts the OI, streams bumps and wheel drops (7), OI mode (35), battery (group 3 = 21-26) and the
+encoder counts (43, 44) on a Create 2 or distance (19) and angle (20) on a Create 1, and turns them
+into :class:`Odometry` and :class:`BaseSensors`.  Velocity goes out as Drive Direct (145).  A watchdog
+stops the wheels when no command came for ``watchdog`` seconds.
+"""
+from __future__ import annotations
+
+import math
+
+import serial
+
+from runtime.drivers import create_oi_protocol as P
+from runtime.drivers.base import BaseSensors, LinkStats, MobileBase, Odometry
+from runtime.errors import InputError
+from runtime.log import get_logger
+
+STREAM_IDS = {"create2": (7, 35, 3, 43, 44), "create1": (7, 35, 3, 19, 20)}
+MAX_READS_PER_POLL = 64
+
+
+class CreateOI(MobileBase):
+    """Create 2 or Create 1 on one serial link; non-blocking, polled with the current time."""
+
+    def __init__(self, port: str, model: str = "create2", baudrate: int | None = None, mode: str = "safe",
+                 watchdog: float = 0.5, max_speed: float = 0.5, robot_id=None):
+        P.check_model(model)
+        if mode not in ("safe", "full"):
+            raise InputError(f"Create OI mode {mode!r}: expected 'safe' or 'full'")
+        geometry = P.GEOMETRY[model]
+        baudrate = geometry.default_baud if baudrate is None else baudrate
+        P.baud_code(baudrate)                                  # must be an OI rate
+        if not (isinstance(watchdog, (int, float)) and watchdog > 0):
+            raise InputError(f"Create OI watchdog {watchdog!r}: expected seconds > 0")
+        if not (isinstance(max_speed, (int, float)) and 0 < max_speed <= P.MAX_WHEEL_MM_S / 1000.0):
+            raise InputError(f"Create OI max_speed {max_speed!r}: expected 0 < m/s <= 0.5")
+        self.port = port
+        self.model = model
+        self.geometry = geometry
+        self.baudrate = baudrate
+        self.mode = mode
+        self.watchdog = float(watchdog)
+        self.max_speed = float(max_speed)
+        self.log = get_logger("create_oi", robot_id)
+        self.odometry = Odometry()
+        self.sensors = BaseSensors()
+        self.stats = LinkStats(extra={"bytes_in": 0, "bytes_out": 0, "malformed": 0, "write_errors": 0,
+                                      "read_errors": 0, "nonfinite_commands": 0})
+        self.parser = P.StreamParser(model)
+        self.values: dict = {}               # latest named values from the stream
+        self.ser = None
+        self._counts: tuple[int, int] | None = None
+        self._last_cmd_t: float | None = None
+        self._moving = False                 # last commanded wheel speeds non-zero
+
+    # ------------------------------------------------------------------ lifecycle
+    def open(self, now: float) -> None:
+        """Open the link; Start, Safe or Full, then Stream the packets odometry needs."""
+        if self.ser is not None:
+            self.close()
+        self._counts = None
+        try:
+            self.ser = serial.serial_for_url(self.port, self.baudrate, timeout=0)
+        except (serial.SerialException, ValueError, OSError) as exc:
+            raise InputError(f"Create OI port {self.port!r}: cannot open ({exc}); "
+                             "expected a serial device, pty or pyserial URL") from None
+        self._write(P.start())
+        self._write(P.safe() if self.mode == "safe" else P.full())
+        self._write(P.stream(STREAM_IDS[self.model], self.model))
+        self._last_cmd_t = now
+        self.odometry.t = now
+        self.log.info("opened %s (%s, %d bit/s, %s mode)", self.port, self.model, self.baudrate, self.mode)
+
+    def close(self) -> None:
+        """Zero velocity, pause the stream, Stop (Create 1 has no Stop: Start returns it to Passive)."""
+        if self.ser is None:
+            return
+        self._write(P.drive_direct(0, 0))
+        self._write(P.pause_resume_stream(False))
+        self._write(P.stop() if self.model == "create2" else P.start())
+        try:
+            self.ser.flush()
+            self.ser.close()
+        except (serial.SerialException, OSError) as exc:
+            self.log.warning("close %s: %s", self.port, exc)
+        self.ser = None
+        self._moving = False
+
+    # ------------------------------------------------------------------ polling
+    def poll(self, now: float) -> bool:
+        """Decode waiting frames into odometry and sensors; enforce the watchdog.  True if new odometry."""
+        if self.ser is None:
+            return False
+        data = self._read_all()
+        moved = False
+        if data:
+            frames = self.parser.feed(data)
+            ds = dth = 0.0
+            n = 0
+            for frame in frames:
+                step = self._odometry_step(frame)
+                self._update_sensors(frame)
+                if step is not None:
+                    ds += step[0]
+                    dth += step[1]
+                    n += 1
+            if n:
+                self._integrate(ds, dth, n, now)
+                moved = True
+            self._sync_stats()
+        if self._moving and self._last_cmd_t is not None and now - self._last_cmd_t >= self.watchdog:
+            self._send_wheels(0, 0)
+            self.stats.watchdog_stops += 1
+            self.log.warning("watchdog: no command for %.2f s, wheels stopped", now - self._last_cmd_t)
+        return moved
+
+    def _read_all(self) -> bytes:
+        chunks = []
+        try:
+            for _ in range(MAX_READS_PER_POLL):
+                chunk = self.ser.read(max(1, self.ser.in_waiting))
+                if not chunk:
+                    break
+                chunks.append(chunk)
+        except (serial.SerialException, OSError) as exc:
+            self.stats.extra["read_errors"] += 1
+            if self.stats.extra["read_errors"] in (1, 10, 100) or self.stats.extra["read_errors"] % 1000 == 0:
+                self.log.warning("read %s: %s", self.port, exc)
+        data = b"".join(chunks)
+        self.stats.extra["bytes_in"] += len(data)
+        return data
+
+    def _odometry_step(self, frame: dict) -> tuple[float, float] | None:
+        """(distance m, heading change rad) since the previous frame, or None (no motion data)."""
+        if self.model == "create1":
+            if "distance" not in frame or "angle" not in frame:
+                return None
+            return frame["distance"] / 1000.0, math.radians(frame["angle"])
+        if "left_encoder_counts" not in frame or "right_encoder_counts" not in frame:
+            return None
+        counts = (frame["left_encoder_counts"], frame["right_encoder_counts"])
+        previous, self._counts = self._counts, counts
+        if previous is None:                   # the first frame only sets the reference
+            return None
+        mpc = self.geometry.mm_per_count / 1000.0
+        dl = _delta16(counts[0], previous[0]) * mpc
+        dr = _delta16(counts[1], previous[1]) * mpc
+        return (dl + dr) / 2.0, (dr - dl) / (self.geometry.track_mm / 1000.0)
+
+    def _integrate(self, ds: float, dth: float, frames: int, now: float) -> None:
+        o = self.odometry
+        mid = o.theta + dth / 2.0
+        o.x += ds * math.cos(mid)
+        o.y += ds * math.sin(mid)
+        o.theta = math.remainder(o.theta + dth, math.tau)
+        o.distance += abs(ds)
+        span = frames * P.STREAM_PERIOD        # the robot sends one frame per 15 ms
+        o.v, o.w = ds / span, dth / span
+        o.t = now
+
+    def _update_sensors(self, frame: dict) -> None:
+        self.values.update(frame)
+        s = self.sensors
+        if "bumps_wheel_drops" in frame:
+            s.bump_left = frame["bump_left"]
+            s.bump_right = frame["bump_right"]
+            s.wheel_drop = bool(frame["wheel_drop_left"] or frame["wheel_drop_right"]
+                                or frame.get("wheel_drop_caster", False))
+        if "oi_mode" in frame:
+            mode = P.MODE_NAMES.get(frame["oi_mode"], "unknown")
+            if mode != s.mode:
+                expected = s.mode in ("unknown", "off") or mode == self.mode
+                (self.log.info if expected else self.log.warning)("OI mode %s -> %s", s.mode, mode)
+                s.mode = mode
+        if "voltage" in frame:
+            s.voltage = frame["voltage"] / 1000.0
+            s.current = frame["current"] / 1000.0
+            s.battery_charge = frame["battery_charge"] / 1000.0
+            s.battery_capacity = frame["battery_capacity"] / 1000.0
+
+    def _sync_stats(self) -> None:
+        p = self.parser
+        self.stats.frames = p.frames
+        self.stats.bad_checksum = p.bad_checksum
+        self.stats.dropped_bytes = p.dropped_bytes
+        self.stats.extra["malformed"] = p.malformed
+
+    # ------------------------------------------------------------------ commands
+    def set_velocity(self, v: float, w: float, now: float) -> None:
+        """Forward speed ``v`` (m/s) and turn rate ``w`` (rad/s) -> Drive Direct; each wheel clipped to
+        +-max_speed with both scaled alike, so the curvature is kept."""
+        if self.ser is None:
+            raise RuntimeError("CreateOI.set_velocity before open()")
+        if not (math.isfinite(v) and math.isfinite(w)):
+            self.stats.extra["nonfinite_commands"] += 1
+            self.log.warning("non-finite velocity command (%r, %r): stopping", v, w)
+            v = w = 0.0
+        half = self.geometry.track_mm / 2000.0
+        left, right = v - w * half, v + w * half
+        peak = max(abs(left), abs(right))
+        if peak > self.max_speed:
+            left, right = left * self.max_speed / peak, right * self.max_speed / peak
+        self._send_wheels(round(right * 1000.0), round(left * 1000.0))
+        self._last_cmd_t = now
+
+    def _send_wheels(self, right_mm_s: int, left_mm_s: int) -> None:
+        lim = P.MAX_WHEEL_MM_S
+        right_mm_s, left_mm_s = max(-lim, min(lim, right_mm_s)), max(-lim, min(lim, left_mm_s))
+        self._write(P.drive_direct(right_mm_s, left_mm_s))
+        self._moving = (right_mm_s, left_mm_s) != (0, 0)
+
+    def _write(self, data: bytes) -> None:
+        try:
+            self.ser.write(data)
+        except (serial.SerialException, OSError) as exc:
+            self.stats.extra["write_errors"] += 1
+            if self.stats.extra["write_errors"] in (1, 10, 100) or self.stats.extra["write_errors"] % 1000 == 0:
+                self.log.warning("write %s: %s", self.port, exc)
+            return
+        self.stats.commands += 1
+        self.stats.extra["bytes_out"] += len(data)
+
+
+def _delta16(new: int, old: int) -> int:
+    """Signed difference of two 16-bit counters, across a rollover either way."""
+    return (new - old + 0x8000) % 0x10000 - 0x8000

@@ -62,3 +62,66 @@ class SimClock:
     def sleep_until(self, t: float) -> None:
         if t > self._t:
             self._t = t
+
+
+class SharedClock:
+    """Sim time published by the simulator process in a small memory-mapped file.
+
+    The simulator is the time master: if it falls behind (a loaded machine), every daemon's time
+    slows with it, so no daemon ever acts on sensor data from a future the world has not reached.
+    Layout: three little-endian doubles (seq, t, seq); a reader retries until both seq agree.
+    ``speedup`` is only a hint for how long to sleep between looks at the clock.
+    """
+
+    _FMT = "<3d"
+
+    def __init__(self, path: str, speedup: float = 1.0):
+        import mmap
+        self._fh = open(path, "rb")
+        self._mm = mmap.mmap(self._fh.fileno(), 24, access=mmap.ACCESS_READ)
+        self.speedup = max(speedup, 1e-3)
+
+    def now(self) -> float:
+        import struct
+        while True:
+            a, t, b = struct.unpack_from(self._FMT, self._mm, 0)
+            if a == b:
+                return t
+
+    def sleep_until(self, t: float) -> None:
+        while True:
+            remaining = t - self.now()
+            if remaining <= 0:
+                return
+            time.sleep(min(0.005, max(0.0002, remaining / self.speedup)))
+
+    def close(self) -> None:
+        self._mm.close()
+        self._fh.close()
+
+
+class ClockPublisher:
+    """The simulator's side of :class:`SharedClock`: ``publish(t)`` after every step."""
+
+    def __init__(self, path: str, t: float = 0.0):
+        import mmap
+        import os
+        tmp = f"{path}.tmp"
+        with open(tmp, "wb") as fh:
+            fh.write(b"\0" * 24)
+        self._fh = open(tmp, "r+b")
+        self._mm = mmap.mmap(self._fh.fileno(), 24)
+        self._seq = 0.0
+        self.publish(t)
+        os.replace(tmp, path)      # readers only ever see a file that holds a time
+
+    def publish(self, t: float) -> None:
+        import struct
+        self._seq += 1.0
+        struct.pack_into("<d", self._mm, 0, self._seq)
+        struct.pack_into("<d", self._mm, 8, t)
+        struct.pack_into("<d", self._mm, 16, self._seq)
+
+    def close(self) -> None:
+        self._mm.close()
+        self._fh.close()

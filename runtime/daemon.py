@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from runtime import config as C
-from runtime.clock import Clock, ScaledClock, WallClock
+from runtime.clock import Clock, ScaledClock, SharedClock, WallClock
 from runtime.log import get_logger
 
 
@@ -283,23 +283,22 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="SITL only: run on a scaled clock this many times faster than real time")
     p.add_argument("--epoch", type=float, default=None,
                    help="SITL only: monotonic-clock epoch shared with the simulator")
-    p.add_argument("--epoch-file", default=None,
-                   help="SITL only: when built, write FILE.ready.ID and wait for FILE to hold the epoch")
+    p.add_argument("--clock-file", default=None,
+                   help="SITL only: when built, write FILE.ready.ID, wait for FILE, then take the "
+                        "simulator's time from it")
     p.add_argument("--duration", type=float, default=None, help="stop after this many (clock) seconds")
     p.add_argument("--stats", default=None, help="write a JSON status snapshot here every second")
     p.set_defaults(func=_main)
 
 
-def _wait_for_epoch(path: str, robot_id: int, timeout: float = 120.0) -> float:
-    """SITL start barrier: say we are built, then wait for the simulator's clock epoch."""
+def _wait_for_clock(path: str, robot_id: int, timeout: float = 120.0) -> None:
+    """SITL start barrier: say we are built, then wait for the simulator to publish its clock."""
     Path(f"{path}.ready.{robot_id}").touch()
     deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        try:
-            return float(Path(path).read_text())
-        except (OSError, ValueError):
-            time.sleep(0.01)
-    raise C.ConfigError(path, "epoch", f"the simulator to start within {timeout:.0f} s")
+    while not Path(path).exists():
+        if time.monotonic() > deadline:
+            raise C.ConfigError(path, "clock", f"the simulator to start within {timeout:.0f} s")
+        time.sleep(0.01)
 
 
 def _main(args) -> int:
@@ -308,11 +307,11 @@ def _main(args) -> int:
         print(f"{args.config}: ok (robot {cfg.robot.id}, {cfg.base.model} on {cfg.base.port})")
         return 0
     daemon = Daemon(cfg)
-    epoch = args.epoch
-    if args.epoch_file:
-        epoch = _wait_for_epoch(args.epoch_file, cfg.robot.id)
-    if args.speedup is not None or epoch is not None:
-        clock: Clock = ScaledClock(args.speedup or 1.0, epoch)
+    if args.clock_file:
+        _wait_for_clock(args.clock_file, cfg.robot.id)
+        clock: Clock = SharedClock(args.clock_file, args.speedup or 1.0)
+    elif args.speedup is not None or args.epoch is not None:
+        clock = ScaledClock(args.speedup or 1.0, args.epoch)
     else:
         clock = WallClock()
     run(daemon, clock, args.duration, args.stats)

@@ -25,10 +25,11 @@ from pathlib import Path
 import yaml
 
 from runtime import config as C
-from runtime.clock import ScaledClock, SimClock
+from runtime.clock import ClockPublisher, ScaledClock, SimClock
 from runtime.log import get_logger
 
 log = get_logger("sitl")
+MAX_LAG = 0.25      # s of sim time the world may trail the speedup clock before the clock slips
 
 
 @dataclass
@@ -56,6 +57,7 @@ class Fleet:
     manifest_path: Path
     device_period: float = 0.005
     events: list[str] = field(default_factory=list)
+    device_hook: object = None          # called with the sim time after every device service
 
     # -------------------------------------------------------------- devices
     def service_devices(self) -> None:
@@ -71,6 +73,8 @@ class Fleet:
         while world.t + 1e-9 < t_target:
             world.step(per)
             self.service_devices()
+            if self.device_hook is not None:
+                self.device_hook(world.t)
 
     def true_pose(self, rid: int) -> tuple[float, float, float]:
         return self.robots[rid].body.pose()
@@ -274,23 +278,26 @@ def run_lockstep(f: Fleet, timeout: float | None = None, tol: float = 0.2, progr
 
 
 def run_processes(f: Fleet, speedup: float, timeout: float | None = None, tol: float = 0.2,
-                  progress=None, stop_flag=None) -> dict:
-    """One daemon process per robot on a clock ``speedup`` times real time."""
+                  progress=None, stop_flag=None, linger: float = 0.0) -> dict:
+    """One daemon process per robot on a clock ``speedup`` times real time.
+
+    ``linger``: wall seconds to keep everything running after the fleet settles; the result then
+    holds each daemon's CPU share over that idle window (``idle_cpu_share``, 1.0 = one core)."""
     from runtime.comms.gcs import GroundStation
 
     gcs = GroundStation(f.fleet.gcs)
-    epoch_file = f.run_dir / "epoch"
-    for stale in f.run_dir.glob("epoch*"):
+    clock_file = f.run_dir / "clock"
+    for stale in f.run_dir.glob("clock*"):
         stale.unlink()
     for r in f.robots.values():
         cmd = [sys.executable, "-m", "runtime.cli", "daemon", str(r.config_path),
-               "--speedup", repr(speedup), "--epoch-file", str(epoch_file),
+               "--speedup", repr(speedup), "--clock-file", str(clock_file),
                "--stats", str(f.run_dir / f"robot_{r.id}.stats.json")]
         with open(f.run_dir / f"robot_{r.id}.log", "w") as log_fh:
             r.proc = subprocess.Popen(cmd, stdout=log_fh, stderr=subprocess.STDOUT)
     # start barrier: the sim clock starts once every daemon is built (imports take seconds)
     deadline = time.monotonic() + 120
-    while not all((f.run_dir / f"epoch.ready.{rid}").exists() for rid in f.robots):
+    while not all((f.run_dir / f"clock.ready.{rid}").exists() for rid in f.robots):
         dead = [r.id for r in f.robots.values() if r.proc.poll() is not None]
         if dead or time.monotonic() > deadline or (stop_flag and stop_flag()):
             for rid in dead:
@@ -298,20 +305,29 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, tol: f
                                 f"before starting (log: {f.run_dir / f'robot_{rid}.log'})")
             break
         time.sleep(0.02)
+    # the world is the time master: it steps towards wall time x speedup and publishes how far it got
     clock = ScaledClock(speedup)
     clock.epoch -= f.world.t / speedup          # sim time continues from where the world is
-    tmp = epoch_file.with_suffix(".tmp")
-    tmp.write_text(repr(clock.epoch))
-    os.replace(tmp, epoch_file)
+    publisher = ClockPublisher(str(clock_file), f.world.t)
+    f.device_hook = publisher.publish
     timeout = timeout or f.fleet.timeout
     settled_since = None
     next_progress = 0.0
+    max_lag = 0.0
+    slips = 0
+    idle_from = None
     while not (stop_flag and stop_flag()):
-        now = clock.now()
-        if now >= timeout:
+        if f.world.t >= timeout:
             f.events.append(f"timeout after {timeout:.0f} s sim time")
             break
-        f.advance_to(now)
+        target = clock.now()
+        f.advance_to(min(target, f.world.t + 0.05))      # bounded chunks: keep watching the fleet
+        lag = target - f.world.t
+        max_lag = max(max_lag, lag)
+        if lag > MAX_LAG:            # the machine cannot hold this speedup: slip rather than sprint later
+            clock.epoch += (lag - MAX_LAG) / speedup
+            slips += 1
+        now = f.world.t
         gcs.poll()
         for r in f.robots.values():
             code = r.proc.poll() if r.proc else None
@@ -321,10 +337,15 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, tol: f
                 f.events.append(msg)
                 log.error(msg)
         status = {rid: s for rid, s in gcs.status().items() if rid in f.robots}
-        if _done(f, status, tol):
+        if idle_from is not None:
+            if time.monotonic() - idle_from[0] >= linger:
+                break
+        elif _done(f, status, tol):
             settled_since = settled_since if settled_since is not None else now
             if now - settled_since > 1.0:
-                break
+                if linger <= 0:
+                    break
+                idle_from = (time.monotonic(), {r.id: _cpu_seconds(r.proc.pid) for r in f.robots.values()})
         else:
             settled_since = None
         if progress and now >= next_progress:
@@ -332,7 +353,28 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, tol: f
             next_progress += 5.0
         time.sleep(0.002)
     gcs.close()
-    return summarise(f, {rid: s.get("task") for rid, s in gcs.status().items()})
+    f.device_hook = None
+    publisher.close()
+    res = summarise(f, {rid: s.get("task") for rid, s in gcs.status().items()})
+    res["world_max_lag"] = max_lag
+    res["clock_slips"] = slips
+    if slips:
+        f.events.append(f"the world fell more than {MAX_LAG} s behind the {speedup:g}x clock {slips} times "
+                        f"(the machine cannot hold this speedup)")
+    if idle_from is not None:
+        wall = time.monotonic() - idle_from[0]
+        res["idle_cpu_share"] = {rid: (_cpu_seconds(f.robots[rid].proc.pid) - c0) / wall
+                                 for rid, c0 in idle_from[1].items()}
+    return res
+
+
+def _cpu_seconds(pid: int) -> float:
+    """User + system CPU seconds of a live process (Linux /proc)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return math.nan
 
 
 def _progress(f: Fleet, status: dict) -> None:

@@ -277,8 +277,19 @@ def run_lockstep(f: Fleet, timeout: float | None = None, tol: float = 0.2, progr
     return summarise(f, {r.id: r.daemon.agent.assignment for r in f.robots.values()})
 
 
+def daemon_stats(f: Fleet) -> dict[int, dict]:
+    """The last status snapshot each daemon process wrote (``--stats``)."""
+    out = {}
+    for rid in f.robots:
+        try:
+            out[rid] = json.loads((f.run_dir / f"robot_{rid}.stats.json").read_text())
+        except (OSError, ValueError):
+            pass
+    return out
+
+
 def run_processes(f: Fleet, speedup: float, timeout: float | None = None, tol: float = 0.2,
-                  progress=None, stop_flag=None, linger: float = 0.0) -> dict:
+                  progress=None, stop_flag=None, linger: float = 0.0, on_step=None) -> dict:
     """One daemon process per robot on a clock ``speedup`` times real time.
 
     ``linger``: wall seconds to keep everything running after the fleet settles; the result then
@@ -329,6 +340,8 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, tol: f
             slips += 1
         now = f.world.t
         gcs.poll()
+        if on_step is not None:
+            on_step(f)
         for r in f.robots.values():
             code = r.proc.poll() if r.proc else None
             if code is not None and not r.exit_reported:

@@ -1,0 +1,47 @@
+"""The fleet as `make run` runs it: one daemon process per robot, on the simulator's clock."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+
+import pytest
+
+from sitl import launcher
+from tests.test_sitl_fleet import ROOT, _fleet_copy
+
+
+@pytest.mark.slow
+def test_cli_runs_fleet_of_daemon_processes(tmp_path):
+    fleet = _fleet_copy(tmp_path)
+    manifest = tmp_path / "manifest.json"
+    proc = subprocess.run([sys.executable, "-m", "runtime.cli", "sitl", "run", str(fleet), "--speedup", "2",
+                           "--manifest", str(manifest), "--run-dir", str(tmp_path / "run")],
+                          capture_output=True, text=True, timeout=300, cwd=ROOT)
+    print(proc.stdout[-1500:])
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "assignment valid: True" in proc.stdout
+    assert "Hungarian optimum" in proc.stdout
+    assert manifest.is_file()
+
+
+@pytest.mark.slow
+def test_dead_daemon_is_reported_and_peers_notice(tmp_path):
+    f = launcher.build(_fleet_copy(tmp_path), tmp_path / "run")
+    killed = {}
+
+    def kill_robot_4(fleet):
+        if fleet.world.t > 3.0 and not killed:
+            killed["t"] = fleet.world.t
+            os.kill(fleet.robots[4].proc.pid, signal.SIGKILL)
+    try:
+        res = launcher.run_processes(f, 2.0, timeout=25, on_step=kill_robot_4)
+    finally:
+        f.close()
+    stats = launcher.daemon_stats(f)
+    assert killed
+    assert any("robot 4 daemon exited with code -9" in e for e in res["events"]), res["events"]
+    # the survivors' heartbeat timeout fired for robot 4
+    for rid in (1, 2, 3):
+        assert 4 in stats[rid]["peers_lost"], (rid, stats[rid])

@@ -1,0 +1,365 @@
+"""BS, the basic market-based algorithm of paper 002 (section II-A), as a sans-IO agent.
+
+An auctioneer announces a task, every other live robot bids its cost, the lowest bid wins.  A robot
+that holds two tasks keeps the cheaper one and sells the other in an auction of its own, to the best
+bid WORSE than its own bid for that task: every resale moves a task to a robot with a strictly larger
+(bid, robot id), so no task can circle between two robots (paper Fig. 2) and negotiation ends.
+Auctions run in parallel; the initial auctioneer is the robot on which :meth:`BSAgent.start` is called.
+
+Wire use of the shared messages (``runtime.allocation.messages``):
+
+* ``Announce`` (broadcast): ``reserve`` = +inf for an open auction (lowest bid wins, the auctioneer's
+  own bid counts); a finite ``reserve`` is the seller's own bid, and only worse bids can win.
+* ``Bid`` (to the auctioneer): ``cost`` = the bid; +inf means "cannot do this task".
+* ``Award`` (to the winner): ``cost`` = the winning bid, ``mean`` = mean of all bids heard.
+* ``Status`` to an auctioneer naming the auction's task: "I hold that task" - the winner's reply to
+  an ``Award`` (sent again for every duplicate), or a holder's reply to an ``Announce`` for a task it
+  already holds (the auction is then cancelled).
+
+Loss, duplication and reordering: an auction closes when every live peer has bid, else it is
+re-announced every ``bid_timeout`` (bidders re-send the same bid) up to ``max_retries`` times, to the
+silent peers only when they are fewer than half; an
+award is re-sent every ``bid_timeout`` until acknowledged.  Everything is keyed by (auctioneer,
+auction id), so duplicates change nothing.  A lost peer's task is re-auctioned by whoever awarded it.
+"""
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field, replace
+from typing import Callable, Mapping, Sequence
+
+from runtime.allocation.assignment import NO_TASK, TaskBook, finite, valid_task_id
+from runtime.allocation.messages import BROADCAST, Announce, Award, Bid, Price, Status, TaskInfo
+from runtime.log import get_logger
+
+INF = math.inf
+
+
+@dataclass
+class _Auction:
+    id: int
+    task: int
+    reserve: float                        # +inf: open auction
+    expected: set[int]                    # live peers whose bids are awaited
+    deadline: float
+    bids: dict[int, float] = field(default_factory=dict)
+    tries: int = 0
+    award: Award | None = None            # sent, waiting for the winner's Status
+
+
+class BSAgent:
+    """One robot's BS negotiator.  See the module docstring for the protocol."""
+
+    method = "bs"
+
+    def __init__(self, robot_id: int, peers: Sequence[int], cost: Callable[[int], float], *,
+                 bid_timeout: float = 1.0, quiet: float | None = None, max_retries: int = 10,
+                 resell_to_worse: bool = True):
+        self.robot_id = int(robot_id)
+        self.peers = sorted({int(p) for p in peers} - {self.robot_id})
+        self.alive = set(self.peers)
+        self.bid_timeout = float(bid_timeout)
+        self.quiet = self.bid_timeout if quiet is None else float(quiet)
+        self.max_retries = int(max_retries)
+        self.resell_to_worse = resell_to_worse      # False: the naive rule that loops in Fig. 2
+        self.book = TaskBook(cost)
+        self.won: dict[int, float] = {}             # task -> my bid when I won it
+        self.means: dict[int, float] = {}           # task -> mean of the bids in the auction I won
+        self.selling: dict[int, int] = {}           # task -> my resale auction id
+        self.auctions: dict[int, _Auction] = {}     # my auctions, open or awarding
+        self.awarded_to: dict[int, int] = {}        # task -> robot that acknowledged my award
+        self.dropped: Counter = Counter()           # messages ignored, by reason
+        self.sent = 0
+        self._next_auction = 1
+        self._bids_sent: dict[tuple[int, int], Bid] = {}
+        self._awards_seen: dict[tuple[int, int], int] = {}
+        self._active = False
+        self._last_activity = -INF
+        self._now = 0.0
+        self.log = get_logger(f"alloc.{self.method}", self.robot_id)
+
+    # ------------------------------------------------------------------ method-specific rules
+    def bid_value(self, task: int) -> float | None:
+        """My bid for ``task``: its cost (BS).  None: not computable yet."""
+        return self.book.cost(task)
+
+    def keep_key(self, task: int):
+        """Sort key of won tasks, lowest is kept: BS keeps the cheapest."""
+        return (self.won[task], task)
+
+    def _notify(self, now: float) -> list:
+        return []
+
+    # ------------------------------------------------------------------ agent interface
+    @property
+    def assignment(self) -> int | None:
+        held = [t for t in self.won if t not in self.selling]
+        return min(held, key=self.keep_key) if held else None
+
+    @property
+    def converged(self) -> bool:
+        return (self._active and not self.auctions and not self._waiting()
+                and self._now - self._last_activity >= self.quiet)
+
+    def _waiting(self) -> bool:
+        return False
+
+    def start(self, tasks: Mapping[int, tuple[float, float]], now: float) -> list:
+        self._now = now
+        self._touch(now)
+        self.book.set_all(tasks)
+        out = self._notify(now)
+        for task in sorted(self.book.positions):
+            out += self._open(task, INF, now)
+        return self._out(out)
+
+    def on_message(self, msg, now: float) -> list:
+        self._now = now
+        sender = getattr(msg, "sender", None)
+        dest = getattr(msg, "dest", None)
+        if not isinstance(sender, int) or sender == self.robot_id or dest not in (BROADCAST, self.robot_id):
+            self.dropped["not for me"] += 1
+            return []
+        handler = {Announce: self._on_announce, Bid: self._on_bid, Award: self._on_award,
+                   Status: self._on_status, TaskInfo: self._on_taskinfo}.get(type(msg))
+        if handler is None:
+            self.dropped["unexpected type"] += 1
+            return []
+        if sender in self.peers:
+            self.alive.add(sender)       # heard again: a peer thought lost is back
+        return self._out(handler(msg, now))
+
+    def on_tick(self, now: float) -> list:
+        self._now = now
+        out = []
+        for a in list(self.auctions.values()):
+            if now < a.deadline:
+                continue
+            if a.award is None:
+                missing = a.expected - set(a.bids)
+                if missing and a.tries < self.max_retries:
+                    a.tries += 1
+                    a.deadline = now + self.bid_timeout
+                    if 2 * len(missing) < len(a.expected):      # ask only those not heard
+                        out += [replace(self._announce(a), dest=r) for r in sorted(missing)]
+                    else:
+                        out.append(self._announce(a))
+                else:
+                    out += self._close(a, now)
+            elif a.tries < self.max_retries:
+                a.tries += 1
+                a.deadline = now + self.bid_timeout
+                out.append(a.award)
+            else:
+                self.log.warning("no acknowledgement of task %d from robot %d: assuming it holds it",
+                                 a.task, a.award.winner)
+                out += self._acknowledged(a, a.award.winner, now)
+        out += self._tick_extra(now)
+        return self._out(out)
+
+    def _tick_extra(self, now: float) -> list:
+        return []
+
+    def on_peer_lost(self, robot_id: int, now: float) -> list:
+        self._now = now
+        self.alive.discard(robot_id)
+        out = []
+        for a in list(self.auctions.values()):
+            a.expected.discard(robot_id)
+            a.bids.pop(robot_id, None)
+            if a.award is not None and a.award.winner == robot_id:
+                a.award = None
+                out += self._close(a, now)
+            elif a.award is None and not (a.expected - set(a.bids)):
+                out += self._close(a, now)
+        for task, winner in list(self.awarded_to.items()):
+            if winner == robot_id:
+                del self.awarded_to[task]
+                self.log.info("robot %d lost holding task %d: re-auctioning it", robot_id, task)
+                out += self._open(task, INF, now)
+        return self._out(out)
+
+    # ------------------------------------------------------------------ auctioneer side
+    def _open(self, task: int, reserve: float, now: float) -> list:
+        self._touch(now)
+        aid = self._next_auction
+        self._next_auction += 1
+        a = _Auction(aid, task, reserve, set(self.alive), now + self.bid_timeout)
+        if reserve == INF:
+            mine = self.bid_value(task)
+            if mine is not None:
+                a.bids[self.robot_id] = mine
+        else:
+            self.selling[task] = aid
+        self.auctions[aid] = a
+        out = [self._announce(a)]
+        if not a.expected:
+            out += self._close(a, now)
+        return out
+
+    def _announce(self, a: _Auction) -> Announce:
+        x, y = self.book.positions.get(a.task, (0.0, 0.0))
+        return Announce(self.robot_id, BROADCAST, a.id, a.task, x, y, a.reserve)
+
+    def _candidates(self, a: _Auction) -> list[tuple[float, int]]:
+        bids = [(b, r) for r, b in a.bids.items() if math.isfinite(b)]
+        if a.reserve == INF:
+            return bids
+        if self.resell_to_worse:
+            return [k for k in bids if k > (a.reserve, self.robot_id)]
+        return [k for k in bids if k[1] != self.robot_id]
+
+    def _close(self, a: _Auction, now: float) -> list:
+        self._touch(now)
+        cands = self._candidates(a)
+        if not cands:
+            if a.reserve == INF:      # nobody can take it (yet): ask again later
+                self.log.warning("task %d: no robot can take it yet; announcing again", a.task)
+                a.bids = {r: b for r, b in a.bids.items() if math.isfinite(b)}
+                a.expected = set(self.alive)
+                a.deadline = now + self.bid_timeout
+                a.tries = 0
+                return []
+            self.log.warning("task %d: no bid worse than mine (%.3f): leaving it unallocated", a.task, a.reserve)
+            del self.auctions[a.id]
+            self._release(a.task)
+            return []
+        bid, winner = min(cands)
+        heard = [b for b in a.bids.values() if math.isfinite(b)]
+        if a.reserve != INF:
+            heard.append(a.reserve)
+        mean = sum(heard) / len(heard)
+        if winner == self.robot_id:
+            del self.auctions[a.id]
+            return self._win(a.task, bid, mean, now)
+        a.award = Award(self.robot_id, winner, a.id, a.task, winner, bid, mean)
+        a.deadline = now + self.bid_timeout
+        a.tries = 0
+        return [a.award]
+
+    def _acknowledged(self, a: _Auction, holder: int, now: float) -> list:
+        self._touch(now)
+        self.auctions.pop(a.id, None)
+        self.awarded_to[a.task] = holder
+        self._release(a.task)
+        return []
+
+    def _release(self, task: int) -> None:
+        if self.selling.get(task) is not None and self.selling[task] not in self.auctions:
+            del self.selling[task]
+            self.won.pop(task, None)
+            self.means.pop(task, None)
+
+    def _on_bid(self, m: Bid, now: float) -> list:
+        if not valid_task_id(m.task) or not isinstance(m.cost, (int, float)) or math.isnan(m.cost):
+            self.dropped["malformed"] += 1
+            return []
+        a = self.auctions.get(m.auction)
+        if a is None or a.task != m.task or a.award is not None:
+            self.dropped["stale bid"] += 1
+            return []
+        self._touch(now)
+        a.bids[m.sender] = float(m.cost)
+        a.expected.add(m.sender)
+        if not (a.expected - set(a.bids)):
+            return self._close(a, now)
+        return []
+
+    def _on_status(self, m: Status, now: float) -> list:
+        if not isinstance(m.task, int) or isinstance(m.task, bool) or not isinstance(m.converged, bool):
+            self.dropped["malformed"] += 1
+            return []
+        if m.dest == BROADCAST:
+            return self._on_status_broadcast(m, now)
+        for a in list(self.auctions.values()):
+            if a.task != m.task:
+                continue
+            if a.award is not None and a.award.winner == m.sender:
+                return self._acknowledged(a, m.sender, now)
+            if a.award is None:       # another robot already holds it: this auction is a duplicate
+                self.log.info("task %d is held by robot %d: cancelling auction %d", m.task, m.sender, a.id)
+                return self._acknowledged(a, m.sender, now)
+        self.dropped["stale status"] += 1
+        return []
+
+    def _on_status_broadcast(self, m: Status, now: float) -> list:
+        self.dropped["unexpected status"] += 1
+        return []
+
+    # ------------------------------------------------------------------ bidder side
+    def _on_announce(self, m: Announce, now: float) -> list:
+        if (not valid_task_id(m.task) or not isinstance(m.auction, int) or not finite(m.x, m.y)
+                or not isinstance(m.reserve, (int, float)) or math.isnan(m.reserve)):
+            self.dropped["malformed"] += 1
+            return []
+        if not self.book.learn(m.task, m.x, m.y):
+            self.dropped["unknown task"] += 1
+            return []
+        self._touch(now)
+        key = (m.sender, m.auction)
+        if key in self._bids_sent:
+            return [self._bids_sent[key]]
+        if m.task in self.won and m.task not in self.selling:
+            return [Status(self.robot_id, m.sender, m.task, False)]
+        return self._bid(m, now)
+
+    def _bid(self, m: Announce, now: float) -> list:
+        value = self.bid_value(m.task)
+        if value is None:
+            return []
+        bid = Bid(self.robot_id, m.sender, m.auction, m.task, value)
+        if math.isfinite(value):      # "cannot" is asked again: the cost may become known later
+            self._bids_sent[(m.sender, m.auction)] = bid
+        return [bid]
+
+    def _on_award(self, m: Award, now: float) -> list:
+        if m.winner != self.robot_id:
+            return []
+        if (not valid_task_id(m.task) or not isinstance(m.auction, int)
+                or not isinstance(m.cost, (int, float)) or not isinstance(m.mean, (int, float))
+                or math.isnan(m.cost) or math.isnan(m.mean)):
+            self.dropped["malformed"] += 1
+            return []
+        key = (m.sender, m.auction)
+        ack = Status(self.robot_id, m.sender, m.task, False)
+        if key in self._awards_seen:
+            return [ack]
+        sent = self._bids_sent.get(key)
+        if sent is None or sent.task != m.task:
+            self.dropped["award without bid"] += 1
+            return []
+        self._awards_seen[key] = m.task
+        return [ack] + self._win(m.task, sent.cost, float(m.mean), now)
+
+    def _win(self, task: int, bid: float, mean: float, now: float) -> list:
+        self._touch(now)
+        if task in self.won:
+            return []
+        self.won[task] = bid
+        self.means[task] = mean
+        out = []
+        held = sorted((t for t in self.won if t not in self.selling), key=self.keep_key)
+        for t in held[1:]:
+            out += self._open(t, self.won[t], now)
+        return out
+
+    def _on_taskinfo(self, m: TaskInfo, now: float) -> list:
+        if (not valid_task_id(m.task) or not finite(m.x, m.y) or not isinstance(m.n_tasks, int)
+                or not 0 < m.n_tasks <= 0xFFFF):
+            self.dropped["malformed"] += 1
+            return []
+        if not self.book.learn(m.task, m.x, m.y, m.n_tasks):
+            self.dropped["contradicts task set"] += 1
+            return []
+        self._touch(now)
+        return []
+
+    # ------------------------------------------------------------------ helpers
+    def _touch(self, now: float) -> None:
+        self._active = True
+        self._last_activity = max(self._last_activity, now)
+
+    def _out(self, msgs: list) -> list:
+        self.sent += len(msgs)
+        return msgs

@@ -1,0 +1,220 @@
+"""BS and RTMA (paper 002, II-A and II-B): valid permutations, the paper's examples, the two rules."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+from runtime.allocation.assignment import NO_TASK, hungarian, is_permutation, percent_error
+from runtime.allocation.bs import BSAgent
+from runtime.allocation.messages import Announce, Award, Bid, Price, Status, TaskInfo
+from runtime.allocation.rtma import RTMAAgent
+from runtime.allocation.simulate import BusParams, make_agents, run, solve
+
+LOSSY = dict(drop=0.1, duplicate=0.1, jitter=0.01)
+METHODS = ("bs", "rtma")
+
+
+def instance(seed: int, n: int, integer: bool) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return rng.integers(0, 20, (n, n)) if integer else rng.uniform(0, 1000, (n, n))
+
+
+@pytest.mark.parametrize("method", METHODS)
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), n=st.integers(1, 14), integer=st.booleans())
+def test_always_a_valid_permutation(method, seed, n, integer):
+    c = instance(seed, n, integer)       # small integer costs: many ties
+    r = solve(method, c)
+    assert r.converged
+    assert is_permutation(r.assignment, n)
+    assert r.cost >= hungarian(c)[1] - 1e-9
+
+
+@pytest.mark.parametrize("method", METHODS)
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), n=st.integers(2, 12))
+def test_valid_permutation_under_loss_duplication_and_reordering(method, seed, n):
+    c = instance(seed, n, integer=False)
+    r = solve(method, c, bus=BusParams(seed=seed, **LOSSY), until=400)
+    assert r.converged
+    assert is_permutation(r.assignment, n)
+
+
+coords = st.floats(0, 1000, allow_nan=False)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.tuples(coords, coords), min_size=4, max_size=4))
+def test_rtma_is_optimal_on_two_robots_two_tasks(points):
+    robots, tasks = points[:2], points[2:]
+    r = solve("rtma", robots=robots, tasks=tasks)
+    optimum = hungarian(np.hypot(*(np.array(robots)[:, None, :] - np.array(tasks)[None, :, :]).transpose(2, 0, 1)))[1]
+    assert is_permutation(r.assignment, 2)
+    assert r.cost == pytest.approx(optimum, abs=1e-9)
+
+
+# Fig. 3, reconstructed on a line (the figure itself is lost): R1 at 0, T1 at 1, T2 at -1.5, R2 at 2.5.
+# R1 is closest to both tasks, keeps T1 and sells T2 to R2: BS costs 1 + 4 = 5, the optimum 1.5 + 1.5 = 3,
+# i.e. the paper's "66.67 % greater than the optimal allocation"; RTMA finds the optimum (Fig. 4).
+FIG3 = dict(robots=[(0.0, 0.0), (2.5, 0.0)], tasks=[(1.0, 0.0), (-1.5, 0.0)])
+
+
+def test_fig3_bs_is_66_percent_worse_and_rtma_optimal():
+    bs, rtma, opt = solve("bs", **FIG3), solve("rtma", **FIG3), solve("hungarian", **FIG3)
+    assert bs.assignment == [0, 1] and bs.cost == pytest.approx(5.0)
+    assert percent_error(bs.cost, opt.cost) == pytest.approx(66.67, abs=0.01)
+    assert rtma.assignment == [1, 0] and rtma.cost == pytest.approx(opt.cost)
+
+
+# Fig. 2: robots A and B have the best bids for all three tasks.  Selling to the best bid makes T3
+# bounce between A and B forever; selling to the best bid worse than one's own ends with C on T3.
+FIG2 = [[1.0, 2.0, 5.0],
+        [3.0, 1.5, 2.0],
+        [10.0, 10.0, 10.0]]
+
+
+def test_fig2_terminates_under_bs():
+    r = solve("bs", FIG2, until=60)
+    assert r.converged and r.assignment == [0, 1, 2]
+    assert r.messages < 60
+
+
+def test_fig2_loops_with_the_naive_resale_rule():
+    r = solve("bs", FIG2, until=30, resell_to_worse=False)
+    assert not r.converged
+    assert r.messages > 1000
+
+
+# ---------------------------------------------------------------- the two RTMA rules, one agent
+
+def rtma_agent(costs=(10.0, 5.0), rid=1, peers=(2, 3)):
+    a = RTMAAgent(rid, list(peers), list(costs).__getitem__, bid_timeout=1.0)
+    for t in range(len(costs)):
+        a.on_message(TaskInfo(9, 0, t, float(t), 0.0, len(costs)), 0.0)
+    return a
+
+
+def test_rtma_bid_is_cost_minus_mean_cost():
+    a = rtma_agent()
+    out = a.on_message(Announce(9, 0, 1, 0, 0.0, 0.0, math.inf), 0.1)
+    assert out == [Bid(1, 9, 1, 0, 10.0 - 7.5)]
+
+
+def test_rtma_bid_waits_for_the_whole_task_set():
+    a = RTMAAgent(1, [2], [10.0, 5.0].__getitem__, bid_timeout=1.0)
+    a.on_message(TaskInfo(9, 0, 0, 0.0, 0.0, 2), 0.0)
+    assert a.on_message(Announce(9, 0, 1, 0, 0.0, 0.0, math.inf), 0.1) == []
+    assert not a.converged
+    asked = a.on_tick(0.2) + a.on_tick(1.3)
+    assert Status(1, 0, NO_TASK, False) in asked
+    out = a.on_message(TaskInfo(9, 0, 1, 1.0, 0.0, 2), 1.4)
+    assert out == [Bid(1, 9, 1, 0, 2.5)]
+
+
+def win(a, auctioneer, auction, task, mean, now):
+    bid = a.on_message(Announce(auctioneer, 0, auction, task, float(task), 0.0, math.inf), now)[0]
+    return a.on_message(Award(auctioneer, a.robot_id, auction, task, a.robot_id, bid.cost, mean), now + 0.01)
+
+
+def test_rtma_keeps_the_task_best_for_the_team_bs_the_cheapest():
+    # my bids: T0 = 10 - 7.5 = 2.5, T1 = 5 - 7.5 = -2.5.  Team means: T0 20 (everyone else is far
+    # away), T1 -2.  Keep T0 (2.5 - 20 < -2.5 + 2), sell T1 with my bid as the reserve.
+    a = rtma_agent()
+    win(a, 9, 1, 1, -2.0, 0.1)
+    out = win(a, 8, 1, 0, 20.0, 0.2)
+    assert a.assignment == 0
+    sells = [m for m in out if isinstance(m, Announce)]
+    assert len(sells) == 1 and sells[0].task == 1 and sells[0].reserve == pytest.approx(-2.5)
+    b = BSAgent(1, [2, 3], [10.0, 5.0].__getitem__, bid_timeout=1.0)
+    win(b, 9, 1, 1, 0.0, 0.1)
+    out = win(b, 8, 1, 0, 0.0, 0.2)
+    assert b.assignment == 1
+    assert [m.task for m in out if isinstance(m, Announce)] == [0]
+
+
+def test_duplicate_award_is_acknowledged_and_changes_nothing():
+    a = rtma_agent()
+    first = win(a, 9, 1, 1, -2.0, 0.1)
+    assert first == [Status(1, 9, 1, False)]
+    award = Award(9, 1, 1, 1, 1, -2.5, -2.0)
+    for _ in range(3):
+        assert a.on_message(award, 0.5) == [Status(1, 9, 1, False)]
+    assert a.won == {1: -2.5} and a.assignment == 1 and not a.auctions
+
+
+def test_resale_goes_to_the_best_bid_worse_than_mine():
+    a = BSAgent(1, [2, 3, 4], [1.0, 4.0].__getitem__, bid_timeout=1.0)
+    a.start({0: (0.0, 0.0), 1: (1.0, 0.0)}, 0.0)
+    out = []
+    for task, auction in ((0, 1), (1, 2)):
+        for rid, bid in ((2, 9.0), (3, 8.0), (4, 6.0)):
+            out += a.on_message(Bid(rid, 1, auction, task, bid), 0.01)
+    # won both (1 and 4 are the lowest bids), keeps task 0, sells task 1 at reserve 4
+    sale = [m for m in out if isinstance(m, Announce)]
+    assert a.assignment == 0 and len(sale) == 1 and sale[0].task == 1 and sale[0].reserve == 4.0
+    aid = sale[0].auction
+    out = []
+    for rid, bid in ((2, 9.0), (3, 3.0), (4, 6.0)):        # robot 3 is better than me: not eligible
+        out += a.on_message(Bid(rid, 1, aid, 1, bid), 0.1)
+    awards = [m for m in out if isinstance(m, Award)]
+    assert len(awards) == 1 and awards[0].winner == 4 and awards[0].cost == 6.0
+    assert awards[0].mean == pytest.approx((9.0 + 3.0 + 6.0 + 4.0) / 4)
+    assert a.on_tick(1.2) == awards                        # not acknowledged: sent again
+    a.on_message(Status(4, 1, 1, False), 1.3)
+    assert 1 not in a.won and not a.auctions and a.awarded_to[1] == 4
+
+
+def test_announce_for_a_task_already_held_is_answered_with_status():
+    a = rtma_agent()
+    win(a, 9, 1, 1, -2.0, 0.1)
+    assert a.on_message(Announce(7, 0, 3, 1, 1.0, 0.0, math.inf), 0.3) == [Status(1, 7, 1, False)]
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_lost_robot_task_is_reauctioned_and_survivors_hold_distinct_tasks(method):
+    n = 6
+    c = instance(4, n, integer=False)
+    agents = make_agents(method, c)
+    held, bus, _, converged = run(agents, {j: (float(j), 0.0) for j in range(n)}, failures={2: 10.0}, until=200)
+    assert converged
+    assert 2 not in held and None not in held.values() and len(set(held.values())) == n - 1
+
+
+@pytest.mark.parametrize("cls", [BSAgent, RTMAAgent])
+def test_daemon_constructor_signature(cls):
+    a = cls(4, [1, 2, 3, 4], lambda t: 1.0, bid_timeout=0.5)
+    assert a.robot_id == 4 and a.peers == [1, 2, 3] and a.assignment is None and not a.converged
+
+
+values = st.one_of(st.none(), st.booleans(), st.integers(-5, 2 ** 33), st.text(max_size=3),
+                   st.floats(allow_nan=True, allow_infinity=True))
+dest = st.sampled_from([0, 1, 2])
+messages = st.one_of(
+    st.builds(Announce, sender=values, dest=dest, auction=values, task=values, x=values, y=values, reserve=values),
+    st.builds(Bid, sender=values, dest=dest, auction=values, task=values, cost=values),
+    st.builds(Award, sender=values, dest=dest, auction=values, task=values, winner=st.one_of(st.just(1), values),
+              cost=values, mean=values),
+    st.builds(Status, sender=values, dest=dest, task=values, converged=values),
+    st.builds(TaskInfo, sender=values, dest=dest, task=values, x=values, y=values, n_tasks=values),
+    st.builds(Price, sender=values, dest=dest, task=values, holder=values, price=values, phase=values),
+    st.integers(), st.none(), st.text(max_size=5))
+
+
+@pytest.mark.parametrize("cls", [BSAgent, RTMAAgent])
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(msgs=st.lists(messages, max_size=30), cut=st.integers(0, 3))
+def test_random_messages_never_raise_and_ignored_ones_are_counted(cls, msgs, cut):
+    a = cls(1, [2, 3], [3.0, 1.0, 2.0].__getitem__, bid_timeout=1.0)
+    a.start({0: (0.0, 0.0), 1: (1.0, 0.0), 2: (2.0, 0.0)}, 0.0)
+    t = 0.0
+    for m in msgs[: len(msgs) - cut]:
+        t += 0.05
+        before = sum(a.dropped.values())
+        out = a.on_message(m, t) + a.on_tick(t)
+        assert all(isinstance(o, (Announce, Bid, Award, Status, TaskInfo)) for o in out)
+        if not hasattr(m, "sender") or isinstance(m, Price):
+            assert sum(a.dropped.values()) == before + 1
+    assert len([t for t in a.won if t not in a.selling]) <= 1

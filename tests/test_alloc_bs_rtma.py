@@ -183,6 +183,16 @@ def test_lost_robot_task_is_reauctioned_and_survivors_hold_distinct_tasks(method
     assert 2 not in held and None not in held.values() and len(set(held.values())) == n - 1
 
 
+@pytest.mark.parametrize("method", METHODS)
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), n_tasks=st.integers(1, 6), surplus=st.integers(1, 3))
+def test_more_robots_than_tasks_every_task_held_once(method, seed, n_tasks, surplus):
+    c = np.random.default_rng(seed).uniform(0, 100, (n_tasks + surplus, n_tasks))
+    held, _, _, converged = run(make_agents(method, c), {j: (float(j), 0.0) for j in range(n_tasks)})
+    assert converged
+    assert sorted(t for t in held.values() if t is not None) == list(range(n_tasks))
+
+
 @pytest.mark.parametrize("cls", [BSAgent, RTMAAgent])
 def test_daemon_constructor_signature(cls):
     a = cls(4, [1, 2, 3, 4], lambda t: 1.0, bid_timeout=0.5)

@@ -29,8 +29,8 @@ from collections import Counter
 from dataclasses import dataclass, field, replace
 from typing import Callable, Mapping, Sequence
 
-from runtime.allocation.assignment import NO_TASK, TaskBook, finite, valid_task_id
-from runtime.allocation.messages import BROADCAST, Announce, Award, Bid, Price, Status, TaskInfo
+from runtime.allocation.assignment import TaskBook, finite, valid_task_id
+from runtime.allocation.messages import BROADCAST, Announce, Award, Bid, Status, TaskInfo
 from runtime.log import get_logger
 
 INF = math.inf

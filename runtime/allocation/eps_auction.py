@@ -1,0 +1,342 @@
+"""Bertsekas' auction algorithm with epsilon-scaling, as a distributed sans-IO agent (the default).
+
+Each robot keeps a price table: per task the highest price heard and the robot that bid it.  A robot
+that holds no task bids for its best task j (value v_j = -cost_j - price_j) by raising its price to
+price_j + (v_j - w) + eps, w the second-best value, and broadcasts ``Price(task, holder=me, price,
+phase)``.  A table entry is replaced only by a higher (price, -holder): highest bid wins, equal prices
+go to the lowest id, stale prices lose - so every table converges to the same entries whatever the
+order, loss or duplication of messages.  A robot that sees its task taken at a higher price bids again.
+
+Epsilon-scaling: eps runs down a schedule from (my largest cost) / ``theta`` to ``eps_final`` =
+``cost_unit`` / (n + 1).  A robot moves to the next eps when its table shows every robot holding a
+distinct task and nothing has changed for ``bid_timeout / 4`` (or nothing at all for twice that: its
+table may be stale, and moving early costs only speed); it then keeps its task only if the task
+is still within the new eps of its best (eps-complementary slackness), else it bids again.  At the end
+every robot is within eps_final of its best task at the final prices, so the total cost is within
+n * eps_final of the optimum: exact for costs that are multiples of ``cost_unit``.
+
+Loss: a robot whose table is incomplete and unchanged for ``bid_timeout`` (or that still misses
+part of the task set ``bid_timeout`` after it first heard from the fleet) broadcasts
+``Status(task=held or NO_TASK, converged=False)``; every holder rebroadcasts its own entry and the
+initial auctioneer the task set if the robot holds nothing (each at most once per ``bid_timeout``).
+A robot that outbids another and hears nothing from it within ``bid_timeout / 4`` sends it the new
+entry directly (up to 3 times); a holder answers any stale ``Price`` for its task with the current
+entry; every holder rebroadcasts its entry every ``keepalive`` seconds.  Task positions and N_T come
+from ``TaskInfo`` broadcast by ``start()``.
+
+More robots than tasks: each robot adds one zero-cost "no task" slot per surplus robot (the standard
+reduction to a square problem); a robot on such a slot reports ``assignment`` None.  A lost robot's
+task is freed at its price and stays open unless a robot now prefers it: the survivors keep a valid
+assignment, but with fewer robots than tasks it is not guaranteed optimal for the smaller fleet.
+"""
+from __future__ import annotations
+
+import math
+from collections import Counter
+from typing import Callable, Mapping, Sequence
+
+from runtime.allocation.assignment import MAX_TASKS, NO_TASK, TaskBook, finite, valid_task_id
+from runtime.allocation.messages import BROADCAST, Price, Status, TaskInfo
+from runtime.log import get_logger
+
+INF = math.inf
+
+
+class EpsAuctionAgent:
+    """One robot's auction-algorithm bidder.  See the module docstring for the protocol."""
+
+    method = "auction"
+
+    def __init__(self, robot_id: int, peers: Sequence[int], cost: Callable[[int], float], *,
+                 bid_timeout: float = 1.0, quiet: float | None = None, cost_unit: float = 0.01,
+                 theta: float = 4.0, eps_final: float | None = None, keepalive: float | None = None):
+        self.robot_id = int(robot_id)
+        self.peers = sorted({int(p) for p in peers} - {self.robot_id})
+        self.alive = set(self.peers)
+        self.bid_timeout = float(bid_timeout)
+        self.quiet = self.bid_timeout if quiet is None else float(quiet)
+        self.settle = self.bid_timeout / 4
+        self.keepalive = 10 * self.bid_timeout if keepalive is None else float(keepalive)
+        self.cost_unit = float(cost_unit)
+        self.theta = float(theta)
+        self.eps_final = eps_final
+        self.book = TaskBook(cost)
+        self.price: dict[int, float] = {}
+        self.holder: dict[int, int] = {}           # task -> robot id, 0 = nobody
+        self.held: int | None = None
+        self.phase = 0
+        self.schedule: list[float] = []            # eps per phase, empty until the task set is known
+        self.bids = 0                              # bids this robot made
+        self.dropped: Counter = Counter()
+        self.sent = 0
+        self._holders: Counter = Counter()         # robot -> number of tasks it holds in my table
+        self._initiator = False
+        self._active = False
+        self._active_since = INF
+        self._now = 0.0
+        self._last_change = -INF
+        self._last_own = -INF                      # last time my entry went out
+        self._last_solicit = -INF
+        self._served: dict[str, float] = {}
+        self._notices: dict[int, list] = {}        # displaced robot -> [task, deadline, tries]
+        self._dummies: set[int] = set()            # "no task" slots when robots outnumber tasks
+        self.log = get_logger("alloc.auction", self.robot_id)
+
+    # ------------------------------------------------------------------ agent interface
+    @property
+    def assignment(self) -> int | None:
+        return None if self.held in self._dummies else self.held
+
+    @property
+    def converged(self) -> bool:
+        return (bool(self.schedule) and self.phase == len(self.schedule) - 1 and self.held is not None
+                and self._full() and self._now - self._last_change >= self.quiet)
+
+    @property
+    def eps(self) -> float:
+        return self.schedule[self.phase] if self.schedule else INF
+
+    def start(self, tasks: Mapping[int, tuple[float, float]], now: float) -> list:
+        self._now = now
+        self._initiator = self._active = True
+        self._active_since = now
+        self._last_change = now
+        self.book.set_all(tasks)
+        out = self._task_set(BROADCAST)
+        out += self._ready(now)
+        return self._out(out)
+
+    def on_message(self, msg, now: float) -> list:
+        self._now = now
+        sender = getattr(msg, "sender", None)
+        dest = getattr(msg, "dest", None)
+        if not isinstance(sender, int) or sender == self.robot_id or dest not in (BROADCAST, self.robot_id):
+            self.dropped["not for me"] += 1
+            return []
+        handler = {Price: self._on_price, TaskInfo: self._on_taskinfo, Status: self._on_status}.get(type(msg))
+        if handler is None:
+            self.dropped["unexpected type"] += 1
+            return []
+        if sender in self.peers and sender not in self.alive:
+            self.alive.add(sender)
+            self._sync_dummies(now)
+        if not self._active:
+            self._active, self._active_since, self._last_change = True, now, now
+        return self._out(handler(msg, now))
+
+    def on_tick(self, now: float) -> list:
+        self._now = now
+        out = []
+        if self.schedule and self.held is None:
+            out += self._bid(now)
+        full = self._full()
+        still = now - self._last_change
+        if self.schedule and self.phase < len(self.schedule) - 1 and (
+                (full and still >= self.settle) or still >= 2 * self.settle):
+            self.phase += 1
+            self._last_change = now
+            out += self._recheck(now)
+        elif not full and self._active and now - self._last_solicit >= self.bid_timeout and (
+                still >= self.bid_timeout or (not self.schedule and now - self._active_since >= self.bid_timeout)):
+            self._last_solicit = now
+            out.append(Status(self.robot_id, BROADCAST, NO_TASK if self.held is None else self.held, False))
+        if self.held is not None and now - self._last_own >= self.keepalive:
+            out.append(self._entry(self.held, BROADCAST))
+        out += self._resend_notices(now)
+        return self._out(out)
+
+    def _resend_notices(self, now: float) -> list:
+        """A robot I outbid has not bid again: it may have missed my Price, tell it directly."""
+        out = []
+        for robot, notice in list(self._notices.items()):
+            task, deadline, tries = notice
+            if now < deadline:
+                continue
+            if self.held != task or tries >= 3 or robot not in self.alive:
+                del self._notices[robot]
+                continue
+            notice[1], notice[2] = now + self.settle, tries + 1
+            out.append(self._entry(task, robot))
+        return out
+
+    def on_peer_lost(self, robot_id: int, now: float) -> list:
+        """The lost robot's task becomes free at its price; whoever now prefers it bids for it."""
+        self._now = now
+        self.alive.discard(robot_id)
+        for task, h in list(self.holder.items()):
+            if h == robot_id:
+                self._set(task, self.price[task], 0)
+                self._last_change = now
+                self.log.info("robot %d lost: task %d is free again", robot_id, task)
+        self._sync_dummies(now)
+        out = self._bid(now) if self.held is None and self.schedule else []
+        return self._out(out)
+
+    # ------------------------------------------------------------------ bidding
+    def _ready(self, now: float) -> list:
+        """Once the whole task set is known: the eps schedule, then a first bid."""
+        if self.schedule or not self.book.complete:
+            return []
+        costs = [self.book.cost(t) for t in self.book.positions]
+        cmax = max((c for c in costs if math.isfinite(c)), default=0.0)
+        n = len(costs)
+        final = self.eps_final if self.eps_final is not None else self.cost_unit / (n + 1)
+        eps, schedule = cmax / self.theta, []
+        while eps > final:
+            schedule.append(eps)
+            eps /= self.theta
+        self.schedule = schedule + [final]
+        for t in self.book.positions:
+            self.price.setdefault(t, 0.0)
+            self.holder.setdefault(t, 0)
+        self._sync_dummies(now)
+        self._last_change = now
+        return self._bid(now) if self.held is None else []
+
+    def _sync_dummies(self, now: float) -> None:
+        """One zero-cost "no task" slot per robot beyond N_T (ids from the top of the id range), so
+        that surplus robots settle instead of bidding prices up for ever."""
+        if not self.schedule:
+            return
+        want = {MAX_TASKS - 1 - k for k in range(max(0, len(self.alive) + 1 - self.book.n_tasks))}
+        for d in self._dummies - want:
+            self._set(d, self.price[d], 0)
+            del self.price[d], self.holder[d]
+            if self.held == d:
+                self.held = None
+        for d in want - self._dummies:
+            self.price.setdefault(d, 0.0)        # a Price for it may have come first
+            self.holder.setdefault(d, 0)
+        if want != self._dummies:
+            self._dummies = want
+            self._last_change = now
+
+    def _cost(self, task: int) -> float:
+        return 0.0 if task in self._dummies else self.book.cost(task)
+
+    def _values(self):
+        for t in list(self.book.positions) + sorted(self._dummies):
+            c = self._cost(t)
+            if math.isfinite(c):
+                yield -c - self.price.get(t, 0.0), t
+
+    def _bid(self, now: float) -> list:
+        best_v, best_t, second_v = -INF, None, -INF
+        for v, t in self._values():
+            if best_t is None or v > best_v or (v == best_v and t < best_t):
+                if best_t is not None:
+                    second_v = max(second_v, best_v)
+                best_v, best_t = v, t
+            else:
+                second_v = max(second_v, v)
+        if best_t is None:
+            return []
+        task = best_t
+        increment = (best_v - second_v if second_v > -INF else 0.0) + self.eps
+        new = self.price.get(task, 0.0) + increment
+        displaced = self.holder.get(task, 0)
+        if displaced and displaced != self.robot_id and displaced in self.alive:
+            self._notices[displaced] = [task, now + self.settle, 0]
+        self._set(task, new, self.robot_id)
+        self.held = task
+        self.bids += 1
+        self._last_change = now
+        return [self._entry(task, BROADCAST)]
+
+    def _recheck(self, now: float) -> list:
+        """Keep my task under the new eps only if it is within eps of my best value."""
+        if self.held is None:
+            return self._bid(now)
+        mine = -self._cost(self.held) - self.price[self.held]
+        best = max((v for v, _ in self._values()), default=mine)
+        if mine >= best - self.eps:
+            return []
+        self.held = None
+        return self._bid(now)
+
+    def _entry(self, task: int, dest: int) -> Price:
+        if self.holder.get(task) == self.robot_id:
+            self._last_own = self._now
+        return Price(self.robot_id, dest, task, self.holder.get(task, 0), self.price.get(task, 0.0), self.phase)
+
+    # ------------------------------------------------------------------ table
+    def _set(self, task: int, price: float, holder: int) -> None:
+        old = self.holder.get(task, 0)
+        if old:
+            self._holders[old] -= 1
+            if not self._holders[old]:
+                del self._holders[old]
+        if holder:
+            self._holders[holder] += 1
+        self.price[task] = price
+        self.holder[task] = holder
+
+    def _full(self) -> bool:
+        """My table shows every live robot (up to N_T of them) on a distinct task."""
+        if self.book.n_tasks is None:
+            return False
+        target = min(self.book.n_tasks + len(self._dummies), len(self.alive) + 1)
+        return len(self._holders) == target and sum(self._holders.values()) == target
+
+    # ------------------------------------------------------------------ messages
+    def _on_price(self, m: Price, now: float) -> list:
+        if (not valid_task_id(m.task) or not finite(m.price) or not isinstance(m.holder, int)
+                or isinstance(m.holder, bool) or not 1 <= m.holder <= 250 or not isinstance(m.phase, int)):
+            self.dropped["malformed"] += 1
+            return []
+        if self.book.complete and m.task not in self.book.positions and m.task not in self._dummies:
+            self.dropped["unknown task"] += 1
+            return []
+        notice = self._notices.get(m.sender)
+        if notice is not None and m.holder == m.sender and m.task != notice[0]:
+            del self._notices[m.sender]                  # it has bid elsewhere: it knows
+        cur_p, cur_h = self.price.get(m.task, 0.0), self.holder.get(m.task, 0)
+        new_key, cur_key = (m.price, -m.holder), (cur_p, -cur_h)
+        if new_key > cur_key:
+            self._set(m.task, float(m.price), m.holder)
+            self._last_change = now
+            if self.held == m.task and m.holder != self.robot_id:
+                self.held = None
+                return self._bid(now) if self.schedule else []
+            return []
+        if new_key < cur_key and cur_h == self.robot_id:
+            return [self._entry(m.task, m.sender)]       # the sender's view is stale
+        return []
+
+    def _on_taskinfo(self, m: TaskInfo, now: float) -> list:
+        if (not valid_task_id(m.task) or not finite(m.x, m.y) or not isinstance(m.n_tasks, int)
+                or isinstance(m.n_tasks, bool) or not 0 < m.n_tasks <= 0xFFFF):
+            self.dropped["malformed"] += 1
+            return []
+        if not self.book.learn(m.task, m.x, m.y, m.n_tasks):
+            self.dropped["contradicts task set"] += 1
+            return []
+        return self._ready(now)
+
+    def _on_status(self, m: Status, now: float) -> list:
+        if (not isinstance(m.task, int) or isinstance(m.task, bool) or not isinstance(m.converged, bool)):
+            self.dropped["malformed"] += 1
+            return []
+        if m.converged:
+            return []
+        out = []
+        if self.held is not None and self._serve("entry", now):
+            out.append(self._entry(self.held, BROADCAST))
+        if m.task == NO_TASK and self._initiator and self._serve("tasks", now):
+            out += self._task_set(BROADCAST)
+        return out
+
+    def _serve(self, what: str, now: float) -> bool:
+        """Answers to Status go to everyone, at most once per bid_timeout of each kind."""
+        if now - self._served.get(what, -INF) < self.bid_timeout:
+            return False
+        self._served[what] = now
+        return True
+
+    def _task_set(self, dest: int) -> list:
+        n = len(self.book.positions)
+        return [TaskInfo(self.robot_id, dest, t, x, y, n) for t, (x, y) in sorted(self.book.positions.items())]
+
+    def _out(self, msgs: list) -> list:
+        self.sent += len(msgs)
+        return msgs

@@ -1,0 +1,231 @@
+"""Distributed epsilon-scaling auction: exact on integer costs, converges on a lossy, reordering bus."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+from runtime.allocation.assignment import NO_TASK, hungarian, is_permutation, straight_line_costs
+from runtime.allocation.eps_auction import EpsAuctionAgent
+from runtime.allocation.messages import Price, Status, TaskInfo
+from runtime.allocation.simulate import BusParams, run, solve
+
+LOSSY = dict(drop=0.1, duplicate=0.1, jitter=0.01)
+
+
+def integer_instance(seed: int, n: int, high: int) -> np.ndarray:
+    return np.random.default_rng(seed).integers(0, high + 1, (n, n))
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), n=st.integers(1, 12) | st.integers(13, 40),
+       high=st.sampled_from([1, 5, 100, 1000]))
+def test_equals_hungarian_on_small_integer_instances(seed, n, high):
+    c = integer_instance(seed, n, high)
+    r = solve("auction", c)
+    assert r.converged
+    assert is_permutation(r.assignment, n)
+    assert r.cost == hungarian(c)[1]
+
+
+@pytest.mark.slow
+@settings(max_examples=3, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1))
+def test_equals_hungarian_on_100x100_integer_instances(seed):
+    c = integer_instance(seed, 100, 1000)
+    r = solve("auction", c)
+    assert r.converged and is_permutation(r.assignment, 100)
+    assert r.cost == hungarian(c)[1]
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), n=st.integers(2, 15), high=st.sampled_from([3, 100, 1000]))
+def test_converges_to_the_optimum_under_loss_duplication_and_reordering(seed, n, high):
+    c = integer_instance(seed, n, high)
+    r = solve("auction", c, bus=BusParams(seed=seed, **LOSSY), until=300)
+    assert r.bus["dropped"] > 0 or n * (n - 1) < 30     # the bus did lose messages
+    assert r.converged
+    assert is_permutation(r.assignment, n)
+    assert r.cost == hungarian(c)[1]
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), n=st.integers(2, 12))
+def test_real_costs_within_n_eps_of_the_optimum(seed, n):
+    rng = np.random.default_rng(seed)
+    robots, tasks = rng.uniform(0, 1000, (n, 2)), rng.uniform(0, 1000, (n, 2))
+    r = solve("auction", robots=robots, tasks=tasks)
+    optimum = hungarian(straight_line_costs(robots, tasks))[1]
+    assert r.converged and is_permutation(r.assignment, n)
+    eps_final = 1e-6 * straight_line_costs(robots, tasks).max() / (n + 1)
+    assert optimum - 1e-6 <= r.cost <= optimum + n * eps_final + 1e-6
+
+
+def test_same_seed_same_run():
+    c = integer_instance(7, 10, 100)
+    a = solve("auction", c, bus=BusParams(seed=3, **LOSSY))
+    b = solve("auction", c, bus=BusParams(seed=3, **LOSSY))
+    assert (a.assignment, a.messages, a.rounds, a.sim_time) == (b.assignment, b.messages, b.rounds, b.sim_time)
+
+
+def test_lost_robot_frees_its_task_and_the_rest_stay_on_distinct_tasks():
+    n = 8
+    c = integer_instance(11, n, 100)
+    from runtime.allocation.simulate import make_agents
+    agents = make_agents("auction", c)
+    held, bus, _, converged = run(agents, {j: (float(j), 0.0) for j in range(n)}, failures={3: 20.0}, until=200)
+    assert converged
+    assert 3 not in held and len(held) == n - 1
+    assert None not in held.values() and len(set(held.values())) == n - 1
+    for rid, a in agents.items():
+        if rid != 3:
+            assert 3 not in a.holder.values()
+
+
+def agent(rid=1, peers=(2, 3), costs=(5.0, 1.0, 3.0)):
+    return EpsAuctionAgent(rid, list(peers), list(costs).__getitem__, bid_timeout=1.0, cost_unit=1.0)
+
+
+def informed(a, n=3, sender=9, out=None):
+    for t in range(n):
+        got = a.on_message(TaskInfo(sender, 0, t, float(t), 0.0, n), 0.0)
+        if out is not None:
+            out += got
+    return a
+
+
+def test_bids_for_best_value_with_second_best_increment():
+    out = []
+    a = informed(agent(), out=out)
+    # values -5, -1, -3 at price 0: best task 1, second -3, increment 2 + eps
+    assert a.held == 1
+    assert out[-1].task == 1 and out[-1].holder == 1
+    assert out[-1].price == pytest.approx(2 + a.eps)
+
+
+def test_higher_price_displaces_and_the_robot_bids_again():
+    a = informed(agent())
+    out = a.on_message(Price(2, 0, 1, 2, 100.0, 0), 0.1)
+    assert a.holder[1] == 2
+    assert a.held == 2 and out and out[0].task == 2      # -3 - 0 beats -1 - 100
+
+
+def test_equal_price_goes_to_the_lowest_id_and_stale_prices_lose():
+    a = informed(agent(rid=5, peers=(2, 7)))
+    assert a.held == 1
+    p = a.price[1]
+    assert a.on_message(Price(7, 0, 1, 7, p, 0), 0.1) == [Price(5, 7, 1, 5, p, a.phase)]   # 7 loses; told
+    assert a.held == 1
+    a.on_message(Price(2, 0, 1, 2, p, 0), 0.2)                    # robot 2 < 5 wins the tie
+    assert a.holder[1] == 2 and a.held != 1
+    stale = a.on_message(Price(7, 0, 1, 7, p / 2, 0), 0.3)
+    assert a.holder[1] == 2 and stale == []                       # not my task any more: silent
+
+
+def test_duplicates_change_nothing():
+    a = informed(agent())
+    m = Price(2, 0, 0, 2, 7.0, 0)
+    a.on_message(m, 0.1)
+    snapshot = (dict(a.price), dict(a.holder), a.held, a.bids)
+    for _ in range(3):
+        assert a.on_message(m, 0.2) == []
+    assert (dict(a.price), dict(a.holder), a.held, a.bids) == snapshot
+
+
+def test_robot_missing_tasks_asks_and_initiator_rebroadcasts_the_set():
+    init = EpsAuctionAgent(1, [2], [1.0, 2.0].__getitem__, bid_timeout=1.0)
+    other = EpsAuctionAgent(2, [1], [2.0, 1.0].__getitem__, bid_timeout=1.0)
+    out = init.start({0: (0.0, 0.0), 1: (1.0, 0.0)}, 0.0)
+    infos = [m for m in out if isinstance(m, TaskInfo)]
+    assert len(infos) == 2
+    other.on_message(infos[0], 0.01)                   # the second notification is lost
+    assert other.on_tick(0.5) == []
+    ask = [m for m in other.on_tick(1.1) if isinstance(m, Status)]
+    assert ask == [Status(2, 0, NO_TASK, False)]
+    again = init.on_message(ask[0], 1.11)
+    assert [m.task for m in again if isinstance(m, TaskInfo)] == [0, 1]
+    assert not [m for m in init.on_message(ask[0], 1.2) if isinstance(m, TaskInfo)]   # once per bid_timeout
+    for m in again:
+        other.on_message(m, 1.12)
+    assert other.held is not None
+
+
+def test_outbid_robot_that_stays_silent_is_told_directly():
+    a = agent(rid=2, peers=(1, 3), costs=(1.0, 9.0, 9.0))
+    a.on_message(Price(1, 0, 0, 1, 0.5, 0), 0.0)      # robot 1 holds task 0 at 0.5 ...
+    out = []
+    informed(a, out=out)                               # ... and robot 2 outbids it
+    assert out[-1].task == 0 and a.holder[0] == 2
+    assert not [m for m in a.on_tick(0.1) if isinstance(m, Price) and m.dest == 1]
+    later = [m for m in a.on_tick(a.settle + 0.01) if isinstance(m, Price) and m.dest == 1]
+    assert later == [Price(2, 1, 0, 2, a.price[0], a.phase)]
+    a.on_message(Price(1, 0, 2, 1, 20.0, 0), 0.4)      # robot 1 bid elsewhere: it knows
+    assert not [m for m in a.on_tick(3 * a.settle) if isinstance(m, Price) and m.dest == 1]
+
+
+def test_phase_runs_down_to_eps_final_and_then_converges():
+    c = integer_instance(5, 6, 1000)
+    from runtime.allocation.simulate import make_agents
+    agents = make_agents("auction", c)
+    run(agents, {j: (float(j), 0.0) for j in range(6)})
+    for a in agents.values():
+        assert len(a.schedule) > 1
+        assert a.phase == len(a.schedule) - 1
+        assert a.eps == pytest.approx(1.0 / 7)
+        assert a.converged
+
+
+values = st.one_of(st.none(), st.booleans(), st.integers(-5, 2 ** 33), st.text(max_size=3),
+                   st.floats(allow_nan=True, allow_infinity=True))
+messages = st.one_of(
+    st.builds(Price, sender=values, dest=st.sampled_from([0, 1, 2]), task=values, holder=values,
+              price=values, phase=values),
+    st.builds(TaskInfo, sender=values, dest=st.sampled_from([0, 1]), task=values, x=values, y=values,
+              n_tasks=values),
+    st.builds(Status, sender=values, dest=st.sampled_from([0, 1]), task=values, converged=values),
+    st.integers(), st.none(), st.text(max_size=5))
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(messages, max_size=30), st.integers(0, 3))
+def test_random_messages_never_raise_and_malformed_ones_are_counted(msgs, cut):
+    a = informed(agent())
+    before = sum(a.dropped.values())
+    malformed = 0
+    t = 0.0
+    for m in msgs[: len(msgs) - cut]:        # truncated streams as well
+        t += 0.05
+        out = a.on_message(m, t)
+        out += a.on_tick(t)
+        assert all(isinstance(o, (Price, Status, TaskInfo)) for o in out)
+        sender = getattr(m, "sender", None)
+        if isinstance(m, Price) and isinstance(sender, int) and not isinstance(sender, bool) \
+                and sender != 1 and not (isinstance(m.price, float) and math.isfinite(m.price)) \
+                and not (isinstance(m.price, int) and not isinstance(m.price, bool)):
+            malformed += 1
+    assert sum(a.dropped.values()) - before >= malformed
+    assert a.held is None or a.held in (0, 1, 2)
+
+
+def test_daemon_constructor_signature():
+    a = EpsAuctionAgent(4, [1, 2, 3, 4], lambda t: 1.0, bid_timeout=0.5)
+    assert a.robot_id == 4 and a.peers == [1, 2, 3] and a.assignment is None and not a.converged
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), n_tasks=st.integers(1, 5), surplus=st.integers(1, 3),
+       lossy=st.booleans())
+def test_more_robots_than_tasks_settles_on_the_optimal_subset(seed, n_tasks, surplus, lossy):
+    from scipy.optimize import linear_sum_assignment
+    from runtime.allocation.simulate import make_agents
+    c = np.random.default_rng(seed).integers(0, 100, (n_tasks + surplus, n_tasks))
+    agents = make_agents("auction", c)
+    bus = BusParams(seed=seed, **LOSSY) if lossy else BusParams()
+    held, _, _, converged = run(agents, {j: (float(j), 0.0) for j in range(n_tasks)}, bus, until=300)
+    assert converged
+    tasks = [t for t in held.values() if t is not None]
+    assert sorted(tasks) == list(range(n_tasks))
+    rows, cols = linear_sum_assignment(c)
+    assert sum(c[rid - 1, t] for rid, t in held.items() if t is not None) == c[rows, cols].sum()

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import socket
 import statistics
 import sys
 import tempfile
@@ -25,26 +24,10 @@ sys.path.insert(0, str(ROOT)) if str(ROOT) not in sys.path else None
 
 from runtime import config as C  # noqa: E402
 from sitl import launcher  # noqa: E402
+from sitl.ports import free_udp_base  # noqa: E402
 from sitl.world import World  # noqa: E402
 
 FLEETS = {4: ROOT / "configs/fleets/create2_4.yaml", 10: ROOT / "configs/fleets/create2_10.yaml"}
-
-
-def free_base_port(n: int) -> int:
-    for base in range(31000, 60000, 113):
-        socks = []
-        try:
-            for k in range(n + 2):
-                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-                s.bind(("127.0.0.1", base + k))
-                socks.append(s)
-            return base
-        except OSError:
-            continue
-        finally:
-            for s in socks:
-                s.close()
-    raise RuntimeError("no free UDP ports")
 
 
 def fleet_file(tmp: Path, n: int, idle: bool = False) -> Path:
@@ -52,7 +35,7 @@ def fleet_file(tmp: Path, n: int, idle: bool = False) -> Path:
     data = yaml.safe_load(src.read_text())
     data["world"] = str((src.parent / data["world"]).resolve())
     data["robot"] = str((src.parent / data["robot"]).resolve())
-    base = free_base_port(len(data["robots"]))
+    base = free_udp_base(len(data["robots"]), start=31000, stride=113)
     data["base_port"], data["gcs"] = base, f"127.0.0.1:{base}"
     if idle:   # formation = where the robots stand: they settle at once and idle
         data["formation"] = [r["start"][:2] for r in data["robots"]]

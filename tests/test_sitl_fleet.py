@@ -3,33 +3,15 @@ from __future__ import annotations
 
 import json
 import math
-import socket
 from pathlib import Path
 
 import pytest
 
 from sitl import launcher
+from sitl.ports import free_udp_base
 
 ROOT = Path(__file__).resolve().parents[1]
 FLEET4 = ROOT / "configs" / "fleets" / "create2_4.yaml"
-
-
-def _free_port_block(n: int) -> int:
-    """A base port with n+1 free UDP ports above it (tests must not collide with a running fleet)."""
-    for base in range(21000, 60000, 97):
-        socks = []
-        try:
-            for k in range(n + 2):
-                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-                s.bind(("127.0.0.1", base + k))
-                socks.append(s)
-            return base
-        except OSError:
-            continue
-        finally:
-            for s in socks:
-                s.close()
-    raise RuntimeError("no free ports")
 
 
 def _fleet_copy(tmp_path, **changes) -> Path:
@@ -37,7 +19,7 @@ def _fleet_copy(tmp_path, **changes) -> Path:
     data = yaml.safe_load(FLEET4.read_text())
     data["world"] = str(ROOT / "configs" / "worlds" / "arena_10m.yaml")
     data["robot"] = str(ROOT / "configs" / "robots" / "create2.yaml")
-    base = _free_port_block(len(data["robots"]))
+    base = free_udp_base(len(data["robots"]))
     data["base_port"] = base
     data["gcs"] = f"127.0.0.1:{base}"
     data.update(changes)

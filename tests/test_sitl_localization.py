@@ -15,11 +15,12 @@ import yaml
 
 from runtime.localization.enu import geodetic_to_enu
 from sitl import launcher
-from tests.test_sitl_fleet import ROOT, _free_port_block
+from sitl.ports import free_udp_base
+from tests.test_sitl_fleet import ROOT
 
 
 def _fleet(tmp_path):
-    base = _free_port_block(3)
+    base = free_udp_base(3)
     data = {
         "world": str(ROOT / "configs" / "worlds" / "arena_10m.yaml"),
         "robot": str(ROOT / "configs" / "robots" / "create2.yaml"),

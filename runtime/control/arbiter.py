@@ -1,0 +1,290 @@
+"""DAMN-style command arbitration (Rosenblatt 1997; paper 002 Section III and IV-C).
+
+Behaviours vote over a fixed set of (speed, turn-rate) arcs with votes in [-1, 1] and may veto arcs.  The
+arbiter sums the weighted votes, smooths the sum with a Gaussian over neighbouring arcs (DAMN's vote
+smoothing, so a narrow peak next to a strongly disliked arc loses to a broad good region), drops vetoed
+arcs and commands the best one.  Sans-IO: sensor input and decisions all take ``now`` (seconds).
+
+Behaviours: ``FollowPath`` (votes around the pure-pursuit command), ``AvoidObstacles`` (after a bumper
+hit, back up and turn away for a while; with range readings, vote against arcs by how soon they hit and
+veto those that hit within a short time) and
+``Stop`` (votes to stand still when the path is done or there is none).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Iterable, Protocol, Sequence
+
+import numpy as np
+from scipy import ndimage
+
+from runtime.control.pure_pursuit import PurePursuit
+from runtime.errors import InputError
+from runtime.log import get_logger
+
+log = get_logger("control.arbiter")
+
+
+@dataclass(frozen=True)
+class ArcSet:
+    """The candidate commands: every (speed, turn rate) pair of two sorted axes; arc k = (k // nw, k % nw)."""
+    speeds: tuple[float, ...]
+    turn_rates: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        for name in ("speeds", "turn_rates"):
+            axis = getattr(self, name)
+            if len(axis) < 1 or any(not math.isfinite(a) for a in axis) or list(axis) != sorted(set(axis)):
+                raise InputError(f"arc set {name}: expected strictly increasing finite values, got {axis!r}")
+        if 0.0 not in self.speeds:
+            raise InputError(f"arc set speeds: expected 0.0 among them (to stop), got {self.speeds!r}")
+
+    @classmethod
+    def uniform(cls, max_speed: float = 0.5, max_reverse: float = 0.2, max_turn_rate: float = 2.0,
+                n_speeds: int = 11, n_turns: int = 21) -> "ArcSet":
+        """Evenly spaced forward speeds in [0, max_speed], plus reverse speeds down to -max_reverse at the same
+        spacing, and turn rates in [-max_turn_rate, max_turn_rate] (defaults fit an iRobot Create 2)."""
+        fwd = np.linspace(0.0, max_speed, n_speeds)
+        dv = fwd[1] - fwd[0] if n_speeds > 1 else max_speed
+        rev = -np.arange(dv, max_reverse + 1e-9, dv)[::-1] if max_reverse > 0 and dv > 0 else np.zeros(0)
+        turns = np.linspace(-max_turn_rate, max_turn_rate, n_turns)
+        return cls(tuple(float(v) for v in np.concatenate((rev, fwd))), tuple(float(w) for w in turns))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return len(self.speeds), len(self.turn_rates)
+
+    @property
+    def v(self) -> np.ndarray:
+        """Speed of every arc (flat, length n_speeds * n_turns)."""
+        return np.repeat(np.asarray(self.speeds), len(self.turn_rates))
+
+    @property
+    def w(self) -> np.ndarray:
+        """Turn rate of every arc (flat)."""
+        return np.tile(np.asarray(self.turn_rates), len(self.speeds))
+
+    def nearest(self, v: float, w: float) -> int:
+        """Index of the arc closest to (v, w), each axis measured in its own spacing."""
+        iv = int(np.argmin(np.abs(np.asarray(self.speeds) - v)))
+        iw = int(np.argmin(np.abs(np.asarray(self.turn_rates) - w)))
+        return iv * len(self.turn_rates) + iw
+
+
+@dataclass
+class Ballot:
+    """One behaviour's opinion: votes in [-1, 1] per arc, and arcs it forbids."""
+    votes: np.ndarray
+    veto: np.ndarray | None = None
+
+
+class Behaviour(Protocol):
+    name: str
+    weight: float
+
+    def ballot(self, arcs: ArcSet, now: float) -> Ballot: ...
+
+
+def _spread(arcs: ArcSet) -> tuple[float, float]:
+    sv = np.ptp(arcs.speeds) if len(arcs.speeds) > 1 else 1.0
+    sw = np.ptp(arcs.turn_rates) if len(arcs.turn_rates) > 1 else 1.0
+    return float(sv) or 1.0, float(sw) or 1.0
+
+
+def peak(arcs: ArcSet, v: float, w: float, width: float = 0.15) -> np.ndarray:
+    """Votes in [-1, 1] peaking at +1 on (v, w) and falling off as a Gaussian of the distance in arc space
+    (each axis scaled by its range; ``width`` is the standard deviation as a fraction of that range)."""
+    sv, sw = _spread(arcs)
+    d2 = ((arcs.v - v) / sv) ** 2 + ((arcs.w - w) / sw) ** 2
+    return 2.0 * np.exp(-0.5 * d2 / width ** 2) - 1.0
+
+
+@dataclass
+class FollowPath:
+    """Votes for arcs near the pure-pursuit command for the current path and pose."""
+    follower: PurePursuit = field(default_factory=PurePursuit)
+    weight: float = 1.0
+    width: float = 0.15
+    name: str = "follow"
+    path: list | None = None
+    command: tuple[float, float] | None = None
+    done: bool = True
+
+    def set_path(self, path: Sequence[Sequence[float]] | None) -> None:
+        """Follow ``path`` from now on (None: no path, vote nothing)."""
+        self.path = None if path is None else [tuple(p) for p in path]
+        self.follower.reset()
+        self.command, self.done = None, path is None
+
+    def update(self, pose: tuple[float, float, float], now: float) -> None:
+        """New pose estimate: recompute the pure-pursuit command."""
+        if self.path is None:
+            self.command, self.done = None, True
+            return
+        v, w, self.done = self.follower.command(pose, self.path)
+        self.command = None if self.done else (v, w)
+
+    def ballot(self, arcs: ArcSet, now: float) -> Ballot:
+        if self.command is None:
+            return Ballot(np.zeros(len(arcs.v)))
+        return Ballot(peak(arcs, *self.command, width=self.width))
+
+
+@dataclass
+class Stop:
+    """Votes to stand still (and against moving) when the followed path is done or absent."""
+    follow: FollowPath
+    weight: float = 2.0
+    name: str = "stop"
+
+    def ballot(self, arcs: ArcSet, now: float) -> Ballot:
+        if not self.follow.done:
+            return Ballot(np.zeros(len(arcs.v)))
+        votes = np.where((arcs.v == 0) & (arcs.w == 0), 1.0, -1.0)
+        return Ballot(votes)
+
+
+@dataclass
+class AvoidObstacles:
+    """Obstacle avoidance from bumpers and, when available, range readings (bearing rad, distance m from
+    the robot centre, robot frame).
+
+    After a bumper hit: for ``backup_time`` seconds vote for backing up at ``backup_speed`` while turning
+    away from the side hit, and veto forward arcs.  Ranges newer than ``range_timeout``: an arc "hits" when
+    its path brings the robot within ``radius + margin`` of a reading (and closer to it than now); arcs
+    hitting within ``horizon`` seconds get votes from -1 (hit at once) rising to 0 (hit at the horizon),
+    and moving arcs hitting within ``veto_time`` are vetoed.  Readings that are not finite or negative are dropped
+    and counted in ``dropped``.
+    """
+    weight: float = 1.5
+    radius: float = 0.17
+    margin: float = 0.05
+    horizon: float = 3.0
+    veto_time: float = 0.75
+    backup_time: float = 1.0
+    backup_speed: float = -0.1
+    backup_turn: float = 1.0
+    range_timeout: float = 0.5
+    max_range: float = 5.0
+    name: str = "avoid"
+    dropped: int = 0
+    _bump_until: float = field(default=-math.inf, repr=False)
+    _turn: float = field(default=0.0, repr=False)
+    _pressed: bool = field(default=False, repr=False)
+    _points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
+    _ranges_at: float = field(default=-math.inf, repr=False)
+
+    def on_bumpers(self, left: bool, right: bool, now: float) -> None:
+        """Bumper state: a press starts (or extends) a back-up-and-turn-away manoeuvre."""
+        self._pressed = bool(left or right)
+        if not self._pressed:
+            return
+        if left and not right:
+            self._turn = -abs(self.backup_turn)      # hit on the left: rotate clockwise (away)
+        elif right and not left:
+            self._turn = abs(self.backup_turn)
+        elif self._turn == 0.0:
+            self._turn = -abs(self.backup_turn)      # head-on: keep turning one way
+        if now >= self._bump_until:
+            log.debug("bump (left=%s right=%s): backing up for %.1f s", left, right, self.backup_time)
+        self._bump_until = now + self.backup_time
+
+    def on_ranges(self, readings: Iterable, now: float) -> int:
+        """Range readings in the robot frame; returns how many were kept."""
+        pts = []
+        for r in readings:
+            try:
+                bearing, dist = float(r[0]), float(r[1])
+            except (TypeError, ValueError, IndexError, KeyError):
+                self.dropped += 1
+                continue
+            if not (math.isfinite(bearing) and math.isfinite(dist)) or dist < 0:
+                self.dropped += 1
+                continue
+            if dist <= self.max_range:
+                pts.append((dist * math.cos(bearing), dist * math.sin(bearing)))
+        self._points = np.asarray(pts, dtype=float).reshape(-1, 2)
+        self._ranges_at = now
+        return len(pts)
+
+    def backing_up(self, now: float) -> bool:
+        """True while the bump manoeuvre runs (bumper pressed, or within backup_time of the last press)."""
+        return self._pressed or now < self._bump_until
+
+    def time_to_collision(self, arcs: ArcSet, horizon: float, steps: int = 16) -> np.ndarray:
+        """Per arc, the first sampled time within ``horizon`` at which the robot disc reaches a range point."""
+        out = np.full(len(arcs.v), np.inf)
+        if len(self._points) == 0:
+            return out
+        t = np.linspace(horizon / steps, horizon, steps)
+        v, w = arcs.v[:, None], arcs.w[:, None]
+        th = w * t
+        small = np.abs(w) < 1e-9
+        safe_w = np.where(small, 1.0, w)
+        x = np.where(small, v * t, v / safe_w * np.sin(th))
+        y = np.where(small, 0.0, v / safe_w * (1 - np.cos(th)))
+        px, py = self._points[None, None, :, 0], self._points[None, None, :, 1]
+        d2 = (x[:, :, None] - px) ** 2 + (y[:, :, None] - py) ** 2
+        d0 = (px * px + py * py)[0]
+        # A hit is coming within the clearance while getting closer to that point than now: an arc that
+        # moves away from something already too close stays allowed, so the robot can back out.
+        hit = ((d2 <= (self.radius + self.margin) ** 2) & (d2 < d0 - 1e-12)).any(axis=2)
+        any_hit = hit.any(axis=1)
+        out[any_hit] = t[np.argmax(hit[any_hit], axis=1)]
+        return out
+
+    def ballot(self, arcs: ArcSet, now: float) -> Ballot:
+        n = len(arcs.v)
+        votes, veto = np.zeros(n), np.zeros(n, dtype=bool)
+        if self.backing_up(now):
+            votes = peak(arcs, self.backup_speed, self._turn, width=0.2)
+            votes = np.where(arcs.v > 0, -1.0, votes)
+            veto |= arcs.v > 0
+        if now - self._ranges_at <= self.range_timeout and len(self._points):
+            ttc = self.time_to_collision(arcs, self.horizon, steps=24)
+            veto |= (ttc <= self.veto_time) & (arcs.v != 0)
+            hits = np.isfinite(ttc)
+            votes = np.where(hits, np.minimum(votes, -(1.0 - ttc / self.horizon)), votes)
+        return Ballot(np.clip(votes, -1.0, 1.0), veto)
+
+
+@dataclass
+class Decision:
+    v: float
+    w: float
+    arc: int
+    scores: np.ndarray          # smoothed weighted sum per arc, -inf where vetoed
+
+
+@dataclass
+class Arbiter:
+    """Sums weighted behaviour votes, Gaussian-smooths them over neighbouring arcs, picks the best arc."""
+    arcs: ArcSet
+    behaviours: list
+    smoothing: float = 1.0       # Gaussian sigma in arcs along each axis (0: none)
+    vetoed_all: int = 0          # decisions where every arc was vetoed (the arbiter then stands still)
+
+    def __post_init__(self) -> None:
+        for b in self.behaviours:
+            if not (isinstance(b.weight, (int, float)) and math.isfinite(b.weight) and b.weight >= 0):
+                raise InputError(f"arbiter behaviour {b.name} weight: expected a finite number >= 0, got {b.weight!r}")
+
+    def decide(self, now: float) -> Decision:
+        total = np.zeros(len(self.arcs.v))
+        veto = np.zeros(len(self.arcs.v), dtype=bool)
+        for b in self.behaviours:
+            ballot = b.ballot(self.arcs, now)
+            total += b.weight * np.clip(np.nan_to_num(ballot.votes, nan=0.0), -1.0, 1.0)
+            if ballot.veto is not None:
+                veto |= ballot.veto
+        grid = total.reshape(self.arcs.shape)
+        if self.smoothing > 0:
+            grid = ndimage.gaussian_filter(grid, self.smoothing, mode="nearest")
+        scores = np.where(veto, -np.inf, grid.ravel())
+        if np.all(veto):
+            self.vetoed_all += 1
+            stop = self.arcs.nearest(0.0, 0.0)
+            return Decision(0.0, 0.0, stop, scores)
+        k = int(np.argmax(scores))
+        return Decision(float(self.arcs.v[k]), float(self.arcs.w[k]), k, scores)

@@ -127,6 +127,13 @@ class ControlConfig:
 
 
 @dataclass(frozen=True)
+class PlanningConfig:
+    map: Optional[str] = None       # world config used as the map (relative to this file); null: open field
+    planner: Literal["astar", "rrt", "euclid"] = "astar"
+    inflate: float = field(default=0.17, metadata=rng(0.0, 5.0))   # obstacle inflation: robot radius (m)
+
+
+@dataclass(frozen=True)
 class AllocationConfig:
     method: Literal["bs", "rtma", "auction"] = "bs"
     bid_timeout: float = field(default=1.0, metadata=rng(0.01, 60))
@@ -142,6 +149,7 @@ class RobotConfig:
     localization: LocalizationConfig = LocalizationConfig()
     comms: CommsConfig = CommsConfig()
     control: ControlConfig = ControlConfig()
+    planning: PlanningConfig = PlanningConfig()
     allocation: AllocationConfig = AllocationConfig()
     datum: Datum = Datum()
     source: str = ""

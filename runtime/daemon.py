@@ -51,6 +51,7 @@ def make_agent(cfg: C.RobotConfig, cost):
 
 class Daemon:
     def __init__(self, cfg: C.RobotConfig, *, base=None, gps=None, link=None):
+        from runtime.control.arbiter import Arbiter, ArcSet, AvoidObstacles, FollowPath, Stop
         from runtime.control.pure_pursuit import PurePursuit
         from runtime.localization.ekf import PoseEKF
         from runtime.localization.enu import geodetic_to_enu
@@ -87,27 +88,65 @@ class Daemon:
         c = cfg.control
         self.pursuit = PurePursuit(lookahead=c.lookahead, cruise_speed=c.cruise_speed,
                                    max_turn_rate=c.max_turn_rate, goal_tolerance=c.goal_tolerance)
+        self.follow = FollowPath(follower=self.pursuit)
+        self.avoid = AvoidObstacles()
+        self.arbiter = Arbiter(ArcSet.uniform(max_speed=c.cruise_speed, max_turn_rate=c.max_turn_rate),
+                               [self.follow, self.avoid, Stop(self.follow)])
+        self.map = self._load_map(cfg)
+        self._cost_row: dict[int, float] = {}
+        self._cost_at: tuple[float, float] | None = None
         self.period = 1.0 / c.rate
         self._last_step: float | None = None
         self._last_odom_t: float | None = None
         self._started = False
         self._target: int | None = None
         self._path: list[tuple[float, float]] = []
-        self._arrived = False
-        self._backoff_until = -1.0
-        self._backoff_turn = 0.0
+        self._backing_up = False
 
     # ------------------------------------------------------------------ costs and pose
     def pose(self) -> tuple[float, float, float] | None:
         return self.ekf.pose() if self.ekf.initialised else None
 
+    @staticmethod
+    def _load_map(cfg: C.RobotConfig):
+        if cfg.planning.map is None:
+            return None
+        path = Path(cfg.planning.map)
+        if not path.is_absolute() and cfg.source:
+            path = Path(cfg.source).parent / path
+        return C.load_world(path)
+
+    @property
+    def planner(self) -> str:
+        return self.cfg.planning.planner if self.map is not None else "euclid"
+
     def _cost(self, task: int) -> float:
-        """Straight-line bid cost from the current pose estimate (planner costs: issue 4)."""
+        """Bid cost: planned path length from the current pose estimate to ``task`` (inf if unreachable).
+        One search fills the row for every known task; it is reused until the robot moves 0.25 m."""
+        from runtime.planning.costs import cost_matrix
+
         pose = self.pose()
         if pose is None or task not in self.tasks:
             return math.inf
-        tx, ty = self.tasks[task]
-        return math.hypot(tx - pose[0], ty - pose[1])
+        if (self._cost_at is None or task not in self._cost_row
+                or math.hypot(pose[0] - self._cost_at[0], pose[1] - self._cost_at[1]) > 0.25):
+            ids = sorted(self.tasks)
+            row = cost_matrix(self.map, [pose[:2]], [self.tasks[i] for i in ids], planner=self.planner,
+                              seed=self.id, inflate=self.cfg.planning.inflate)[0]
+            self._cost_row = {i: float(c) for i, c in zip(ids, row)}
+            self._cost_at = (pose[0], pose[1])
+        return self._cost_row[task]
+
+    def _plan(self, pose, goal) -> list[tuple[float, float]]:
+        from runtime.planning.costs import path
+
+        route = path(self.map, pose[:2], goal, planner=self.planner, seed=self.id,
+                     inflate=self.cfg.planning.inflate) if self.map is not None else None
+        if route is None:
+            if self.map is not None:
+                self.log.warning("no path to (%.2f, %.2f) on the map: heading straight for it", *goal)
+            route = [(pose[0], pose[1]), goal]
+        return route
 
     # ------------------------------------------------------------------ lifecycle
     def open(self, now: float) -> None:
@@ -184,32 +223,36 @@ class Daemon:
             self.link.send_agent(out, now)
 
     def _control(self, now: float) -> None:
+        """Path to the held task, followed by pure pursuit under the DAMN-style arbiter (bumpers)."""
         pose = self.pose()
         task = self.agent.assignment
         if pose is None or task is None or task not in self.tasks:
+            if self._target is not None:
+                self.follow.set_path(None)
+                self._target = None
             self.base.set_velocity(0.0, 0.0, now)
             return
         goal = self.tasks[task]
+        tol = self.cfg.control.goal_tolerance
         if task != self._target:
-            self._target, self._arrived = task, False
-            self._path = [(pose[0], pose[1]), goal]
+            self._target = task
+            self.follow.set_path(self._plan(pose, goal))
             self.log.info("driving to task %d at (%.2f, %.2f)", task, *goal)
-        sensors = self.base.sensors
-        if sensors.bump_left or sensors.bump_right:
-            # back off and turn away from the side that hit; then re-plan from where we are
-            self._backoff_until = now + 0.6
-            self._backoff_turn = -1.2 if sensors.bump_left and not sensors.bump_right else 1.2
-            self._path = [(pose[0], pose[1]), goal]
-        if now < self._backoff_until:
-            self.base.set_velocity(-0.08, self._backoff_turn, now)
-            return
-        if self._arrived and math.hypot(goal[0] - pose[0], goal[1] - pose[1]) < 3 * self.cfg.control.goal_tolerance:
-            self.base.set_velocity(0.0, 0.0, now)
-            return
-        v, w, done = self.pursuit.command(pose, self._path)
-        if done:
-            self._arrived = True
-            v, w = 0.0, 0.0
+        elif self.follow.done and math.hypot(goal[0] - pose[0], goal[1] - pose[1]) > 3 * tol:
+            self.follow.set_path(self._plan(pose, goal))      # pushed off station: go back
+        s = self.base.sensors
+        self.avoid.on_bumpers(s.bump_left, s.bump_right, now)
+        backing = self.avoid.backing_up(now)
+        if self._backing_up and not backing:
+            self.follow.set_path(self._plan(pose, goal))      # re-plan from where the bump left us
+        self._backing_up = backing
+        self.follow.update(pose, now)
+        d = self.arbiter.decide(now)
+        cmd = self.follow.command
+        if cmd is not None and not backing and d.arc == self.arbiter.arcs.nearest(*cmd):
+            v, w = cmd           # the path follower won: pass its exact command, not the arc's grid value
+        else:
+            v, w = d.v, d.w
         self.base.set_velocity(v, w, now)
 
     def snapshot(self) -> dict:
@@ -217,7 +260,7 @@ class Daemon:
         s = self.stats
         return {
             "robot": self.id, "pose": pose, "task": self.agent.assignment,
-            "converged": bool(self.agent.converged), "arrived": self._arrived,
+            "converged": bool(self.agent.converged), "arrived": bool(self.follow.done and self._target is not None),
             "cycles": s.cycles, "missed_deadlines": s.missed_deadlines,
             "worst_lateness": s.worst_lateness, "agent_sent": s.agent_sent,
             "agent_received": s.agent_received, "peers_lost": s.peers_lost,

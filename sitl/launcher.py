@@ -139,6 +139,7 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
                       "peers": [{"id": o, "address": f"127.0.0.1:{p}"} for o, p in ports.items() if o != r.id],
                       "signing_key": str(key_path) if key_path else None},
             "allocation": {"formation": [list(xy) for xy in fleet.formation], "initiator": r.id == initiator},
+            "planning": {"map": str(Path(fleet.world).resolve())},
             "datum": C.to_dict(world_cfg.datum),
         }
         if method:
@@ -192,7 +193,9 @@ def summarise(f: Fleet, assignment: dict[int, int | None]) -> dict:
     starts = {r.id: r.start for r in f.fleet.robots}
     ids = sorted(starts)
     tasks = [tuple(t) for t in f.fleet.formation]
-    cost = np.array([[math.hypot(tx - starts[i][0], ty - starts[i][1]) for tx, ty in tasks] for i in ids])
+    from runtime.planning.costs import cost_matrix
+    # the costs the daemons bid: planned path lengths on the world map from the start poses
+    cost = cost_matrix(f.world_cfg, [starts[i][:2] for i in ids], tasks, planner="astar")
     rows, cols = linear_sum_assignment(cost)
     optimum = float(cost[rows, cols].sum())
     held = [assignment.get(i) for i in ids]
@@ -217,7 +220,8 @@ def print_summary(res: dict, out=sys.stdout) -> None:
         print(f"{rid:5d}  {'-' if task is None else task:>4}  {pos:16}  {res['optimal_assignment'][rid]:>12}  "
               f"{'-' if math.isnan(err) else f'{err:.3f}':>15}", file=out)
     gap = 100.0 * (res["global_cost"] - res["optimum"]) / res["optimum"] if res["optimum"] > 0 else 0.0
-    print(f"\nglobal cost {res['global_cost']:.3f} m   Hungarian optimum {res['optimum']:.3f} m   "
+    print(f"\nglobal cost (path lengths from the start poses) {res['global_cost']:.3f} m   "
+          f"Hungarian optimum {res['optimum']:.3f} m   "
           f"gap {gap:+.2f} %", file=out)
     print(f"assignment valid: {res['valid']}   sim time {res['sim_time']:.1f} s", file=out)
     for e in res["events"]:

@@ -61,3 +61,26 @@ def test_manifest_lists_every_robot(tmp_path):
         assert data["ground_station"].startswith("127.0.0.1:")
     finally:
         f.close()
+
+
+@pytest.mark.slow
+def test_fleet_plans_around_boxes(tmp_path):
+    """Bids are A* path lengths on the world map and robots drive the planned paths without
+    getting stuck on the boxes."""
+    import yaml
+    src = ROOT / "configs" / "fleets" / "create2_4_boxes.yaml"
+    data = yaml.safe_load(src.read_text())
+    data["world"] = str(ROOT / "configs" / "worlds" / "boxes_10m.yaml")
+    data["robot"] = str(ROOT / "configs" / "robots" / "create2.yaml")
+    base = free_udp_base(len(data["robots"]))
+    data["base_port"], data["gcs"] = base, f"127.0.0.1:{base}"
+    path = tmp_path / "boxes.yaml"
+    path.write_text(yaml.safe_dump(data))
+    f = launcher.build(path, tmp_path / "run")
+    try:
+        res = launcher.run_lockstep(f, timeout=120)
+    finally:
+        f.close()
+    assert res["valid"], res
+    assert all(e < 0.25 for e in res["final_error"].values()), res["final_error"]
+    assert res["sim_time"] < 120

@@ -266,6 +266,8 @@ class Daemon:
             "agent_received": s.agent_received, "peers_lost": s.peers_lost,
             "cpu_seconds": s.cpu_seconds, "wall_seconds": s.wall_seconds,
             "base": vars(self.base.stats) if hasattr(self.base, "stats") else {},
+            "link": self.link.counters.as_dict() if hasattr(self.link, "counters") else {},
+            "gps_rejected": getattr(self.ekf, "gps_rejected", 0),
         }
 
 

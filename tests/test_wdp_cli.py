@@ -81,7 +81,7 @@ def _bad(**change):
     ('{"robots": [1.5], "tasks": [1], "bids": []}', '"robots"[0]: expected an integer or string id'),
     ('{"tasks": [1], "bids": []}', '"robots": expected a list'),
     ('[1, 2]', "expected an object"),
-    ('{"robots": [1], "tasks": [1], "bids": [', "not valid JSON at line 1"),
+    ('{"robots": [1], "tasks": [1], "bids": [', "expected JSON (Expecting value at line 1"),
 ])
 def test_bad_input_is_one_line_exit_2(tmp_path, capsys, doc, needle):
     path = _write(tmp_path, doc)
@@ -93,7 +93,7 @@ def test_bad_input_is_one_line_exit_2(tmp_path, capsys, doc, needle):
 
 def test_missing_file_and_bad_node_limit(tmp_path, capsys):
     assert cli.main(["wdp", str(tmp_path / "none.json")]) == 2
-    assert "cannot read" in capsys.readouterr().err
+    assert "expected a readable bids file" in capsys.readouterr().err
     assert cli.main(["wdp", str(_write(tmp_path, TABLE2)), "--node-limit", "0"]) == 2
     assert "--node-limit 0" in capsys.readouterr().err
 

@@ -16,6 +16,7 @@ import numpy as np
 
 from runtime.allocation.assignment import check_costs, hungarian, percent_error, straight_line_costs
 from runtime.errors import InputError
+from runtime.jsonfile import read_json
 
 METHODS = ("auction", "bs", "rtma", "hungarian")
 
@@ -60,18 +61,7 @@ def _world_costs(world: str, robots, tasks, path: Path) -> np.ndarray:
 def load_problem(path: str | Path) -> tuple[np.ndarray, list | None, list | None]:
     """(costs, robot positions or None, task positions or None) from a problem file, or InputError."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise InputError(f"{path}: expected a readable problem file ({exc.strerror})") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: expected a JSON text file") from None
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{path}: expected JSON ({exc.msg} at line {exc.lineno} column {exc.colno})") from None
-    except RecursionError:
-        raise InputError(f"{path}: expected JSON (nested too deeply)") from None
+    data = read_json(path, "problem file")
     if not isinstance(data, dict):
         raise InputError(f'{path}: expected a JSON object with "costs" or "robots" and "tasks"')
     if "costs" in data:

@@ -15,9 +15,7 @@ Methods, all exact (IDA* and BFS unless capped):
 """
 from __future__ import annotations
 
-import json
 import math
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,6 +24,7 @@ from typing import Any, Callable
 from runtime.allocation import wdp_bounds, wdp_dp, wdp_milp, wdp_search
 from runtime.allocation.wdp_model import Compiled, Problem, SolverOutput, TaskBid, compile_problem
 from runtime.errors import InputError
+from runtime.jsonfile import read_json
 
 DP_WORK_LIMIT = 30_000_000       # DP states touched before auto prefers HiGHS
 SPARSE_MAX_BIDS = 60             # auto tries the plain-Python DP up to this many bids...
@@ -136,18 +135,7 @@ def parse_problem(obj: Any) -> Problem:
 def load_problem(path: str | Path) -> Problem:
     """Read and check a bids JSON file (``-`` reads stdin)."""
     name = str(path)
-    try:
-        text = sys.stdin.read() if name == "-" else Path(path).read_text()
-    except OSError as exc:
-        raise InputError(f"{name}: cannot read ({exc.strerror or exc})") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{name}: not UTF-8 text, expected a JSON bids file") from None
-    try:
-        obj = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{name}: not valid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
-    except RecursionError:
-        raise InputError(f"{name}: JSON nested too deeply") from None
+    obj = read_json(path, "bids file")
     try:
         return parse_problem(obj)
     except InputError as exc:

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 import struct
 
 import pytest
@@ -13,19 +12,8 @@ from runtime.allocation import messages as M
 from runtime.comms import codec, dialect
 
 
-@pytest.fixture(scope="module", autouse=True)
-def cache_dir(tmp_path_factory):
-    old = os.environ.get("MRTA_CACHE_DIR")
-    os.environ["MRTA_CACHE_DIR"] = str(tmp_path_factory.getbasetemp() / "mrta-cache")
-    yield
-    if old is None:
-        os.environ.pop("MRTA_CACHE_DIR", None)
-    else:
-        os.environ["MRTA_CACHE_DIR"] = old
-
-
 @pytest.fixture(scope="module")
-def mod(cache_dir):
+def mod():
     return dialect.load()
 
 

@@ -1,7 +1,6 @@
 """MavlinkLink on loopback: exchange, addressing, signing, liveness, and a parser that never raises."""
 from __future__ import annotations
 
-import os
 import time
 
 import pytest
@@ -15,17 +14,6 @@ from runtime.errors import InputError
 KEY = bytes(range(32))
 OTHER_KEY = bytes(range(1, 33))
 DROPS = ("bad_crc", "parse_errors", "unsigned_dropped", "bad_signature_dropped", "not_for_us", "unknown")
-
-
-@pytest.fixture(scope="module", autouse=True)
-def cache_dir(tmp_path_factory):
-    old = os.environ.get("MRTA_CACHE_DIR")
-    os.environ["MRTA_CACHE_DIR"] = str(tmp_path_factory.getbasetemp() / "mrta-cache")
-    yield
-    if old is None:
-        os.environ.pop("MRTA_CACHE_DIR", None)
-    else:
-        os.environ["MRTA_CACHE_DIR"] = old
 
 
 @pytest.fixture

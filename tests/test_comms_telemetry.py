@@ -2,9 +2,7 @@
 from __future__ import annotations
 
 import math
-import os
 import socket
-import time
 
 import pymap3d
 import pytest
@@ -19,17 +17,6 @@ from runtime.drivers.base import BaseSensors
 
 DATUM = Datum(lat=33.7756, lon=-84.3963, alt=300.0)
 BATTERY = BaseSensors(voltage=14.2, current=-0.8, battery_charge=2.0, battery_capacity=2.7)
-
-
-@pytest.fixture(scope="module", autouse=True)
-def cache_dir(tmp_path_factory):
-    old = os.environ.get("MRTA_CACHE_DIR")
-    os.environ["MRTA_CACHE_DIR"] = str(tmp_path_factory.getbasetemp() / "mrta-cache")
-    yield
-    if old is None:
-        os.environ.pop("MRTA_CACHE_DIR", None)
-    else:
-        os.environ["MRTA_CACHE_DIR"] = old
 
 
 class Gcs:

@@ -19,19 +19,16 @@ import numpy as np
 
 from runtime.allocation.assignment import hungarian, percent_error, straight_line_costs
 from runtime.allocation.simulate import BusParams, solve
+from sitl.experiments.formation_common import error_sweep, mean_of_max, uniform_instance
 
 METHODS = ("auction", "rtma", "bs")
-
-
-def instance(rng, n):
-    return rng.uniform(0, 1000, (n, 2)), rng.uniform(0, 1000, (n, 2))
 
 
 def compare(sizes, seed, drop=0.0):
     print(f"{'n':>4} {'method':>8} {'messages':>9} {'x RTMA':>7} {'rounds':>7} {'sim s':>7} "
           f"{'error %':>8} {'cpu x RTMA':>10}")
     for n in sizes:
-        robots, tasks = instance(np.random.default_rng(seed + n), n)
+        robots, tasks = uniform_instance(np.random.default_rng(seed + n), n)
         optimum = hungarian(straight_line_costs(robots, tasks))[1]
         rows = {}
         for m in METHODS:
@@ -47,24 +44,18 @@ def compare(sizes, seed, drop=0.0):
 
 
 def errors(cases, seed, sizes=range(2, 21)):
+    """The sweep of ``mrta experiment formation-ideal`` (same instances for the same seed), BS and RTMA."""
     print(f"\n% error vs Hungarian, {cases} random cases per size, 1000 x 1000 m field")
     print(f"{'n':>4} {'BS mean':>8} {'BS max':>8} {'RTMA mean':>10} {'RTMA max':>9}")
-    maxima = {"bs": [], "rtma": []}
+    rows = error_sweep(uniform_instance, sizes, cases, seed, ("bs", "rtma"))
+    for r in rows:
+        assert r["not_converged"] == 0, r
+    get = {(r["robots"], r["method"]): r for r in rows}
     for n in sizes:
-        rng = np.random.default_rng(seed * 1000 + n)
-        err = {"bs": [], "rtma": []}
-        for _ in range(cases):
-            robots, tasks = instance(rng, n)
-            optimum = hungarian(straight_line_costs(robots, tasks))[1]
-            for m in err:
-                r = solve(m, robots=robots, tasks=tasks)
-                assert r.converged, (m, n)
-                err[m].append(percent_error(r.cost, optimum))
-        for m in err:
-            maxima[m].append(max(err[m]))
-        print(f"{n:>4} {np.mean(err['bs']):>8.2f} {max(err['bs']):>8.2f} "
-              f"{np.mean(err['rtma']):>10.2f} {max(err['rtma']):>9.2f}")
-    print(f"mean over sizes of the max error: BS {np.mean(maxima['bs']):.2f} %, RTMA {np.mean(maxima['rtma']):.2f} %"
+        bs, rtma = get[(n, "bs")], get[(n, "rtma")]
+        print(f"{n:>4} {bs['mean_error_pct']:>8.2f} {bs['max_error_pct']:>8.2f} "
+              f"{rtma['mean_error_pct']:>10.2f} {rtma['max_error_pct']:>9.2f}")
+    print(f"mean over sizes of the max error: BS {mean_of_max(rows, 'bs'):.2f} %, RTMA {mean_of_max(rows, 'rtma'):.2f} %"
           "  (paper: 33.77 %, 14.91 %)")
 
 

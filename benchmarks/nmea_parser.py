@@ -1,5 +1,5 @@
 """NmeaParser.feed vs pynmea2.NMEAStreamReader on the same emulated stream, same run (ratio of CPU time)."""
-import sys, time, statistics
+import time, statistics
 import numpy as np, pynmea2
 from runtime.drivers.nmea_gps import NmeaParser
 from sitl.devices.nmea_gps import gga_sentence, rmc_sentence

@@ -299,7 +299,7 @@ def load_fleet(path: str | Path) -> FleetConfig:
     for key in ("world", "robot"):
         target = base / getattr(fleet, key)
         if not target.is_file():
-            raise ConfigError(path, key, f"a path to an existing file relative to the fleet file", getattr(fleet, key))
+            raise ConfigError(path, key, "a path to an existing file relative to the fleet file", getattr(fleet, key))
     ids = [r.id for r in fleet.robots]
     if len(set(ids)) != len(ids):
         raise ConfigError(path, "robots", "unique robot ids", ids)

@@ -187,7 +187,6 @@ def write_manifest(f: Fleet, speedup: float, seed: int, key_path: Path | None) -
 
 def summarise(f: Fleet, assignment: dict[int, int | None]) -> dict:
     """Assignment, its straight-line global cost beside the Hungarian optimum, final errors."""
-    import numpy as np
     from scipy.optimize import linear_sum_assignment
 
     starts = {r.id: r.start for r in f.fleet.robots}

@@ -64,6 +64,10 @@ class SimClock:
             self._t = t
 
 
+class ClockStalled(RuntimeError):
+    """The simulator stopped publishing time: it has exited or hung."""
+
+
 class SharedClock:
     """Sim time published by the simulator process in a small memory-mapped file.
 
@@ -75,8 +79,9 @@ class SharedClock:
 
     _FMT = "<3d"
 
-    def __init__(self, path: str, speedup: float = 1.0):
+    def __init__(self, path: str, speedup: float = 1.0, stall_timeout: float = 30.0):
         import mmap
+        self.stall_timeout = stall_timeout     # wall seconds without the time moving: the simulator is gone
         self._fh = open(path, "rb")
         self._mm = mmap.mmap(self._fh.fileno(), 24, access=mmap.ACCESS_READ)
         self.speedup = max(speedup, 1e-3)
@@ -89,10 +94,16 @@ class SharedClock:
                 return t
 
     def sleep_until(self, t: float) -> None:
+        last, since = self.now(), time.monotonic()
         while True:
-            remaining = t - self.now()
+            now = self.now()
+            remaining = t - now
             if remaining <= 0:
                 return
+            if now != last:
+                last, since = now, time.monotonic()
+            elif time.monotonic() - since > self.stall_timeout:
+                raise ClockStalled(f"simulator clock stopped at {now:.3f} s for {self.stall_timeout:.0f} s")
             time.sleep(min(0.005, max(0.0002, remaining / self.speedup)))
 
     def close(self) -> None:

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from runtime import config as C
-from runtime.clock import Clock, ScaledClock, SharedClock, WallClock
+from runtime.clock import Clock, ClockStalled, ScaledClock, SharedClock, WallClock
 from runtime.log import get_logger
 
 
@@ -273,22 +273,24 @@ class Daemon:
 
 # ---------------------------------------------------------------------- process main loop
 
+class _Stop(Exception):
+    """SIGTERM or SIGINT arrived: leave the loop wherever it is, then stop the motors."""
+
+
 def run(daemon: Daemon, clock: Clock, duration: float | None = None, stats_path: str | None = None) -> None:
     """Run ``daemon`` at its control rate until ``duration`` (clock seconds) or SIGTERM/SIGINT."""
-    stop = {"flag": False}
-
     def _stop(signum, frame):
-        stop["flag"] = True
+        raise _Stop(signal.Signals(signum).name)
 
     signal.signal(signal.SIGTERM, _stop)
     signal.signal(signal.SIGINT, _stop)
     t0 = clock.now()
     wall0, cpu0 = time.monotonic(), time.process_time()
-    daemon.open(t0)
     next_t = t0
     last_dump = t0
     try:
-        while not stop["flag"] and (duration is None or clock.now() - t0 < duration):
+        daemon.open(t0)
+        while duration is None or clock.now() - t0 < duration:
             now = clock.now()
             late = now - next_t
             if late > daemon.period:       # the cycle that was due is a whole period late
@@ -302,8 +304,16 @@ def run(daemon: Daemon, clock: Clock, duration: float | None = None, stats_path:
                 daemon.stats.cpu_seconds = time.process_time() - cpu0
                 daemon.stats.wall_seconds = time.monotonic() - wall0
                 _dump(stats_path, daemon.snapshot())
-            clock.sleep_until(next_t)
+            try:
+                clock.sleep_until(next_t)
+            except ClockStalled as exc:
+                daemon.log.error("%s: stopping", exc)
+                break
+    except _Stop as exc:
+        daemon.log.info("%s: stopping", exc)
     finally:
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)     # a second signal must not cut the clean-up short
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
         daemon.close()
         daemon.stats.cpu_seconds = time.process_time() - cpu0
         daemon.stats.wall_seconds = time.monotonic() - wall0

@@ -308,7 +308,7 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, tol: f
                "--speedup", repr(speedup), "--clock-file", str(clock_file),
                "--stats", str(f.run_dir / f"robot_{r.id}.stats.json")]
         with open(f.run_dir / f"robot_{r.id}.log", "w") as log_fh:
-            r.proc = subprocess.Popen(cmd, stdout=log_fh, stderr=subprocess.STDOUT)
+            r.proc = subprocess.Popen(cmd, stdout=log_fh, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent)
     # start barrier: the sim clock starts once every daemon is built (imports take seconds)
     deadline = time.monotonic() + 120
     while not all((f.run_dir / f"clock.ready.{rid}").exists() for rid in f.robots):
@@ -382,6 +382,15 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, tol: f
         res["idle_cpu_share"] = {rid: (_cpu_seconds(f.robots[rid].proc.pid) - c0) / wall
                                  for rid, c0 in idle_from[1].items()}
     return res
+
+
+def _die_with_parent() -> None:
+    """In the child before exec: ask Linux to SIGTERM it when the launcher dies, however it dies."""
+    try:
+        import ctypes
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass      # not Linux: the daemons' stalled-clock check still ends them
 
 
 def _cpu_seconds(pid: int) -> float:

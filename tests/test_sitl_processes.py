@@ -45,3 +45,41 @@ def test_dead_daemon_is_reported_and_peers_notice(tmp_path):
     # the survivors' heartbeat timeout fired for robot 4
     for rid in (1, 2, 3):
         assert 4 in stats[rid]["peers_lost"], (rid, stats[rid])
+
+
+@pytest.mark.slow
+def test_daemons_end_when_the_launcher_is_killed(tmp_path):
+    """SIGKILL the launcher: no daemon is left running (parent-death signal)."""
+    import time
+    fleet = _fleet_copy(tmp_path)
+    run_dir = tmp_path / "run"
+    sitl = subprocess.Popen([sys.executable, "-m", "runtime.cli", "sitl", "run", str(fleet), "--run-dir",
+                             str(run_dir)], cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 60
+    while not (run_dir / "clock").exists():
+        assert time.monotonic() < deadline and sitl.poll() is None
+        time.sleep(0.05)
+    pids = [int(p.name) for p in __import__("pathlib").Path("/proc").iterdir() if p.name.isdigit()
+            and str(run_dir) in _cmdline(p) and " daemon " in _cmdline(p)]
+    assert len(pids) == 4
+    sitl.kill()
+    sitl.wait()
+    deadline = time.monotonic() + 10
+    while any(_alive(pid) for pid in pids) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(_alive(pid) for pid in pids)
+
+
+def _cmdline(proc_dir) -> str:
+    try:
+        return (proc_dir / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+    except OSError:
+        return ""
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"

@@ -109,9 +109,17 @@ def cost_matrix(world_or_grid: WorldConfig | OccupancyGrid | None, robots_xy, ta
     rok, tok = rix >= 0, tix >= 0
     out = np.full(euclid.shape, np.inf)
     if planner == "astar":
-        if rok.any() and tok.any():
-            table = cost_table(grid, np.column_stack((rix[rok], riy[rok])), np.column_stack((tix[tok], tiy[tok])))
-            out[np.ix_(rok, tok)] = table
+        # Robots that see every task along a clear line need no search: their row is the straight-line
+        # distance (the daemon refreshes its row while driving; in the open this keeps it off the grid).
+        r_all, t_all = np.meshgrid(np.arange(len(robots)), np.arange(len(tasks)), indexing="ij")
+        sight = grid.segments_free(robots[r_all.ravel()], tasks[t_all.ravel()]).reshape(euclid.shape)
+        seen = sight.all(axis=1) & rok
+        out[seen] = euclid[seen]
+        search = rok & ~seen
+        if search.any() and tok.any():
+            table = cost_table(grid, np.column_stack((rix[search], riy[search])),
+                               np.column_stack((tix[tok], tiy[tok])))
+            out[np.ix_(search, tok)] = table
         # The grid graph overestimates any-angle lengths by up to 8 %: a pair with a clear line costs
         # exactly the straight-line distance, and no path is shorter than it.
         # Only pairs that could have a clear line: along a clear line the grid path is at most the

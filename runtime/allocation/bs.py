@@ -30,7 +30,7 @@ from dataclasses import dataclass, field, replace
 from typing import Callable, Mapping, Sequence
 
 from runtime.allocation.assignment import TaskBook, finite, valid_task_id
-from runtime.allocation.messages import BROADCAST, Announce, Award, Bid, Status, TaskInfo
+from runtime.allocation.messages import BROADCAST, Announce, Award, Bid, Status, TaskInfo, addressed_to
 from runtime.log import get_logger
 
 INF = math.inf
@@ -116,11 +116,10 @@ class BSAgent:
 
     def on_message(self, msg, now: float) -> list:
         self._now = now
-        sender = getattr(msg, "sender", None)
-        dest = getattr(msg, "dest", None)
-        if not isinstance(sender, int) or sender == self.robot_id or dest not in (BROADCAST, self.robot_id):
+        if not addressed_to(msg, self.robot_id):
             self.dropped["not for me"] += 1
             return []
+        sender = msg.sender
         handler = {Announce: self._on_announce, Bid: self._on_bid, Award: self._on_award,
                    Status: self._on_status, TaskInfo: self._on_taskinfo}.get(type(msg))
         if handler is None:

@@ -36,7 +36,7 @@ from collections import Counter
 from typing import Callable, Mapping, Sequence
 
 from runtime.allocation.assignment import MAX_TASKS, NO_TASK, TaskBook, finite, valid_task_id
-from runtime.allocation.messages import BROADCAST, Price, Status, TaskInfo
+from runtime.allocation.messages import BROADCAST, Price, Status, TaskInfo, addressed_to
 from runtime.log import get_logger
 
 INF = math.inf
@@ -108,11 +108,10 @@ class EpsAuctionAgent:
 
     def on_message(self, msg, now: float) -> list:
         self._now = now
-        sender = getattr(msg, "sender", None)
-        dest = getattr(msg, "dest", None)
-        if not isinstance(sender, int) or sender == self.robot_id or dest not in (BROADCAST, self.robot_id):
+        if not addressed_to(msg, self.robot_id):
             self.dropped["not for me"] += 1
             return []
+        sender = msg.sender
         handler = {Price: self._on_price, TaskInfo: self._on_taskinfo, Status: self._on_status}.get(type(msg))
         if handler is None:
             self.dropped["unexpected type"] += 1

@@ -83,3 +83,10 @@ class Status:
 
 
 AGENT_MESSAGES = (TaskInfo, Announce, Bid, Award, Price, Status)
+
+
+def addressed_to(msg, robot_id: int) -> bool:
+    """True if ``msg`` is a well-formed message from another robot, for ``robot_id`` or for everyone."""
+    sender = getattr(msg, "sender", None)
+    return (isinstance(sender, int) and sender != robot_id
+            and getattr(msg, "dest", None) in (BROADCAST, robot_id))

@@ -26,7 +26,7 @@ class ConfigError(InputError):
 
     def __init__(self, file: str | Path, key: str, expected: str, got: Any = dataclasses.MISSING):
         self.file, self.key, self.expected = str(file), key, expected
-        msg = f"{file}: {key or '<top>'}: expected {expected}"
+        msg = f"{file}: {key}: expected {expected}" if key else f"{file}: expected {expected}"
         if got is not dataclasses.MISSING:
             shown = repr(got)
             msg += f", got {shown[:60] + '...' if len(shown) > 60 else shown}"

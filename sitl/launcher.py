@@ -102,14 +102,14 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
           seed: int | None = None, signing: bool = False, method: str | None = None,
           speedup: float | None = None) -> Fleet:
     """Load the fleet, build the world and devices, write robot configs and the manifest."""
-    from sitl.devices.create_oi import CreateOIDevice
-    from sitl.devices.nmea_gps import NmeaGpsDevice
-    from sitl.world import World
-
     fleet = C.load_fleet(fleet_path)
     world_cfg = C.load_world(fleet.world)
     template = yaml.safe_load(Path(fleet.robot).read_text()) or {}
     C.load_robot(fleet.robot)   # validate the template itself, naming its own file on error
+
+    from sitl.devices.create_oi import CreateOIDevice      # pybullet only once the configs are good
+    from sitl.devices.nmea_gps import NmeaGpsDevice
+    from sitl.world import World
     seed = fleet.seed if seed is None else seed
     run_dir = Path(run_dir or tempfile.mkdtemp(prefix="mrta-sitl-"))
     run_dir.mkdir(parents=True, exist_ok=True)

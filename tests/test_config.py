@@ -60,7 +60,6 @@ def _write(tmp_path, data, name="robot.yaml"):
         ({"localization": {"initial_pose": [1, 2]}}, "localization.initial_pose", "a list of 3 numbers"),
         ({"datum": {"lat": 91}}, "datum.lat", "[-90, 90]"),
         ({"control": {"rate": float("nan")}}, "control.rate", "a number"),
-        ([1, 2], "<top>", "a mapping"),
     ],
 )
 def test_bad_robot_config_names_file_and_key(tmp_path, data, key, expected):
@@ -71,6 +70,13 @@ def test_bad_robot_config_names_file_and_key(tmp_path, data, key, expected):
     assert msg.startswith(f"{path}: {key}: expected"), msg
     assert expected in msg
     assert "\n" not in msg
+
+
+def test_top_level_not_a_mapping(tmp_path):
+    path = _write(tmp_path, [1, 2])
+    with pytest.raises(ConfigError) as info:
+        C.load_robot(path)
+    assert str(info.value) == f"{path}: expected a mapping, got [1, 2]"
 
 
 def test_bad_yaml_and_missing_file(tmp_path):

@@ -10,41 +10,9 @@ from runtime.drivers import create_oi_protocol as P
 from runtime.drivers.create_oi import CreateOI
 from runtime.errors import InputError
 from sitl.devices.create_oi import CreateOIDevice
+from tests.fakes import FakeBody
 
 MM_PER_COUNT = P.GEOMETRY["create2"].mm_per_count
-
-
-class FakeBody:
-    """Kinematic differential drive with a ground-truth pose."""
-
-    def __init__(self, travel=(0.0, 0.0), track=0.235):
-        self.cmd = (0.0, 0.0)
-        self.travel = list(travel)
-        self.track = track
-        self.x = self.y = self.theta = 0.0
-        self.bump = (False, False)
-        self.drop = (False, False)
-
-    def set_wheel_speeds(self, left_mps, right_mps):
-        self.cmd = (left_mps, right_mps)
-
-    def step(self, dt):
-        left, right = self.cmd
-        self.travel[0] += left * dt
-        self.travel[1] += right * dt
-        ds, dth = (left + right) / 2 * dt, (right - left) / self.track * dt
-        self.x += ds * math.cos(self.theta + dth / 2)
-        self.y += ds * math.sin(self.theta + dth / 2)
-        self.theta += dth
-
-    def wheel_travel(self):
-        return tuple(self.travel)
-
-    def bumps(self):
-        return self.bump
-
-    def wheel_drop(self):
-        return self.drop
 
 
 def loop_driver(model="create2", mode="safe", **kw):

@@ -9,37 +9,9 @@ import serial
 
 from runtime.drivers import create_oi_protocol as P
 from sitl.devices.create_oi import CreateOIDevice
+from tests.fakes import FakeBody
 
 MM_PER_COUNT = P.GEOMETRY["create2"].mm_per_count
-
-
-class FakeBody:
-    """Kinematic differential drive: wheels follow their targets at once."""
-
-    def __init__(self, travel=(0.0, 0.0), track=0.235):
-        self.cmd = (0.0, 0.0)
-        self.travel = list(travel)
-        self.track = track
-        self.bump = (False, False)
-        self.drop = (False, False)
-        self.calls = 0
-
-    def set_wheel_speeds(self, left_mps, right_mps):
-        self.cmd = (left_mps, right_mps)
-        self.calls += 1
-
-    def step(self, dt):
-        self.travel[0] += self.cmd[0] * dt
-        self.travel[1] += self.cmd[1] * dt
-
-    def wheel_travel(self):
-        return tuple(self.travel)
-
-    def bumps(self):
-        return self.bump
-
-    def wheel_drop(self):
-        return self.drop
 
 
 class MemLink:

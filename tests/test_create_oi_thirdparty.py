@@ -19,30 +19,7 @@ import pytest
 
 from runtime.drivers import create_oi_protocol as P
 from sitl.devices.create_oi import CreateOIDevice
-
-
-class FakeBody:
-    def __init__(self):
-        self.cmd = (0.0, 0.0)
-        self.travel = [0.0, 0.0]
-        self.bump = (False, False)
-        self.drop = (False, False)
-
-    def set_wheel_speeds(self, left_mps, right_mps):
-        self.cmd = (left_mps, right_mps)
-
-    def step(self, dt):
-        self.travel[0] += self.cmd[0] * dt
-        self.travel[1] += self.cmd[1] * dt
-
-    def wheel_travel(self):
-        return tuple(self.travel)
-
-    def bumps(self):
-        return self.bump
-
-    def wheel_drop(self):
-        return self.drop
+from tests.fakes import FakeBody
 
 
 class Emulated:

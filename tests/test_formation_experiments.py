@@ -17,17 +17,28 @@ from sitl.experiments import formation_common as fc
 from sitl.experiments import formation_world as fw
 
 SWEEP_COLUMNS = {"distribution", "robots", "method", "cases", "mean_error_pct", "max_error_pct", "min_error_pct",
-                 "optimal_cases", "mean_messages", "mean_rounds", "not_converged", "cpu_s"}
+                 "optimal_cases", "mean_messages", "mean_rounds", "not_converged", "cpu_s", "same_as_closed_form"}
 
 
 def _rows(path):
     return list(csv.DictReader(path.open()))
 
 
-def test_ideal_reduced_run(tmp_path):
+def test_ideal_reduced_run(tmp_path, capsys):
     out = tmp_path / "ideal"
-    assert cli.main(["experiment", "formation-ideal", "--out", str(out), "--cases", "5", "--max-robots", "6"]) == 0
+    assert cli.main(["experiment", "formation-ideal", "--out", str(out), "--cases", "5", "--max-robots", "6",
+                     "--repeats", "4"]) == 0
+    assert "closed form n=6: 4 samples of 5 cases" in capsys.readouterr().err      # progress without -v
     rows = _rows(out / "formation_ideal.csv")
+    # the agents end in the deferred-acceptance matching on every instance
+    assert all(r["same_as_closed_form"] == "5" for r in rows if r["method"] in ("bs", "rtma"))
+    expected = _rows(out / "formation_ideal_expected.csv")
+    assert sorted((int(r["robots"]), r["method"]) for r in expected) == [
+        (n, m) for n in range(2, 7) for m in ("bs", "rtma")]
+    for r in expected:
+        assert r["samples"] == "4" and r["cases_per_sample"] == "5"
+        assert float(r["max_p5_pct"]) <= float(r["expected_max_pct"]) <= float(r["max_p95_pct"])
+
     assert set(rows[0]) == SWEEP_COLUMNS
     assert sorted({(int(r["robots"]), r["method"]) for r in rows}) == [
         (n, m) for n in range(2, 7) for m in sorted(fc.METHODS)]
@@ -61,16 +72,25 @@ def test_auction_is_within_n_eps_of_the_optimum():
 def test_twobox_reduced_run(tmp_path):
     out = tmp_path / "twobox"
     assert cli.main(["experiment", "formation-twobox", "--out", str(out), "--cases", "5", "--max-robots", "5",
-                     "--methods", "bs,rtma"]) == 0
+                     "--methods", "bs,rtma", "--repeats", "3", "--sensitivity-cases", "4"]) == 0
     rows = _rows(out / "formation_twobox.csv")
     assert set(rows[0]) == SWEEP_COLUMNS
     assert {(r["distribution"], r["method"]) for r in rows} == {
         ("twobox", "bs"), ("twobox", "rtma"), ("uniform", "bs"), ("uniform", "rtma")}
     md = (out / "formation_twobox.md").read_text()
-    for heading in ("Two-box distribution (our reconstruction)", "Fig. 9: error vs robots, two-box",
-                    "Two-box vs uniform, mean error (same run)"):
+    for heading in ("Two-box distribution (our reconstruction)", "Fig. 9: error vs robots, two-box (agents)",
+                    "Two-box vs uniform, mean error (agents, same run)",
+                    "Two-box vs uniform, expected mean error (closed form)",
+                    "Paper's statements (Section IV-A, Fig. 9) beside ours: expected, 3 x 5 cases per size"):
         assert f"## {heading}" in md
-    assert "200 m small box and a 600 m big box" in md
+    assert "400 m small box and a 700 m big box" in md
+    # one sensitivity line per (small, big) box pair, each with a verdict
+    sens = [line for line in md.splitlines() if line.startswith("| ") and line.count("|") == 9
+            and line.split("|")[1].strip().replace(".", "").isdigit()]
+    assert len(sens) == 15 and all(line.rstrip(" |").split("|")[-1].strip() in ("yes", "no") for line in sens)
+    expected = _rows(out / "formation_twobox_expected.csv")
+    assert {(r["distribution"], r["method"]) for r in expected} == {
+        ("twobox", "bs"), ("twobox", "rtma"), ("uniform", "bs"), ("uniform", "rtma")}
     assert (out / "formation_twobox.png").stat().st_size > 10_000
     assert (out / "formation_twobox_instance.png").stat().st_size > 5_000
 
@@ -171,7 +191,9 @@ def test_world_drive_one_mission(tmp_path, monkeypatch):
     ("formation-ideal", ["--max-robots", "1"], "--max-robots 1"),
     ("formation-ideal", ["--methods", "bs,greedy"], "--methods 'bs,greedy'"),
     ("formation-twobox", ["--inside", "0.3"], "--inside 0.3"),
-    ("formation-twobox", ["--small-box", "700"], "--small-box 700 --big-box 600"),
+    ("formation-twobox", ["--small-box", "800"], "--small-box 800 --big-box 700"),
+    ("formation-twobox", ["--sensitivity-cases", "-1"], "--sensitivity-cases -1"),
+    ("formation-ideal", ["--repeats", "0"], "--repeats 0"),
     ("formation-world", ["--robots", "4,x"], "--robots '4,x'"),
     ("formation-world", ["--planners", "dijkstra"], "--planners 'dijkstra'"),
     ("formation-world", ["--fractions", "90"], "--fractions '90'"),

@@ -6,7 +6,9 @@ CSV + PNG + a markdown table (with the paper's numbers beside ours) under ``--ou
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib
+import logging
 
 EXPERIMENTS = {
     "wdp-tables": ("sitl.experiments.wdp_tables", "paper 001 Tables 3-6: IDA* and BFS nodes/seconds"),
@@ -30,6 +32,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     for name, (module_name, help_) in _available().items():
         module = importlib.import_module(module_name)
         p = exp_sub.add_parser(name, help=help_)
-        p.add_argument("--out", default=f"out/{name}", help="output directory (default: out/%(default)s)")
+        p.add_argument("--out", default=f"out/{name}", help="output directory (default: %(default)s)")
         module.add_arguments(p)
-        p.set_defaults(func=module.run)
+        p.set_defaults(func=_with_progress(module.run))
+
+
+def _with_progress(run):
+    """Experiments are long: their progress lines (INFO on ``mrta.experiments``) show without -v."""
+    @functools.wraps(run)
+    def wrapped(args):
+        logger = logging.getLogger("mrta.experiments")
+        if logger.getEffectiveLevel() > logging.INFO:
+            logger.setLevel(logging.INFO)
+        return run(args)
+    return wrapped

@@ -7,6 +7,7 @@ cost being the sum of every robot's cost to its task (paper 002, Section II).
 from __future__ import annotations
 
 import math
+import os
 import statistics
 import time
 from pathlib import Path
@@ -15,6 +16,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from runtime.allocation.assignment import hungarian, percent_error, straight_line_costs
+from runtime.allocation.deferred_acceptance import bs_outcome, rtma_outcome
 from runtime.allocation.simulate import BusParams, solve
 from runtime.errors import InputError
 from runtime.log import get_logger
@@ -23,6 +25,9 @@ from sitl.experiments import report
 log = get_logger("experiments.formation")
 
 METHODS = ("bs", "rtma", "auction")
+# BS and RTMA end in the deferred-acceptance matching whatever the message order
+# (runtime.allocation.deferred_acceptance): large samples are solved in closed form
+CLOSED_FORM = {"bs": bs_outcome, "rtma": rtma_outcome}
 LABELS = {"bs": "BS", "rtma": "RTMA", "auction": "auction", "hungarian": "optimum"}
 FIELD_M = 1000.0          # paper 002 Section IV-A: 1000 x 1000 m, no obstacles
 
@@ -61,8 +66,8 @@ def inside_count(n: int, inside: float) -> int:
     return n_in
 
 
-def twobox_instance(rng: np.random.Generator, n: int, size: float = FIELD_M, small: float = 200.0,
-                    big: float = 600.0, inside: float = 0.75) -> tuple[np.ndarray, np.ndarray]:
+def twobox_instance(rng: np.random.Generator, n: int, size: float = FIELD_M, small: float = 400.0,
+                    big: float = 700.0, inside: float = 0.75) -> tuple[np.ndarray, np.ndarray]:
     """Robots and tasks drawn independently by :func:`box_points` (Fig. 8 right, as reconstructed)."""
     return box_points(rng, n, size, small, big, inside), box_points(rng, n, size, small, big, inside)
 
@@ -95,6 +100,7 @@ def error_sweep(instance: Instance, sizes: Sequence[int], cases: int, seed: int,
         rng = np.random.default_rng(seed * 1000 + n)
         acc: dict[str, dict[str, list]] = {m: {"error": [], "messages": [], "rounds": []} for m in methods}
         failed = dict.fromkeys(methods, 0)
+        agree = dict.fromkeys(methods, 0)
         cpu = dict.fromkeys(methods, 0.0)
         for _ in range(cases):
             robots, tasks = instance(rng, n)
@@ -107,6 +113,8 @@ def error_sweep(instance: Instance, sizes: Sequence[int], cases: int, seed: int,
                 if not res["converged"]:
                     failed[m] += 1
                     continue
+                if m in CLOSED_FORM:
+                    agree[m] += res["assignment"] == CLOSED_FORM[m](costs)
                 for k in acc[m]:
                     acc[m][k].append(res[k])
         for m in methods:
@@ -118,11 +126,87 @@ def error_sweep(instance: Instance, sizes: Sequence[int], cases: int, seed: int,
                          "optimal_cases": sum(abs(x) < 1e-9 for x in e),
                          "mean_messages": statistics.fmean(acc[m]["messages"]) if e else math.nan,
                          "mean_rounds": statistics.fmean(acc[m]["rounds"]) if e else math.nan,
-                         "not_converged": failed[m], "cpu_s": cpu[m]})
+                         "not_converged": failed[m], "cpu_s": cpu[m],
+                         "same_as_closed_form": agree[m] if m in CLOSED_FORM else ""})
         log.info("%s n=%d: %s", label, n, ", ".join(
             f"{m} {r['mean_error_pct']:.2f}/{r['max_error_pct']:.2f}" for m, r in
             ((r["method"], r) for r in rows[-len(methods):])))
     return rows
+
+
+def closed_form_errors(instance: Instance, n: int, cases: int, repeats: int, seed: int,
+                       methods: Sequence[str]) -> dict[str, np.ndarray]:
+    """% error of each closed-form method on ``repeats`` samples of ``cases`` instances of size n, as a
+    (repeats, cases) array per method.  The instances are drawn from the same stream as
+    :func:`error_sweep`'s, so sample 0 holds the very instances the agents ran."""
+    rng = np.random.default_rng(seed * 1000 + n)
+    out = {m: np.empty((repeats, cases)) for m in methods if m in CLOSED_FORM}
+    rows = np.arange(n)
+    for r in range(repeats):
+        for k in range(cases):
+            robots, tasks = instance(rng, n)
+            costs = straight_line_costs(robots, tasks)
+            optimum = hungarian(costs)[1]
+            for m, errors in out.items():
+                errors[r, k] = percent_error(float(costs[rows, CLOSED_FORM[m](costs)].sum()), optimum)
+    return out
+
+
+def closed_form_sweep(instance: Instance, sizes: Sequence[int], cases: int, repeats: int, seed: int,
+                      methods: Sequence[str], label: str = "", workers: int | None = None) -> dict[int, dict[str, np.ndarray]]:
+    """:func:`closed_form_errors` for every size, the sizes spread over ``workers`` processes (default:
+    one per CPU); ``instance`` must be picklable (a module-level function or a functools.partial)."""
+    methods = [m for m in methods if m in CLOSED_FORM]
+    if not methods:
+        return {}
+    workers = workers or os.cpu_count() or 1
+    out: dict[int, dict[str, np.ndarray]] = {}
+    if workers == 1 or len(sizes) == 1:
+        for n in sizes:
+            out[n] = closed_form_errors(instance, n, cases, repeats, seed, methods)
+            log.info("%s closed form n=%d: %d samples of %d cases", label, n, repeats, cases)
+        return out
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    with ProcessPoolExecutor(max_workers=min(workers, len(sizes))) as pool:
+        # largest sizes first: they take longest
+        jobs = {pool.submit(closed_form_errors, instance, n, cases, repeats, seed, methods): n
+                for n in sorted(sizes, reverse=True)}
+        for job in as_completed(jobs):
+            out[jobs[job]] = job.result()
+            log.info("%s closed form n=%d: %d samples of %d cases (%d/%d sizes)", label, jobs[job], repeats, cases,
+                     len(out), len(sizes))
+    return {n: out[n] for n in sorted(out)}
+
+
+def sample_statistics(errors: dict[int, dict[str, np.ndarray]]) -> list[dict]:
+    """Rows (size, method) over all samples: mean error with its 95 % confidence half-width (normal
+    approximation over every instance), and the max error one sample of ``cases`` instances gives
+    (the paper's Fig. 7 statistic): its mean over the samples, standard deviation, 5th and 95th percentiles."""
+    rows = []
+    for n in sorted(errors):
+        for m, e in errors[n].items():
+            flat = e.ravel()
+            sample_max = e.max(axis=1)
+            half = 1.96 * float(flat.std(ddof=1)) / math.sqrt(flat.size) if flat.size > 1 else math.nan
+            rows.append({"robots": n, "method": m, "samples": e.shape[0], "cases_per_sample": e.shape[1],
+                         "mean_error_pct": float(flat.mean()), "mean_ci95_pct": half,
+                         "sample_mean_p5_pct": float(np.percentile(e.mean(axis=1), 5)),
+                         "sample_mean_p95_pct": float(np.percentile(e.mean(axis=1), 95)),
+                         "expected_max_pct": float(sample_max.mean()),
+                         "max_sd_pct": float(sample_max.std(ddof=1)) if e.shape[0] > 1 else math.nan,
+                         "max_p5_pct": float(np.percentile(sample_max, 5)),
+                         "max_p95_pct": float(np.percentile(sample_max, 95))})
+    return rows
+
+
+def mean_of_max_per_sample(errors: dict[int, dict[str, np.ndarray]], method: str) -> np.ndarray:
+    """Per sample: the mean over sizes of that sample's max error (the paper's summary of Fig. 7)."""
+    return np.mean([errors[n][method].max(axis=1) for n in sorted(errors)], axis=0)
+
+
+def percentile_of(value: float, samples: np.ndarray) -> float:
+    """Share of ``samples`` at or below ``value``, in %."""
+    return 100.0 * float(np.mean(np.asarray(samples) <= value))
 
 
 def by_method(rows: Sequence[dict], method: str, key: str) -> list[float]:
@@ -177,12 +261,17 @@ def add_sweep_arguments(parser, cases: int = 100, max_robots: int = 20) -> None:
     parser.add_argument("--max-robots", type=int, default=max_robots, help="largest n (robots = tasks)")
     parser.add_argument("--methods", default=",".join(METHODS), help="comma-separated subset of bs,rtma,auction")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--repeats", type=int, default=1000,
+                        help="samples of --cases instances solved in closed form for BS and RTMA (the first "
+                             "sample is also run as agents): expected values and spreads (default %(default)s)")
     parser.add_argument("--no-png", action="store_true", help="skip the figure")
 
 
 def sweep_sizes(args) -> range:
     if args.cases < 1:
         raise InputError(f"--cases {args.cases}: expected at least 1")
+    if getattr(args, "repeats", 1) < 1:
+        raise InputError(f"--repeats {args.repeats}: expected at least 1")
     if not 2 <= args.min_robots <= args.max_robots <= 250:
         raise InputError(f"--min-robots {args.min_robots} --max-robots {args.max_robots}: "
                          "expected 2 <= min <= max <= 250")
@@ -218,10 +307,12 @@ def claims_table(claims: Sequence[tuple[str, str, str, bool | None]]) -> str:
 
 
 def error_figure(series: Sequence[tuple[str, Sequence[dict], str]], path: Path, title: str,
-                 paper_points: Sequence[tuple[str, str, float | None, float]] = ()) -> Path:
+                 paper_points: Sequence[tuple[str, str, float | None, float]] = (),
+                 expected: Sequence[dict] = ()) -> Path:
     """Two panels, mean and max % error vs robots.  ``series``: (label prefix, rows, line style);
     ``paper_points``: (panel "mean"|"max", label, robots, value) drawn as stars; robots None draws a
-    dashed line (a value over all sizes)."""
+    dashed line (a value over all sizes); ``expected``: :func:`sample_statistics` rows, drawn as a line
+    with a band (mean: 95 % CI; max: 5th..95th percentile of one sample's max)."""
     fig, _ = report.figure()
     fig.clf()
     axes = fig.subplots(1, 2, sharex=True)
@@ -232,6 +323,17 @@ def error_figure(series: Sequence[tuple[str, Sequence[dict], str]], path: Path, 
             for ax, key in zip(axes, ("mean_error_pct", "max_error_pct")):
                 ax.plot(n, by_method(rows, m, key), style, color=color[m], ms=3,
                         label=f"{prefix}{LABELS[m]}".strip())
+    for m in [m for m in METHODS if any(r["method"] == m for r in expected)]:
+        rows = sorted((r for r in expected if r["method"] == m), key=lambda r: r["robots"])
+        n = [r["robots"] for r in rows]
+        mean = np.array([r["mean_error_pct"] for r in rows])
+        ci = np.array([r["mean_ci95_pct"] for r in rows])
+        axes[0].plot(n, mean, "-", color=color[m], lw=2, alpha=0.5, label=f"expected {LABELS[m]}")
+        axes[0].fill_between(n, mean - ci, mean + ci, color=color[m], alpha=0.2)
+        axes[1].plot(n, [r["expected_max_pct"] for r in rows], "-", color=color[m], lw=2, alpha=0.5,
+                     label=f"expected {LABELS[m]}")
+        axes[1].fill_between(n, [r["max_p5_pct"] for r in rows], [r["max_p95_pct"] for r in rows],
+                             color=color[m], alpha=0.15)
     for panel, label, n, v in paper_points:
         ax = axes[0 if panel == "mean" else 1]
         if n is None:                   # a value over all sizes: a dashed line

@@ -72,7 +72,7 @@ PAPER = {
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cases", type=int, default=20, help="random missions per cell (paper: 20)")
     parser.add_argument("--robots", default="4,6,8", help="robot (= task) counts, comma-separated")
-    parser.add_argument("--fractions", default="5,20,40", help="% non-navigable terrain, comma-separated")
+    parser.add_argument("--fractions", default="5,20,40", help="%% non-navigable terrain, comma-separated")
     parser.add_argument("--planners", default="astar,rrt", help="bid-cost planners: astar,rrt")
     parser.add_argument("--methods", default=",".join(fc.METHODS), help="subset of bs,rtma,auction")
     parser.add_argument("--size", type=float, default=75.0, help="side of the square field (m; paper: 75)")

@@ -167,6 +167,32 @@ def test_resale_goes_to_the_best_bid_worse_than_mine():
     assert 1 not in a.won and not a.auctions and a.awarded_to[1] == 4
 
 
+def test_late_acknowledgement_does_not_cancel_my_resale_of_the_same_task():
+    """Robot 1 awards task 1 to robot 2; robot 2 sells it back to 1 before 1 hears the ack; 1 resells
+    it.  A duplicated ack from 2 then arrives: it answers the first award, not the resale (found by the
+    closed-form property test under loss and duplication: the task used to be dropped)."""
+    a = BSAgent(1, [2, 3], [1.0, 7.0].__getitem__, bid_timeout=1.0)
+    a.start({0: (0.0, 0.0), 1: (1.0, 0.0)}, 0.0)
+    out = []
+    for task, auction, bids in ((0, 1, {2: 5.0, 3: 6.0}), (1, 2, {2: 2.0, 3: 9.0})):
+        for rid, bid in bids.items():
+            out += a.on_message(Bid(rid, 1, auction, task, bid), 0.01)
+    assert a.assignment == 0 and [m.winner for m in out if isinstance(m, Award)] == [2]
+    # robot 2 resells task 1 (reserve 2.0); 1 bids 7.0 and wins it, then resells it itself
+    out = a.on_message(Announce(2, 0, 1, 1, 1.0, 0.0, 2.0), 0.5)
+    assert [m.cost for m in out if isinstance(m, Bid)] == [7.0]
+    a.on_message(Status(2, 1, 1, False), 0.55)                 # ack of the first award: closes it
+    out = a.on_message(Award(2, 1, 1, 1, 1, 7.0, 6.0), 0.6)
+    resale = [m for m in out if isinstance(m, Announce)]
+    assert len(resale) == 1 and resale[0].task == 1 and resale[0].reserve == 7.0
+    a.on_message(Status(2, 1, 1, False), 0.61)                 # the same ack, duplicated
+    assert any(x.task == 1 and x.reserve == 7.0 for x in a.auctions.values())
+    assert a.dropped["stale status"] == 1
+    out = a.on_message(Bid(3, 1, resale[0].auction, 1, 9.0), 0.7)
+    out += a.on_message(Bid(2, 1, resale[0].auction, 1, 2.0), 0.7)
+    assert [m.winner for m in out if isinstance(m, Award)] == [3]
+
+
 def test_announce_for_a_task_already_held_is_answered_with_status():
     a = rtma_agent()
     win(a, 9, 1, 1, -2.0, 0.1)

@@ -276,6 +276,10 @@ class BSAgent:
                 continue
             if a.award is not None and a.award.winner == m.sender:
                 return self._acknowledged(a, m.sender, now)
+            if a.award is None and a.reserve != INF:
+                # I hold the task I am reselling, so this is a late or duplicated acknowledgement of an
+                # award I made earlier for the same task (Status carries no auction id), not a holder
+                continue
             if a.award is None:       # another robot already holds it: this auction is a duplicate
                 self.log.info("task %d is held by robot %d: cancelling auction %d", m.task, m.sender, a.id)
                 return self._acknowledged(a, m.sender, now)

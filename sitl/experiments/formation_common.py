@@ -255,13 +255,13 @@ def positive(value: float, what: str, upper: float | None = None) -> float:
     return float(value)
 
 
-def add_sweep_arguments(parser, cases: int = 100, max_robots: int = 20) -> None:
+def add_sweep_arguments(parser, cases: int = 100, max_robots: int = 20, repeats: int = 1000) -> None:
     parser.add_argument("--cases", type=int, default=cases, help=f"random instances per size (paper: {cases})")
     parser.add_argument("--min-robots", type=int, default=2)
     parser.add_argument("--max-robots", type=int, default=max_robots, help="largest n (robots = tasks)")
     parser.add_argument("--methods", default=",".join(METHODS), help="comma-separated subset of bs,rtma,auction")
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--repeats", type=int, default=1000,
+    parser.add_argument("--repeats", type=int, default=repeats,
                         help="samples of --cases instances solved in closed form for BS and RTMA (the first "
                              "sample is also run as agents): expected values and spreads (default %(default)s)")
     parser.add_argument("--no-png", action="store_true", help="skip the figure")

@@ -24,7 +24,7 @@ from sitl.experiments import formation_common as fc
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    fc.add_sweep_arguments(parser, cases=100, max_robots=20)
+    fc.add_sweep_arguments(parser, cases=100, max_robots=20, repeats=200)
     parser.add_argument("--small-box", type=float, default=400.0, help="side of the centred small box (m)")
     parser.add_argument("--big-box", type=float, default=700.0, help="side of the centred big box (m)")
     parser.add_argument("--inside", type=float, default=0.75, help="share of robots and of tasks in the small box")

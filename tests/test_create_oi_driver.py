@@ -278,3 +278,57 @@ def test_wheel_drop_reaches_the_driver(rig):
     r.t += 0.02
     r.settle()
     assert r.drv.sensors.wheel_drop and r.drv.sensors.mode == "passive" and r.body.cmd == (0.0, 0.0)
+
+
+def _run_for(r, seconds, dt=0.02, v=0.2):
+    """Command v every step (as the daemon does) and advance sim time."""
+    end = r.t + seconds
+    while r.t < end - 1e-9:
+        r.drv.set_velocity(v, 0.0, r.t)
+        r.settle()
+        r.t = round(r.t + dt, 9)
+        r.body.step(dt)
+        r.settle()
+
+
+def test_back_to_safe_mode_once_the_wheels_are_down_again(rig):
+    r = rig()
+    _run_for(r, 0.2)
+    r.body.drop = (True, True)                       # picked up: Safe -> Passive, wheels stopped
+    _run_for(r, 3.0)
+    assert r.dev.mode_name == "passive" and r.body.cmd == (0.0, 0.0)
+    assert r.drv.stats.extra["mode_recoveries"] == 0  # not while the wheels hang
+    r.body.drop = (False, False)                     # put down again
+    _run_for(r, 0.5)
+    assert r.dev.mode_name == "passive"              # waits a moment first
+    _run_for(r, 1.0)
+    assert r.dev.mode_name == "safe" and r.drv.sensors.mode == "safe"
+    assert r.drv.stats.extra["mode_recoveries"] == 1
+    assert r.body.cmd == pytest.approx((0.2, 0.2))   # the daemon's commands drive it again
+
+
+def test_mode_recovery_backs_off_while_a_cliff_persists(rig):
+    r = rig()
+    _run_for(r, 0.2)
+    r.body.cliffs = lambda: (False, True, False, False)   # a cliff the driver cannot see in its stream
+    times = []
+    end = r.t + 40.0
+    while r.t < end:
+        before = r.drv.stats.extra["mode_recoveries"]
+        _run_for(r, 0.1)
+        if r.drv.stats.extra["mode_recoveries"] > before:
+            times.append(r.t)
+    gaps = [b - a for a, b in zip(times, times[1:])]
+    assert 4 <= len(times) <= 6
+    assert all(b > a for a, b in zip(gaps, gaps[1:]))      # each wait longer than the last
+    assert r.dev.mode_name == "passive" and r.dev.stats.safety_stops == len(times) + 1
+    assert r.body.cmd == (0.0, 0.0)
+
+
+def test_no_recovery_when_the_base_was_never_in_safe_mode(rig):
+    r = rig()
+    r.drv.sensors.mode = "unknown"
+    r.drv._reached_mode = False
+    r.dev.mode = P.MODE_PASSIVE                        # e.g. someone sent Start from another program
+    _run_for(r, 5.0)
+    assert r.drv.stats.extra["mode_recoveries"] == 0 and r.dev.mode_name == "passive"

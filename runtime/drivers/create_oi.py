@@ -20,6 +20,8 @@ from runtime.log import get_logger
 
 STREAM_IDS = {"create2": (7, 35, 3, 43, 44), "create1": (7, 35, 3, 19, 20)}
 MAX_READS_PER_POLL = 64
+RECOVER_AFTER = 1.0        # s the wheels must be down again before Safe/Full is asked for again
+RECOVER_BACKOFF_MAX = 16.0  # s between attempts at most (a cliff, which is not streamed, may persist)
 
 
 class CreateOI(MobileBase):
@@ -48,13 +50,17 @@ class CreateOI(MobileBase):
         self.odometry = Odometry()
         self.sensors = BaseSensors()
         self.stats = LinkStats(extra={"bytes_in": 0, "bytes_out": 0, "malformed": 0, "write_errors": 0,
-                                      "read_errors": 0, "nonfinite_commands": 0})
+                                      "read_errors": 0, "nonfinite_commands": 0, "mode_recoveries": 0})
         self.parser = P.StreamParser(model)
         self.values: dict = {}               # latest named values from the stream
         self.ser = None
         self._counts: tuple[int, int] | None = None
         self._last_cmd_t: float | None = None
         self._moving = False                 # last commanded wheel speeds non-zero
+        self._reached_mode = False           # the base has reported self.mode since open()
+        self._passive_since: float | None = None  # in an unwanted Passive with the wheels down, since
+        self._mode_since: float | None = None     # in self.mode since
+        self._backoff = RECOVER_AFTER
 
     # ------------------------------------------------------------------ lifecycle
     def open(self, now: float) -> None:
@@ -70,6 +76,9 @@ class CreateOI(MobileBase):
         self._write(P.start())
         self._write(P.safe() if self.mode == "safe" else P.full())
         self._write(P.stream(STREAM_IDS[self.model], self.model))
+        self._reached_mode = False
+        self._passive_since = self._mode_since = None
+        self._backoff = RECOVER_AFTER
         self._last_cmd_t = now
         self.odometry.t = now
         self.log.info("opened %s (%s, %d bit/s, %s mode)", self.port, self.model, self.baudrate, self.mode)
@@ -111,11 +120,42 @@ class CreateOI(MobileBase):
                 self._integrate(ds, dth, n, now)
                 moved = True
             self._sync_stats()
+        self._recover_mode(now)
         if self._moving and self._last_cmd_t is not None and now - self._last_cmd_t >= self.watchdog:
             self._send_wheels(0, 0)
             self.stats.watchdog_stops += 1
             self.log.warning("watchdog: no command for %.2f s, wheels stopped", now - self._last_cmd_t)
         return moved
+
+    def _recover_mode(self, now: float) -> None:
+        """In Safe mode a wheel drop or a cliff puts the base in Passive, where it ignores drive
+        commands.  Once the wheels have been down for a while (RECOVER_AFTER s at first), ask for Safe
+        (or Full) again.  If the base drops straight back (a cliff: not streamed), the wait doubles up to
+        RECOVER_BACKOFF_MAX; it starts over after the base has held its mode for twice that long."""
+        s = self.sensors
+        if s.mode == self.mode:
+            self._reached_mode = True
+            self._passive_since = None
+            if self._mode_since is None:
+                self._mode_since = now
+            elif now - self._mode_since > 2 * RECOVER_BACKOFF_MAX:
+                self._backoff = RECOVER_AFTER
+            return
+        self._mode_since = None
+        if s.mode != "passive" or not self._reached_mode or self.ser is None:
+            return
+        if s.wheel_drop:
+            self._passive_since = None
+            return
+        if self._passive_since is None:
+            self._passive_since = now
+        elif now - self._passive_since >= self._backoff:
+            self._write(P.safe() if self.mode == "safe" else P.full())
+            self.stats.extra["mode_recoveries"] += 1
+            self.log.warning("base in passive with its wheels down for %.1f s: asking for %s mode again",
+                             now - self._passive_since, self.mode)
+            self._passive_since = None
+            self._backoff = min(2 * self._backoff, RECOVER_BACKOFF_MAX)
 
     def _read_all(self) -> bytes:
         chunks = []

@@ -173,10 +173,11 @@ def test_world_drive_one_mission(tmp_path, monkeypatch):
     every robot arrives, and the simulator's driven distance is close to the planned path length."""
     monkeypatch.chdir(tmp_path)                 # a relative --out, as `mrta experiment` defaults to
     out = tmp_path / "drive"
-    assert cli.main(["experiment", "formation-world", "--out", "drive", "--cases", "1", "--robots", "4",
+    assert cli.main(["experiment", "formation-world", "--out", "drive", "--cases", "1", "--robots", "2,4",
                      "--fractions", "5", "--planners", "astar", "--methods", "rtma", "--drive", "--drive-cases", "1",
-                     "--drive-size", "20", "--drive-resolution", "0.25", "--no-png"]) == 0
-    (r,) = _rows(out / "formation_world_drive.csv")
+                     "--drive-size", "20", "--drive-resolution", "0.25", "--no-png", "--jobs", "2"]) == 0
+    two, r = _rows(out / "formation_world_drive.csv")        # two cells driven in parallel, kept in order
+    assert two["robots"] == "2" and two["valid"] == "True" and two["arrived"] == "2"
     assert r["valid"] == "True" and r["arrived"] == "4" and r["method"] == "rtma" and r["field_m"] == "20.0"
     planned, driven = float(r["planned_cost"]), float(r["driven_m"])
     assert planned >= float(r["optimum_astar"]) - 1e-6
@@ -198,6 +199,7 @@ def test_world_drive_one_mission(tmp_path, monkeypatch):
     ("formation-world", ["--planners", "dijkstra"], "--planners 'dijkstra'"),
     ("formation-world", ["--fractions", "90"], "--fractions '90'"),
     ("formation-world", ["--cruise-speed", "2"], "--cruise-speed 2"),
+    ("formation-world", ["--jobs", "0"], "--jobs 0"),
 ])
 def test_bad_arguments_exit_2_with_one_line(tmp_path, capsys, name, argv, needle):
     assert cli.main(["experiment", name, "--out", str(tmp_path)] + argv) == 2

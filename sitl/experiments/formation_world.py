@@ -18,6 +18,7 @@ import argparse
 import dataclasses
 import functools
 import math
+import os
 import statistics
 import time
 from pathlib import Path
@@ -92,6 +93,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     d.add_argument("--drive-inflate", type=float, default=None,
                    help="obstacle inflation of the daemons' map (m; default: robot radius + half a cell)")
     d.add_argument("--cruise-speed", type=float, default=0.5, help="robot cruise speed when driving (m/s)")
+    d.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                   help="driven cells run in this many processes at once (default: one per CPU, %(default)s)")
     d.add_argument("--drive-timeout", type=float, default=None,
                    help="sim seconds per driven mission (default: 30 + 1.5 x the longest A* cost / cruise speed)")
 
@@ -244,7 +247,7 @@ def write_fleet(run_dir: Path, world, robots, yaws, tasks, planner: str, cruise:
     robot_path = run_dir / "robot.yaml"
     robot_path.write_text(yaml.safe_dump(template, sort_keys=False))
     n = len(robots)
-    base = free_udp_base(n)
+    base = free_udp_base(n, start=21000 + 97 * (os.getpid() % 300))   # parallel drives start apart
     fleet = {"world": str(world_path), "robot": str(robot_path),
              "robots": [{"id": i + 1, "start": [float(robots[i][0]), float(robots[i][1]), float(yaws[i])]}
                         for i in range(n)],
@@ -452,6 +455,8 @@ def _check(args) -> tuple:
         raise InputError(f"--cases {args.cases}: expected at least 1")
     if args.drive and args.drive_cases < 1:
         raise InputError(f"--drive-cases {args.drive_cases}: expected at least 1")
+    if args.jobs < 1:
+        raise InputError(f"--jobs {args.jobs}: expected at least 1")
     if args.rrt_iterations < 1:
         raise InputError(f"--rrt-iterations {args.rrt_iterations}: expected at least 1")
     robots = fc.parse_ints(args.robots, "--robots", 2, 250)
@@ -494,9 +499,19 @@ def run(args: argparse.Namespace) -> int:
     t1 = time.perf_counter()
     if args.drive:
         driven = fc.parse_ints(args.drive_robots, "--drive-robots", 2, 250) if args.drive_robots else robots
-        for pct in fractions:
-            for n in driven:
+        cells = [(n, pct) for pct in fractions for n in driven]
+        if args.jobs == 1 or len(cells) == 1:
+            for n, pct in cells:
                 drive_rows += drive_cell(n, pct, args, planners, methods, out)
+        else:
+            from concurrent.futures import ProcessPoolExecutor
+            # largest fleets first (they take longest); results kept in the cells' order
+            order = sorted(range(len(cells)), key=lambda k: -cells[k][0])
+            plain = argparse.Namespace(**{k: v for k, v in vars(args).items() if not callable(v)})   # picklable
+            with ProcessPoolExecutor(max_workers=min(args.jobs, len(cells))) as pool:
+                jobs = {k: pool.submit(drive_cell, *cells[k], plain, planners, methods, out) for k in order}
+                for k in range(len(cells)):
+                    drive_rows += jobs[k].result()
     drive_wall = time.perf_counter() - t1
     written = [report.write_csv(out / "formation_world.csv", rows)]
     if drive_rows:
@@ -505,7 +520,7 @@ def run(args: argparse.Namespace) -> int:
            f"--planners {args.planners} --methods {','.join(methods)} --size {args.size:g} "
            f"--resolution {args.resolution:g} --seed {args.seed}" + (" --rrt-raw" if args.rrt_raw else ""))
     if args.drive:
-        cmd += f" --drive --drive-cases {args.drive_cases} --cruise-speed {args.cruise_speed:g}"
+        cmd += f" --drive --drive-cases {args.drive_cases} --cruise-speed {args.cruise_speed:g} --jobs {args.jobs}"
         if args.drive_robots:
             cmd += f" --drive-robots {args.drive_robots}"
         if args.drive_inflate is not None:

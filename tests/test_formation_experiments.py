@@ -185,6 +185,8 @@ def test_world_drive_one_mission(tmp_path, monkeypatch):
     assert float(r["sim_s"]) > planned / 4 / 0.5              # nobody drives faster than the cruise speed
     md = (out / "formation_world.md").read_text()
     assert "## Driven in the pybullet SITL (--drive)" in md and "scaled to 20 m" in md
+    summary = [line for line in md.splitlines() if line.startswith("| A* | 4 | 5 % | 1 |")]
+    assert len(summary) == 1 and summary[0].endswith("| 4/4 |")        # Tables I-II from the driven missions
 
 
 @pytest.mark.parametrize("name, argv, needle", [

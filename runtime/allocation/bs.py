@@ -30,7 +30,8 @@ from dataclasses import dataclass, field, replace
 from typing import Callable, Mapping, Sequence
 
 from runtime.allocation.assignment import TaskBook, finite, valid_task_id
-from runtime.allocation.messages import BROADCAST, Announce, Award, Bid, Status, TaskInfo, addressed_to
+from runtime.allocation.messages import (BROADCAST, Announce, Award, Bid, Status, TaskInfo, addressed_to,
+                                         wire_float)
 from runtime.log import get_logger
 
 INF = math.inf
@@ -83,6 +84,11 @@ class BSAgent:
     def bid_value(self, task: int) -> float | None:
         """My bid for ``task``: its cost (BS).  None: not computable yet."""
         return self.book.cost(task)
+
+    def my_bid(self, task: int) -> float | None:
+        """:meth:`bid_value` at wire precision: what peers will see, so what I compare with."""
+        value = self.bid_value(task)
+        return None if value is None else wire_float(value)
 
     def keep_key(self, task: int):
         """Sort key of won tasks, lowest is kept: BS keeps the cheapest."""
@@ -186,7 +192,7 @@ class BSAgent:
         self._next_auction += 1
         a = _Auction(aid, task, reserve, set(self.alive), now + self.bid_timeout)
         if reserve == INF:
-            mine = self.bid_value(task)
+            mine = self.my_bid(task)
             if mine is not None:
                 a.bids[self.robot_id] = mine
         else:
@@ -228,7 +234,7 @@ class BSAgent:
         heard = [b for b in a.bids.values() if math.isfinite(b)]
         if a.reserve != INF:
             heard.append(a.reserve)
-        mean = sum(heard) / len(heard)
+        mean = wire_float(sum(heard) / len(heard))
         if winner == self.robot_id:
             del self.auctions[a.id]
             return self._win(a.task, bid, mean, now)
@@ -308,7 +314,7 @@ class BSAgent:
         return self._bid(m, now)
 
     def _bid(self, m: Announce, now: float) -> list:
-        value = self.bid_value(m.task)
+        value = self.my_bid(m.task)
         if value is None:
             return []
         bid = Bid(self.robot_id, m.sender, m.auction, m.task, value)

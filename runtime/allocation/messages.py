@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 BROADCAST = 0
 
 
@@ -83,6 +85,14 @@ class Status:
 
 
 AGENT_MESSAGES = (TaskInfo, Announce, Bid, Award, Price, Status)
+
+
+def wire_float(value: float) -> float:
+    """``value`` at the precision the dialect carries it (MAVLink ``float``: IEEE single).  An agent that
+    compares its own bid with bids it received must hold its own at that precision too: otherwise two
+    bids that tie on the wire differ at home, and "only a worse bid can win" can exclude every robot."""
+    with np.errstate(over="ignore"):
+        return float(np.float32(value))
 
 
 def addressed_to(msg, robot_id: int) -> bool:

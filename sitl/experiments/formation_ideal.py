@@ -16,8 +16,6 @@ import numpy as np
 from sitl.experiments import report
 from sitl.experiments import formation_common as fc
 
-log = fc.log
-
 # paper 002 Section IV-A prose (Figs. 6 and 7)
 PAPER_RTMA_MEAN_AT_20 = 5.98
 PAPER_MEAN_OF_MAX = {"rtma": 14.91, "bs": 33.77}

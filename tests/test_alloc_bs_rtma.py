@@ -109,7 +109,7 @@ def test_rtma_bid_waits_for_the_whole_task_set():
     assert a.on_message(Announce(9, 0, 1, 0, 0.0, 0.0, math.inf), 0.1) == []
     assert not a.converged
     asked = a.on_tick(0.2) + a.on_tick(1.3)
-    assert Status(1, 0, NO_TASK, False) in asked
+    assert Status(1, 0, 0, NO_TASK, False) in asked
     out = a.on_message(TaskInfo(9, 0, 1, 1.0, 0.0, 2), 1.4)
     assert out == [Bid(1, 9, 1, 0, 2.5)]
 
@@ -138,10 +138,10 @@ def test_rtma_keeps_the_task_best_for_the_team_bs_the_cheapest():
 def test_duplicate_award_is_acknowledged_and_changes_nothing():
     a = rtma_agent()
     first = win(a, 9, 1, 1, -2.0, 0.1)
-    assert first == [Status(1, 9, 1, False)]
+    assert first == [Status(1, 9, 1, 1, False)]
     award = Award(9, 1, 1, 1, 1, -2.5, -2.0)
     for _ in range(3):
-        assert a.on_message(award, 0.5) == [Status(1, 9, 1, False)]
+        assert a.on_message(award, 0.5) == [Status(1, 9, 1, 1, False)]
     assert a.won == {1: -2.5} and a.assignment == 1 and not a.auctions
 
 
@@ -163,14 +163,15 @@ def test_resale_goes_to_the_best_bid_worse_than_mine():
     assert len(awards) == 1 and awards[0].winner == 4 and awards[0].cost == 6.0
     assert awards[0].mean == pytest.approx((9.0 + 3.0 + 6.0 + 4.0) / 4)
     assert a.on_tick(1.2) == awards                        # not acknowledged: sent again
-    a.on_message(Status(4, 1, 1, False), 1.3)
+    a.on_message(Status(4, 1, aid, 1, False), 1.3)
     assert 1 not in a.won and not a.auctions and a.awarded_to[1] == 4
 
 
 def test_late_acknowledgement_does_not_cancel_my_resale_of_the_same_task():
     """Robot 1 awards task 1 to robot 2; robot 2 sells it back to 1 before 1 hears the ack; 1 resells
-    it.  A duplicated ack from 2 then arrives: it answers the first award, not the resale (found by the
-    closed-form property test under loss and duplication: the task used to be dropped)."""
+    it.  A duplicated ack from 2 then arrives: it answers the first award (its auction id), not the
+    resale (found by the closed-form property test under loss and duplication: the task used to be
+    dropped)."""
     a = BSAgent(1, [2, 3], [1.0, 7.0].__getitem__, bid_timeout=1.0)
     a.start({0: (0.0, 0.0), 1: (1.0, 0.0)}, 0.0)
     out = []
@@ -181,11 +182,12 @@ def test_late_acknowledgement_does_not_cancel_my_resale_of_the_same_task():
     # robot 2 resells task 1 (reserve 2.0); 1 bids 7.0 and wins it, then resells it itself
     out = a.on_message(Announce(2, 0, 1, 1, 1.0, 0.0, 2.0), 0.5)
     assert [m.cost for m in out if isinstance(m, Bid)] == [7.0]
-    a.on_message(Status(2, 1, 1, False), 0.55)                 # ack of the first award: closes it
+    a.on_message(Status(2, 1, 2, 1, False), 0.55)              # ack of the first award: closes it
     out = a.on_message(Award(2, 1, 1, 1, 1, 7.0, 6.0), 0.6)
     resale = [m for m in out if isinstance(m, Announce)]
     assert len(resale) == 1 and resale[0].task == 1 and resale[0].reserve == 7.0
-    a.on_message(Status(2, 1, 1, False), 0.61)                 # the same ack, duplicated
+    assert resale[0].auction != 2
+    a.on_message(Status(2, 1, 2, 1, False), 0.61)              # the same ack, duplicated
     assert any(x.task == 1 and x.reserve == 7.0 for x in a.auctions.values())
     assert a.dropped["stale status"] == 1
     out = a.on_message(Bid(3, 1, resale[0].auction, 1, 9.0), 0.7)
@@ -196,7 +198,45 @@ def test_late_acknowledgement_does_not_cancel_my_resale_of_the_same_task():
 def test_announce_for_a_task_already_held_is_answered_with_status():
     a = rtma_agent()
     win(a, 9, 1, 1, -2.0, 0.1)
-    assert a.on_message(Announce(7, 0, 3, 1, 1.0, 0.0, math.inf), 0.3) == [Status(1, 7, 1, False)]
+    assert a.on_message(Announce(7, 0, 3, 1, 1.0, 0.0, math.inf), 0.3) == [Status(1, 7, 3, 1, False)]
+
+
+def bs_state(a: BSAgent):
+    return (dict(a.won), dict(a.selling), dict(a.awarded_to),
+            {k: (v.task, v.reserve, v.award, dict(v.bids), v.tries) for k, v in a.auctions.items()})
+
+
+def test_status_for_an_unknown_auction_or_another_task_is_dropped_and_changes_nothing():
+    a = BSAgent(1, [2, 3], [5.0, 5.0].__getitem__, bid_timeout=1.0)
+    a.start({0: (0.0, 0.0), 1: (1.0, 0.0)}, 0.0)               # auctions 1 (task 0) and 2 (task 1)
+    out = a.on_message(Bid(2, 1, 1, 0, 1.0), 0.01) + a.on_message(Bid(3, 1, 1, 0, 9.0), 0.01)
+    assert [(m.auction, m.task, m.winner) for m in out if isinstance(m, Award)] == [(1, 0, 2)]
+    # auction 1 waits for robot 2's ack, auction 2 (task 1) is still open
+    before = bs_state(a)
+    stale = [Status(2, 1, 7, 0, False),         # no auction 7: unknown id
+             Status(2, 1, 0, 0, False),         # auction 0 = answers none
+             Status(2, 1, 1, 1, False),         # auction 1 sells task 0, not 1
+             Status(3, 1, 2, 0, False),         # auction 2 sells task 1, not 0: must not cancel it
+             Status(3, 1, 7, 1, False)]         # a holder of task 1 naming an unknown auction
+    for i, m in enumerate(stale):
+        assert a.on_message(m, 0.1 + 0.01 * i) == []
+    assert a.dropped["stale status"] == len(stale)
+    assert bs_state(a) == before
+    assert [m for m in a.on_tick(1.05) if isinstance(m, Award)] == [before[3][1][2]]   # still unacked
+    a.on_message(Status(2, 1, 1, 0, False), 1.1)                   # the real ack: by auction id
+    a.on_message(Status(3, 1, 2, 1, False), 1.1)                   # a holder answers auction 2
+    assert not a.auctions and a.awarded_to == {0: 2, 1: 3}
+    assert a.dropped["stale status"] == len(stale)
+
+
+def test_status_from_a_robot_that_lost_the_award_is_stale():
+    a = BSAgent(1, [2, 3], [5.0].__getitem__, bid_timeout=1.0)
+    a.start({0: (0.0, 0.0)}, 0.0)
+    a.on_message(Bid(2, 1, 1, 0, 1.0), 0.01)
+    a.on_message(Bid(3, 1, 1, 0, 9.0), 0.01)                   # awarded to robot 2
+    before = bs_state(a)
+    assert a.on_message(Status(3, 1, 1, 0, False), 0.1) == []  # right id and task, wrong robot
+    assert a.dropped["stale status"] == 1 and bs_state(a) == before
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -233,7 +273,8 @@ messages = st.one_of(
     st.builds(Bid, sender=values, dest=dest, auction=values, task=values, cost=values),
     st.builds(Award, sender=values, dest=dest, auction=values, task=values, winner=st.one_of(st.just(1), values),
               cost=values, mean=values),
-    st.builds(Status, sender=values, dest=dest, task=values, converged=values),
+    st.builds(Status, sender=values, dest=dest, auction=st.one_of(st.integers(0, 4), values), task=values,
+              converged=values),
     st.builds(TaskInfo, sender=values, dest=dest, task=values, x=values, y=values, n_tasks=values),
     st.builds(Price, sender=values, dest=dest, task=values, holder=values, price=values, phase=values),
     st.integers(), st.none(), st.text(max_size=5))

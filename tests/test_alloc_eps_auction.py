@@ -143,7 +143,7 @@ def test_robot_missing_tasks_asks_and_initiator_rebroadcasts_the_set():
     other.on_message(infos[0], 0.01)                   # the second notification is lost
     assert other.on_tick(0.5) == []
     ask = [m for m in other.on_tick(1.1) if isinstance(m, Status)]
-    assert ask == [Status(2, 0, NO_TASK, False)]
+    assert ask == [Status(2, 0, 0, NO_TASK, False)]
     again = init.on_message(ask[0], 1.11)
     assert [m.task for m in again if isinstance(m, TaskInfo)] == [0, 1]
     assert not [m for m in init.on_message(ask[0], 1.2) if isinstance(m, TaskInfo)]   # once per bid_timeout
@@ -184,7 +184,8 @@ messages = st.one_of(
               price=values, phase=values),
     st.builds(TaskInfo, sender=values, dest=st.sampled_from([0, 1]), task=values, x=values, y=values,
               n_tasks=values),
-    st.builds(Status, sender=values, dest=st.sampled_from([0, 1]), task=values, converged=values),
+    st.builds(Status, sender=values, dest=st.sampled_from([0, 1]), auction=values, task=values,
+              converged=values),
     st.integers(), st.none(), st.text(max_size=5))
 
 

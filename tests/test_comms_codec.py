@@ -29,7 +29,7 @@ MESSAGES = st.one_of(
     st.builds(M.Bid, robot, dest, u32, u16, f32),
     st.builds(M.Award, robot, dest, u32, u16, robot, f32, f32),
     st.builds(M.Price, robot, dest, u16, robot, f32, u16),
-    st.builds(M.Status, robot, dest, u16, st.booleans()),
+    st.builds(M.Status, robot, dest, u32, u16, st.booleans()),
 )
 
 
@@ -79,8 +79,16 @@ def test_special_floats_and_none_task(mod):
     assert codec.from_mavlink(_wire(mod, a)[1]) == a
     b = codec.from_mavlink(_wire(mod, M.Bid(3, 0, 7, 2, math.nan))[1])
     assert math.isnan(b.cost)
-    s = M.Status(4, 0, 0xFFFF, False)
+    s = M.Status(4, 0, 0, 0xFFFF, False)
     assert codec.from_mavlink(_wire(mod, s)[1]) == s
+
+
+@pytest.mark.parametrize("status", [M.Status(4, 9, 1, 3, True), M.Status(4, 9, 0xFFFFFFFF, 0xFFFE, False),
+                                    M.Status(4, 0, 0, 0xFFFF, True)])
+def test_status_carries_the_auction_it_answers(mod, status):
+    _, m = _wire(mod, status)
+    assert m.get_type() == "MRTA_STATUS" and m.auction == status.auction and m.target_system == status.dest
+    assert codec.from_mavlink(m) == status
 
 
 def test_doubles_round_to_float32(mod):
@@ -91,7 +99,8 @@ def test_doubles_round_to_float32(mod):
 
 
 @pytest.mark.parametrize("msg", [M.Bid(1, 0, -1, 1, 1.0), M.Bid(1, 0, 2**32, 1, 1.0),
-                                 M.TaskInfo(1, 0, 70000, 0.0, 0.0, 1), M.Award(1, 0, 1, 1, 300, 1.0, 1.0)])
+                                 M.TaskInfo(1, 0, 70000, 0.0, 0.0, 1), M.Award(1, 0, 1, 1, 300, 1.0, 1.0),
+                                 M.Status(1, 2, 2**32, 1, False), M.Status(1, 2, -1, 1, False)])
 def test_values_outside_the_wire_types_are_refused(mod, msg):
     tx = mod.MAVLink(None, srcSystem=1, srcComponent=1)
     with pytest.raises(ValueError, match=type(msg).__name__):

@@ -52,7 +52,7 @@ def settle(link, now, attr, value) -> int:
 
 ALL = [M.TaskInfo(2, 0, 3, 1.5, -2.0, 4), M.Announce(2, 0, 11, 3, 1.5, -2.0, float("inf")),
        M.Bid(2, 0, 11, 3, 0.75), M.Award(2, 0, 11, 3, 1, 0.75, 1.25), M.Price(2, 0, 3, 1, 0.5, 2),
-       M.Status(2, 0, 3, True)]
+       M.Status(2, 0, 11, 3, True)]
 
 
 # ---------------------------------------------------------------------------------------- exchange
@@ -277,7 +277,7 @@ AGENT = st.one_of(
     st.builds(M.TaskInfo, robot, st.just(0), u16, f32, f32, u16),
     st.builds(M.Bid, robot, st.just(1), st.integers(0, 2**32 - 1), u16, f32),
     st.builds(M.Award, robot, st.just(0), st.integers(0, 2**32 - 1), u16, robot, f32, f32),
-    st.builds(M.Status, robot, st.just(1), u16, st.booleans()),
+    st.builds(M.Status, robot, st.just(1), st.integers(0, 2**32 - 1), u16, st.booleans()),
 )
 _stamp = [signing_timestamp(time.time())]
 

@@ -111,7 +111,7 @@ def test_rates_over_ten_seconds_of_injected_time(make, gcs):
     assert counts == {"HEARTBEAT": 10, "SYS_STATUS": 10, "MRTA_STATUS": 10,
                       "GLOBAL_POSITION_INT": 50, "LOCAL_POSITION_NED": 50}
     status = [codec.from_mavlink(m) for m in got if m.get_type() == "MRTA_STATUS"]
-    assert status[0] == Status(3, 0, 4, True)
+    assert status[0] == Status(3, 0, 0, 4, True)
 
 
 def test_positions_are_geodetic_and_ned(make, gcs):
@@ -154,12 +154,13 @@ def test_mode_and_state_follow_the_robot(make, gcs):
     hb = next(m for m in gcs.receive(5) if m.get_type() == "HEARTBEAT")
     assert hb.system_status == mod.MAV_STATE_STANDBY and hb.custom_mode == CUSTOM_MODE_ALLOCATING
 
-    tel.tick(2.0, (0.0, 0.0, 0.0), (0.0, 0.0), BATTERY, Status(3, 0, 6, True))
+    tel.tick(2.0, (0.0, 0.0, 0.0), (0.0, 0.0), BATTERY, Status(3, 7, 12, 6, True))   # an agent's ack
     got = gcs.receive(5)
     hb = next(m for m in got if m.get_type() == "HEARTBEAT")
     assert hb.system_status == mod.MAV_STATE_ACTIVE and hb.custom_mode == CUSTOM_MODE_CONVERGED
     assert hb.base_mode & mod.MAV_MODE_FLAG_SAFETY_ARMED and hb.base_mode & mod.MAV_MODE_FLAG_AUTO_ENABLED
-    assert codec.from_mavlink(next(m for m in got if m.get_type() == "MRTA_STATUS")).task == 6
+    # telemetry broadcasts the state only: to every peer, answering no auction
+    assert codec.from_mavlink(next(m for m in got if m.get_type() == "MRTA_STATUS")) == Status(3, 0, 0, 6, True)
     # the peer HEARTBEAT the link sends carries the same mode
     assert (link.base_mode, link.custom_mode, link.system_status) == (hb.base_mode, hb.custom_mode,
                                                                       hb.system_status)

@@ -12,9 +12,13 @@ Wire use of the shared messages (``runtime.allocation.messages``):
   own bid counts); a finite ``reserve`` is the seller's own bid, and only worse bids can win.
 * ``Bid`` (to the auctioneer): ``cost`` = the bid; +inf means "cannot do this task".
 * ``Award`` (to the winner): ``cost`` = the winning bid, ``mean`` = mean of all bids heard.
-* ``Status`` to an auctioneer naming the auction's task: "I hold that task" - the winner's reply to
-  an ``Award`` (sent again for every duplicate), or a holder's reply to an ``Announce`` for a task it
-  already holds (the auction is then cancelled).
+* ``Status`` to an auctioneer: "I hold that task", with ``auction`` = the id of the auction it
+  answers - the winner's reply to an ``Award`` (sent again for every duplicate), or a holder's reply
+  to an ``Announce`` for a task it already holds (the auction is then cancelled).  The auctioneer
+  matches it by auction id, never by task alone: a late or duplicated reply to an auction already
+  closed cannot touch a newer auction for the same task.  A ``Status`` naming an auction the
+  auctioneer does not have open, or a task other than that auction's, is dropped ("stale status").
+  Broadcast ``Status`` (``dest`` 0) carries ``auction`` 0.
 
 Loss, duplication and reordering: an auction closes when every live peer has bid, else it is
 re-announced every ``bid_timeout`` (bidders re-send the same bid) up to ``max_retries`` times, to the
@@ -272,25 +276,24 @@ class BSAgent:
         return []
 
     def _on_status(self, m: Status, now: float) -> list:
-        if not isinstance(m.task, int) or isinstance(m.task, bool) or not isinstance(m.converged, bool):
+        if (not isinstance(m.task, int) or isinstance(m.task, bool) or not isinstance(m.auction, int)
+                or isinstance(m.auction, bool) or not isinstance(m.converged, bool)):
             self.dropped["malformed"] += 1
             return []
         if m.dest == BROADCAST:
             return self._on_status_broadcast(m, now)
-        for a in list(self.auctions.values()):
-            if a.task != m.task:
-                continue
-            if a.award is not None and a.award.winner == m.sender:
+        a = self.auctions.get(m.auction)
+        if a is None or a.task != m.task:          # an auction closed since, or not mine at all
+            self.dropped["stale status"] += 1
+            return []
+        if a.award is not None:
+            if a.award.winner == m.sender:         # the winner acknowledges my award
                 return self._acknowledged(a, m.sender, now)
-            if a.award is None and a.reserve != INF:
-                # I hold the task I am reselling, so this is a late or duplicated acknowledgement of an
-                # award I made earlier for the same task (Status carries no auction id), not a holder
-                continue
-            if a.award is None:       # another robot already holds it: this auction is a duplicate
-                self.log.info("task %d is held by robot %d: cancelling auction %d", m.task, m.sender, a.id)
-                return self._acknowledged(a, m.sender, now)
-        self.dropped["stale status"] += 1
-        return []
+            self.dropped["stale status"] += 1      # awarded to another robot meanwhile
+            return []
+        # another robot already holds the task: this auction is a duplicate
+        self.log.info("task %d is held by robot %d: cancelling auction %d", m.task, m.sender, a.id)
+        return self._acknowledged(a, m.sender, now)
 
     def _on_status_broadcast(self, m: Status, now: float) -> list:
         self.dropped["unexpected status"] += 1
@@ -310,7 +313,7 @@ class BSAgent:
         if key in self._bids_sent:
             return [self._bids_sent[key]]
         if m.task in self.won and m.task not in self.selling:
-            return [Status(self.robot_id, m.sender, m.task, False)]
+            return [Status(self.robot_id, m.sender, m.auction, m.task, False)]
         return self._bid(m, now)
 
     def _bid(self, m: Announce, now: float) -> list:
@@ -331,7 +334,7 @@ class BSAgent:
             self.dropped["malformed"] += 1
             return []
         key = (m.sender, m.auction)
-        ack = Status(self.robot_id, m.sender, m.task, False)
+        ack = Status(self.robot_id, m.sender, m.auction, m.task, False)
         if key in self._awards_seen:
             return [ack]
         sent = self._bids_sent.get(key)

@@ -17,8 +17,9 @@ n * eps_final of the optimum: exact for costs that are multiples of ``cost_unit`
 
 Loss: a robot whose table is incomplete and unchanged for ``bid_timeout`` (or that still misses
 part of the task set ``bid_timeout`` after it first heard from the fleet) broadcasts
-``Status(task=held or NO_TASK, converged=False)``; every holder rebroadcasts its own entry and the
-initial auctioneer the task set if the robot holds nothing (each at most once per ``bid_timeout``).
+``Status(auction=0, task=held or NO_TASK, converged=False)`` (no auction here: ``auction`` is always 0);
+every holder rebroadcasts its own entry and the initial auctioneer the task set if the robot holds
+nothing (each at most once per ``bid_timeout``).
 A robot that outbids another and hears nothing from it within ``bid_timeout / 4`` sends it the new
 entry directly (up to 3 times); a holder answers any stale ``Price`` for its task with the current
 entry; every holder rebroadcasts its entry every ``keepalive`` seconds.  Task positions and N_T come
@@ -138,7 +139,7 @@ class EpsAuctionAgent:
         elif not full and self._active and now - self._last_solicit >= self.bid_timeout and (
                 still >= self.bid_timeout or (not self.schedule and now - self._active_since >= self.bid_timeout)):
             self._last_solicit = now
-            out.append(Status(self.robot_id, BROADCAST, NO_TASK if self.held is None else self.held, False))
+            out.append(Status(self.robot_id, BROADCAST, 0, NO_TASK if self.held is None else self.held, False))
         if self.held is not None and now - self._last_own >= self.keepalive:
             out.append(self._entry(self.held, BROADCAST))
         out += self._resend_notices(now)
@@ -313,7 +314,8 @@ class EpsAuctionAgent:
         return self._ready(now)
 
     def _on_status(self, m: Status, now: float) -> list:
-        if (not isinstance(m.task, int) or isinstance(m.task, bool) or not isinstance(m.converged, bool)):
+        if (not isinstance(m.task, int) or isinstance(m.task, bool) or not isinstance(m.auction, int)
+                or isinstance(m.auction, bool) or not isinstance(m.converged, bool)):
             self.dropped["malformed"] += 1
             return []
         if m.converged:

@@ -5,7 +5,8 @@ maps each class to one MAVLink message of the private dialect with the same fiel
 (see ``runtime/comms/codec.py``); the in-memory bus in tests passes the objects as they are.
 
 Ids: ``task`` and ``auction`` are unsigned 16/32-bit integers chosen by the sender; an auction id
-is unique per auctioneer, so (sender, auction) names one auction fleet-wide.
+is unique per auctioneer and never 0, so (sender, auction) names one auction fleet-wide.  ``Status``
+answers an auction rather than running one: there (dest, auction) names it, and auction 0 = none.
 """
 from __future__ import annotations
 
@@ -77,9 +78,12 @@ class Price:
 @dataclass(frozen=True)
 class Status:
     """A robot's allocation state: the task it holds (or 0xFFFF for none) and whether it believes
-    the allocation has converged."""
+    the allocation has converged.  ``auction`` is the id of the auction this status answers (the
+    ``Award`` it acknowledges, or the ``Announce`` of a task the sender already holds), so with
+    ``dest`` it names the auctioneer's auction; 0 = it answers no auction (broadcasts)."""
     sender: int
     dest: int
+    auction: int
     task: int
     converged: bool
 

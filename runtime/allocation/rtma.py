@@ -12,8 +12,8 @@ seller's own), with the two changes of the paper:
   inequality is the one that makes the rule "less selfish", and it is the one used here.)
 
 A robot bids only once it knows all N_T tasks.  One that is still missing some after ``bid_timeout``
-broadcasts ``Status(task=NO_TASK, converged=False)``; the initial auctioneer answers by broadcasting the
-task notifications again (at most once per ``bid_timeout``).
+broadcasts ``Status(auction=0, task=NO_TASK, converged=False)``; the initial auctioneer answers by
+broadcasting the task notifications again (at most once per ``bid_timeout``).
 """
 from __future__ import annotations
 
@@ -98,7 +98,7 @@ class RTMAAgent(BSAgent):
             self._last_request = now
         elif now - self._last_request >= self.bid_timeout:
             self._last_request = now
-            return [Status(self.robot_id, BROADCAST, NO_TASK, False)]
+            return [Status(self.robot_id, BROADCAST, 0, NO_TASK, False)]
         return []
 
     def _on_status_broadcast(self, m: Status, now: float) -> list:

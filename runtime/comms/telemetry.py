@@ -93,7 +93,7 @@ class GcsTelemetry:
         if self._slow.due(now):
             self._send(self.link.heartbeat())
             self._send(self._sys_status(battery, remaining))
-            self._send(codec.to_mavlink(Status(self.robot_id, BROADCAST, task, conv), self.m))
+            self._send(codec.to_mavlink(Status(self.robot_id, BROADCAST, 0, task, conv), self.m))
         if pose is not None and self._fast.due(now):
             self._send_position(now, pose, velocity)
 

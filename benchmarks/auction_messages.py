@@ -1,14 +1,14 @@
 """Messages and rounds: epsilon-scaling auction vs RTMA and BS on the same instances, one run each.
 
 Robots and tasks uniform in a 1000 x 1000 m field (paper 002, section IV-A), straight-line costs,
-in-memory bus (delay 10 ms; lossless unless ``--drop``).  Per size and method: messages sent (a broadcast counts once),
+in-memory bus (one-way delay ``--delay``, 10 ms by default; lossless unless ``--drop``).  Per size and method: messages sent (a broadcast counts once),
 rounds (longest causal chain of messages), simulated seconds to convergence, % error against the
 Hungarian optimum, and messages / CPU time as ratios to RTMA measured in the same run.
 
 ``--errors`` also prints the % error of BS and RTMA against the optimum over ``--cases`` random
 instances per size 2..20 (paper Fig. 6/7: mean error at 20 robots, mean over sizes of the max error).
 
-Usage: python benchmarks/auction_messages.py [--sizes 20 100] [--seed 1] [--drop P] [--errors] [--cases 100]
+Usage: python benchmarks/auction_messages.py [--sizes 20 100] [--seed 1] [--delay S] [--drop P] [--errors] [--cases 100]
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ from sitl.experiments.formation_common import error_sweep, mean_of_max, uniform_
 METHODS = ("auction", "rtma", "bs")
 
 
-def compare(sizes, seed, drop=0.0):
+def compare(sizes, seed, drop=0.0, delay=0.01):
     print(f"{'n':>4} {'method':>8} {'messages':>9} {'x RTMA':>7} {'rounds':>7} {'sim s':>7} "
           f"{'error %':>8} {'cpu x RTMA':>10}")
     for n in sizes:
@@ -33,7 +33,7 @@ def compare(sizes, seed, drop=0.0):
         rows = {}
         for m in METHODS:
             t0 = time.process_time()
-            bus = BusParams(seed=seed, drop=drop, duplicate=drop, jitter=0.01 if drop else 0.0)
+            bus = BusParams(delay=delay, seed=seed, drop=drop, duplicate=drop, jitter=0.01 if drop else 0.0)
             r = solve(m, robots=robots, tasks=tasks, bus=bus, until=3600)
             rows[m] = (r, time.process_time() - t0)
         base_msgs, base_cpu = rows["rtma"][0].messages, rows["rtma"][1]
@@ -63,12 +63,13 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[20, 100])
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--delay", type=float, default=0.01, help="one-way message delay in seconds (default 0.01)")
     ap.add_argument("--drop", type=float, default=0.0,
                     help="loss and duplication probability per copy (adds 10 ms jitter: reordering)")
     ap.add_argument("--errors", action="store_true", help="also the BS/RTMA error sweep (about a minute)")
     ap.add_argument("--cases", type=int, default=100)
     args = ap.parse_args()
-    compare(args.sizes, args.seed, args.drop)
+    compare(args.sizes, args.seed, args.drop, args.delay)
     if args.errors:
         errors(args.cases, args.seed)
 

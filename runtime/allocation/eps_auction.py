@@ -7,13 +7,21 @@ phase)``.  A table entry is replaced only by a higher (price, -holder): highest 
 go to the lowest id, stale prices lose - so every table converges to the same entries whatever the
 order, loss or duplication of messages.  A robot that sees its task taken at a higher price bids again.
 
-Epsilon-scaling: eps runs down a schedule from (my largest cost) / ``theta`` to ``eps_final`` =
-``cost_unit`` / (n + 1).  A robot moves to the next eps when its table shows every robot holding a
-distinct task and nothing has changed for ``bid_timeout / 4`` (or nothing at all for twice that: its
-table may be stale, and moving early costs only speed); it then keeps its task only if the task
-is still within the new eps of its best (eps-complementary slackness), else it bids again.  At the end
+Epsilon-scaling: eps runs down one ladder the whole fleet shares, eps_k = ``eps_final`` * ``theta``**k
+with ``eps_final`` = ``cost_unit`` / (n + 1), from the first rung at or above (my largest cost) / ``theta``
+down to k = 0.  ``Price.phase`` carries the sender's k, the rungs it has left.  A robot steps down a rung
+when its table shows every robot holding a distinct task and nothing has changed for ``bid_timeout / 4``
+(or nothing at all for twice that: its table may be stale), and only when every live peer has told it
+(by any ``Price`` it sent) that it stands on the same rung or a lower one; it then tells everyone its
+new rung with its entry, and keeps its task only if the task is still within the new eps of its best
+(eps-complementary slackness), else it bids again.  The rung barrier keeps the fleet within one rung:
+a robot on a fine eps never fights a price war over a gap that a robot on a coarse eps left, which
+without it takes (gap / eps) bids and, with 50 ms links, minutes.  A robot waiting at the barrier
+for ``bid_timeout`` asks for the entries it misses (a ``Status`` broadcast, as below).  At the end
 every robot is within eps_final of its best task at the final prices, so the total cost is within
-n * eps_final of the optimum: exact for costs that are multiples of ``cost_unit``.
+n * eps_final of the optimum: exact for costs that are multiples of ``cost_unit``.  ``theta`` = 8
+(fewer rungs, so fewer rung announcements) beat 4 in messages and time at 10-200 ms delays
+(``benchmarks/auction_messages.py --delay``).
 
 Loss: a robot whose table is incomplete and unchanged for ``bid_timeout`` (or that still misses
 part of the task set ``bid_timeout`` after it first heard from the fleet) broadcasts
@@ -41,6 +49,7 @@ from runtime.allocation.messages import BROADCAST, Price, Status, TaskInfo, addr
 from runtime.log import get_logger
 
 INF = math.inf
+NO_RUNG = 0xFFFF          # Price.phase before the sender knows the task set
 
 
 class EpsAuctionAgent:
@@ -50,7 +59,7 @@ class EpsAuctionAgent:
 
     def __init__(self, robot_id: int, peers: Sequence[int], cost: Callable[[int], float], *,
                  bid_timeout: float = 1.0, quiet: float | None = None, cost_unit: float = 0.01,
-                 theta: float = 4.0, eps_final: float | None = None, keepalive: float | None = None):
+                 theta: float = 8.0, eps_final: float | None = None, keepalive: float | None = None):
         self.robot_id = int(robot_id)
         self.peers = sorted({int(p) for p in peers} - {self.robot_id})
         self.alive = set(self.peers)
@@ -81,6 +90,8 @@ class EpsAuctionAgent:
         self._served: dict[str, float] = {}
         self._notices: dict[int, list] = {}        # displaced robot -> [task, deadline, tries]
         self._dummies: set[int] = set()            # "no task" slots when robots outnumber tasks
+        self._peer_rung: dict[int, int] = {}       # robot -> lowest rung it has reported
+        self.barrier_waits = 0                     # ticks spent quiet but held back by a peer's rung
         self.log = get_logger("alloc.auction", self.robot_id)
 
     # ------------------------------------------------------------------ agent interface
@@ -96,6 +107,16 @@ class EpsAuctionAgent:
     @property
     def eps(self) -> float:
         return self.schedule[self.phase] if self.schedule else INF
+
+    @property
+    def rung(self) -> int:
+        """Rungs left above the final eps (0: on it); ``NO_RUNG`` before the task set is known."""
+        return len(self.schedule) - 1 - self.phase if self.schedule else NO_RUNG
+
+    def _fleet_caught_up(self) -> bool:
+        """Every live peer has reported a rung no higher than mine."""
+        mine = self.rung
+        return all(self._peer_rung.get(p, NO_RUNG) <= mine for p in self.alive)
 
     def start(self, tasks: Mapping[int, tuple[float, float]], now: float) -> list:
         self._now = now
@@ -131,15 +152,21 @@ class EpsAuctionAgent:
             out += self._bid(now)
         full = self._full()
         still = now - self._last_change
-        if self.schedule and self.phase < len(self.schedule) - 1 and (
-                (full and still >= self.settle) or still >= 2 * self.settle):
+        quiet = (full and still >= self.settle) or still >= 2 * self.settle
+        stepping = self.schedule and self.phase < len(self.schedule) - 1 and quiet
+        if stepping and self._fleet_caught_up():
             self.phase += 1
             self._last_change = now
-            out += self._recheck(now)
-        elif not full and self._active and now - self._last_solicit >= self.bid_timeout and (
+            rebid = self._recheck(now)
+            out += rebid
+            if not rebid and self.held is not None:
+                out.append(self._entry(self.held, BROADCAST))      # my new rung, for the others' barrier
+        elif (not full or stepping or not self.schedule) and self._active and now - self._last_solicit >= self.bid_timeout and (
                 still >= self.bid_timeout or (not self.schedule and now - self._active_since >= self.bid_timeout)):
             self._last_solicit = now
             out.append(Status(self.robot_id, BROADCAST, 0, NO_TASK if self.held is None else self.held, False))
+        if stepping and not self._fleet_caught_up():
+            self.barrier_waits += 1
         if self.held is not None and now - self._last_own >= self.keepalive:
             out.append(self._entry(self.held, BROADCAST))
         out += self._resend_notices(now)
@@ -181,11 +208,10 @@ class EpsAuctionAgent:
         cmax = max((c for c in costs if math.isfinite(c)), default=0.0)
         n = len(costs)
         final = self.eps_final if self.eps_final is not None else self.cost_unit / (n + 1)
-        eps, schedule = cmax / self.theta, []
-        while eps > final:
-            schedule.append(eps)
-            eps /= self.theta
-        self.schedule = schedule + [final]
+        top = 0
+        while final * self.theta ** top < cmax / self.theta and top < NO_RUNG - 1:
+            top += 1
+        self.schedule = [final * self.theta ** k for k in range(top, -1, -1)]
         for t in self.book.positions:
             self.price.setdefault(t, 0.0)
             self.holder.setdefault(t, 0)
@@ -257,7 +283,7 @@ class EpsAuctionAgent:
     def _entry(self, task: int, dest: int) -> Price:
         if self.holder.get(task) == self.robot_id:
             self._last_own = self._now
-        return Price(self.robot_id, dest, task, self.holder.get(task, 0), self.price.get(task, 0.0), self.phase)
+        return Price(self.robot_id, dest, task, self.holder.get(task, 0), self.price.get(task, 0.0), self.rung)
 
     # ------------------------------------------------------------------ table
     def _set(self, task: int, price: float, holder: int) -> None:
@@ -281,12 +307,15 @@ class EpsAuctionAgent:
     # ------------------------------------------------------------------ messages
     def _on_price(self, m: Price, now: float) -> list:
         if (not valid_task_id(m.task) or not finite(m.price) or not isinstance(m.holder, int)
-                or isinstance(m.holder, bool) or not 1 <= m.holder <= 250 or not isinstance(m.phase, int)):
+                or isinstance(m.holder, bool) or not 1 <= m.holder <= 250 or not isinstance(m.phase, int)
+                or isinstance(m.phase, bool) or not 0 <= m.phase <= NO_RUNG):
             self.dropped["malformed"] += 1
             return []
         if self.book.complete and m.task not in self.book.positions and m.task not in self._dummies:
             self.dropped["unknown task"] += 1
             return []
+        if m.phase != NO_RUNG and m.sender in self.peers:
+            self._peer_rung[m.sender] = min(m.phase, self._peer_rung.get(m.sender, NO_RUNG))
         notice = self._notices.get(m.sender)
         if notice is not None and m.holder == m.sender and m.task != notice[0]:
             del self._notices[m.sender]                  # it has bid elsewhere: it knows

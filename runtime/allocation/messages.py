@@ -65,8 +65,9 @@ class Award:
 
 @dataclass(frozen=True)
 class Price:
-    """Auction-algorithm price update: ``holder`` holds ``task`` at ``price`` (epsilon-scaling
-    phase ``phase``)."""
+    """Auction-algorithm price update: ``holder`` holds ``task`` at ``price``.  ``phase`` is the
+    sender's epsilon-scaling rung: phases it has left above the final epsilon (0 = on it, 0xFFFF =
+    it does not know the task set yet)."""
     sender: int
     dest: int
     task: int

@@ -135,7 +135,7 @@ class PlanningConfig:
 
 @dataclass(frozen=True)
 class AllocationConfig:
-    method: Literal["bs", "rtma", "auction"] = "bs"
+    method: Literal["bs", "rtma", "auction"] = "auction"    # epsilon auction: optimal, the default
     bid_timeout: float = field(default=1.0, metadata=rng(0.01, 60))
     formation: tuple[tuple[float, float], ...] = ()   # task positions in the fleet frame (m)
     initiator: bool = False        # this robot announces the formation (one robot per fleet)

@@ -186,3 +186,38 @@ def test_closed_loop_reaches_goal_around_an_unmapped_obstacle():
         pose = unicycle(pose, d.v, d.w, dt)
     assert follow.done and math.hypot(pose[0] - 4.0, pose[1]) <= 0.05
     assert closest > 0.17 + 0.05                    # robot radius + post radius: never touched
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(1, 40), sigma=st.floats(0.3, 4.0), seed=st.integers(0, 2 ** 32 - 1))
+def test_smoothing_matrix_is_scipys_gaussian_filter_with_nearest_edges(n, sigma, seed):
+    from scipy import ndimage
+    from runtime.control.arbiter import smoothing_matrix
+    x = np.random.default_rng(seed).normal(size=n)
+    want = ndimage.gaussian_filter1d(x, sigma, mode="nearest")
+    assert np.allclose(smoothing_matrix(n, sigma) @ x, want, rtol=0, atol=1e-12)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), sigma=st.sampled_from([0.5, 1.0, 2.0]))
+def test_decide_scores_equal_the_2d_gaussian_filter_of_the_weighted_votes(seed, sigma):
+    from scipy import ndimage
+    rng = np.random.default_rng(seed)
+    arcs = ArcSet.uniform()
+
+    class Random:
+        name, weight = "random", 1.0
+
+        def __init__(self):
+            self.votes = rng.uniform(-1.5, 1.5, len(arcs.v))
+            self.votes[rng.random(len(arcs.v)) < 0.05] = np.nan
+
+        def ballot(self, arcs, now):
+            return Ballot(self.votes)
+
+    bs = [Random(), Random()]
+    d = Arbiter(arcs, bs, smoothing=sigma).decide(0.0)
+    total = sum(np.clip(np.nan_to_num(b.votes, nan=0.0), -1, 1) for b in bs)
+    want = ndimage.gaussian_filter(total.reshape(arcs.shape), sigma, mode="nearest").ravel()
+    assert np.allclose(d.scores, want, rtol=0, atol=1e-12)
+    assert d.arc == int(np.argmax(want))

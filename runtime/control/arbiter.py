@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Iterable, Protocol, Sequence
 
 import numpy as np
-from scipy import ndimage
 
 from runtime.control.pure_pursuit import PurePursuit
 from runtime.errors import InputError
@@ -55,21 +55,45 @@ class ArcSet:
     def shape(self) -> tuple[int, int]:
         return len(self.speeds), len(self.turn_rates)
 
-    @property
+    @cached_property
     def v(self) -> np.ndarray:
-        """Speed of every arc (flat, length n_speeds * n_turns)."""
-        return np.repeat(np.asarray(self.speeds), len(self.turn_rates))
+        """Speed of every arc (flat, length n_speeds * n_turns; read-only, computed once)."""
+        return _frozen(np.repeat(np.asarray(self.speeds), len(self.turn_rates)))
 
-    @property
+    @cached_property
     def w(self) -> np.ndarray:
-        """Turn rate of every arc (flat)."""
-        return np.tile(np.asarray(self.turn_rates), len(self.speeds))
+        """Turn rate of every arc (flat; read-only, computed once)."""
+        return _frozen(np.tile(np.asarray(self.turn_rates), len(self.speeds)))
+
+    @cached_property
+    def _axes(self) -> tuple[np.ndarray, np.ndarray]:
+        return _frozen(np.asarray(self.speeds)), _frozen(np.asarray(self.turn_rates))
 
     def nearest(self, v: float, w: float) -> int:
         """Index of the arc closest to (v, w), each axis measured in its own spacing."""
-        iv = int(np.argmin(np.abs(np.asarray(self.speeds) - v)))
-        iw = int(np.argmin(np.abs(np.asarray(self.turn_rates) - w)))
+        speeds, turns = self._axes
+        iv = int(np.argmin(np.abs(speeds - v)))
+        iw = int(np.argmin(np.abs(turns - w)))
         return iv * len(self.turn_rates) + iw
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
+def smoothing_matrix(n: int, sigma: float, truncate: float = 4.0) -> np.ndarray:
+    """The n x n matrix that applies scipy.ndimage.gaussian_filter1d(x, sigma, mode="nearest") to a length-n
+    axis: the same kernel (radius int(truncate * sigma + 0.5), normalised), edges repeated.  The arbiter
+    smooths every cycle, so it multiplies by two of these instead of calling the filter."""
+    radius = int(truncate * float(sigma) + 0.5)
+    k = np.exp(-0.5 * (np.arange(-radius, radius + 1) / float(sigma)) ** 2)
+    k /= k.sum()
+    m = np.zeros((n, n))
+    for i in range(n):
+        for off, weight in zip(range(-radius, radius + 1), k):
+            m[i, min(max(i + off, 0), n - 1)] += weight
+    return m
 
 
 @dataclass
@@ -266,6 +290,7 @@ class Arbiter:
     vetoed_all: int = 0          # decisions where every arc was vetoed (the arbiter then stands still)
 
     def __post_init__(self) -> None:
+        self._smoothers: tuple = (None, None, None)     # (sigma, along speeds, along turn rates)
         for b in self.behaviours:
             if not (isinstance(b.weight, (int, float)) and math.isfinite(b.weight) and b.weight >= 0):
                 raise InputError(f"arbiter behaviour {b.name} weight: expected a finite number >= 0, got {b.weight!r}")
@@ -275,12 +300,19 @@ class Arbiter:
         veto = np.zeros(len(self.arcs.v), dtype=bool)
         for b in self.behaviours:
             ballot = b.ballot(self.arcs, now)
-            total += b.weight * np.clip(np.nan_to_num(ballot.votes, nan=0.0), -1.0, 1.0)
+            votes = ballot.votes
+            if not np.isfinite(votes).all():
+                votes = np.nan_to_num(votes, nan=0.0)
+            total += b.weight * np.clip(votes, -1.0, 1.0)
             if ballot.veto is not None:
                 veto |= ballot.veto
         grid = total.reshape(self.arcs.shape)
         if self.smoothing > 0:
-            grid = ndimage.gaussian_filter(grid, self.smoothing, mode="nearest")
+            if self._smoothers[0] != self.smoothing:
+                nv, nw = self.arcs.shape
+                self._smoothers = (self.smoothing, smoothing_matrix(nv, self.smoothing),
+                                   smoothing_matrix(nw, self.smoothing))
+            grid = self._smoothers[1] @ grid @ self._smoothers[2].T
         scores = np.where(veto, -np.inf, grid.ravel())
         if np.all(veto):
             self.vetoed_all += 1

@@ -168,7 +168,7 @@ def test_missions_are_reproducible_spaced_and_clear_of_boxes():
 
 
 @pytest.mark.slow
-def test_world_drive_one_mission(tmp_path, monkeypatch):
+def test_world_drive_one_mission(tmp_path, monkeypatch, capsys):
     """One mission driven by daemons in the pybullet SITL on a scaled field: the daemons reach an assignment,
     every robot arrives, and the simulator's driven distance is close to the planned path length."""
     monkeypatch.chdir(tmp_path)                 # a relative --out, as `mrta experiment` defaults to
@@ -187,6 +187,24 @@ def test_world_drive_one_mission(tmp_path, monkeypatch):
     assert "## Driven in the pybullet SITL (--drive)" in md and "scaled to 20 m" in md
     summary = [line for line in md.splitlines() if line.startswith("| A* | 4 | 5 % | 1 |")]
     assert len(summary) == 1 and summary[0].endswith("| 4/4 |")        # Tables I-II from the driven missions
+
+    # --drive-resume: the earlier mission is kept as it was, only the new case is driven
+    from sitl.experiments import formation_world as fw
+    calls = []
+    real = fw.drive_mission
+    monkeypatch.setattr(fw, "drive_mission", lambda *a, **k: calls.append(a) or real(*a, **k))
+    base = ["experiment", "formation-world", "--cases", "1", "--robots", "2", "--fractions", "5", "--planners",
+            "astar", "--methods", "rtma", "--drive", "--drive-size", "20", "--drive-resolution", "0.25", "--no-png",
+            "--jobs", "1", "--drive-resume", "drive/formation_world_drive.csv"]
+    assert cli.main(base + ["--out", "more", "--drive-cases", "2"]) == 0
+    assert len(calls) == 1 and "case1" in str(calls[0][1])
+    kept, new = _rows(tmp_path / "more" / "formation_world_drive.csv")
+    assert kept == two and new["case"] == "1" and new["valid"] == "True"
+    assert "--drive-resume drive/formation_world_drive.csv" in (tmp_path / "more" / "formation_world.md").read_text()
+    capsys.readouterr()
+    assert cli.main(base + ["--out", "other", "--cruise-speed", "0.4"]) == 2     # driven at another speed
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cruise_speed = 0.5, expected 0.4" in err[0]
 
 
 @pytest.mark.parametrize("name, argv, needle", [

@@ -15,6 +15,7 @@ drives the planned path (pure pursuit + DAMN arbiter) and the simulator measures
 from __future__ import annotations
 
 import argparse
+import csv
 import dataclasses
 import functools
 import math
@@ -95,6 +96,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     d.add_argument("--cruise-speed", type=float, default=0.5, help="robot cruise speed when driving (m/s)")
     d.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                    help="driven cells run in this many processes at once (default: one per CPU, %(default)s)")
+    d.add_argument("--drive-resume", default=None, metavar="CSV",
+                   help="a formation_world_drive.csv of an earlier run with the same settings: its missions are "
+                        "kept, only the missing ones are driven (so --drive-cases can grow over several runs)")
     d.add_argument("--drive-timeout", type=float, default=None,
                    help="sim seconds per driven mission (default: 30 + 1.5 x the longest A* cost / cruise speed)")
 
@@ -297,23 +301,94 @@ def drive_inflate(args) -> float:
     return CREATE2_RADIUS + 0.5 * (args.drive_resolution or args.resolution)
 
 
-def drive_cell(n: int, percent: int, args, planners, methods, out: Path) -> list[dict]:
-    """``--drive-cases`` missions of one cell driven with every planner and method."""
+def drive_settings(args) -> dict:
+    """What a driven mission's outcome depends on besides its cell, case and method (kept in every row, so
+    that --drive-resume can refuse rows driven otherwise)."""
+    return {"field_m": float(args.drive_size or args.size),
+            "resolution_m": float(args.drive_resolution or args.resolution),
+            "seed": int(args.seed), "cruise_speed": float(args.cruise_speed), "inflate_m": float(drive_inflate(args)),
+            "rrt_iterations": int(args.rrt_iterations), "rrt_raw": bool(args.rrt_raw),
+            "drive_timeout": float(args.drive_timeout) if args.drive_timeout else math.nan}
+
+
+_INT_COLUMNS = ("robots", "obstacles_pct", "case", "arrived", "seed", "rrt_iterations")
+_BOOL_COLUMNS = ("valid", "same_assignment_as_offline", "rrt_raw")
+_TEXT_COLUMNS = ("planner", "method", "events")
+
+
+def load_resume(path: str | Path, args) -> dict[tuple, dict]:
+    """Rows of an earlier ``formation_world_drive.csv`` by (planner, robots, obstacles_pct, case, method)."""
+    path = Path(path)
+    try:
+        with path.open(newline="") as fh:
+            raw = list(csv.DictReader(fh))
+    except OSError as e:
+        raise InputError(f"--drive-resume {path}: cannot read it ({e.strerror or e})") from None
+    want = drive_settings(args)
+    out: dict[tuple, dict] = {}
+    for i, r in enumerate(raw, start=2):          # line numbers: the header is line 1
+        missing = [k for k in (*want, *_INT_COLUMNS, *_TEXT_COLUMNS[:2], "driven_m") if k not in r]
+        if missing:
+            raise InputError(f"--drive-resume {path}: expected a formation_world_drive.csv written with "
+                             f"--drive-resume support, line {i} has no column {missing[0]!r}")
+        try:
+            row = {k: _parse_cell(k, v) for k, v in r.items()}
+        except ValueError:
+            raise InputError(f"--drive-resume {path} line {i}: expected numbers in the numeric columns") from None
+        for k, mine in want.items():
+            theirs = row[k]
+            same = (theirs == mine or (isinstance(mine, float) and math.isnan(mine) and math.isnan(theirs))
+                    or (isinstance(mine, float) and math.isclose(theirs, mine, rel_tol=1e-9)))
+            if not same:
+                raise InputError(f"--drive-resume {path} line {i}: driven with {k} = {theirs}, expected {mine} "
+                                 f"as in this run")
+        out[(row["planner"], row["robots"], row["obstacles_pct"], row["case"], row["method"])] = row
+    return out
+
+
+def _parse_cell(key: str, value: str):
+    if key in _TEXT_COLUMNS:
+        return value
+    if key in _BOOL_COLUMNS:
+        if value not in ("True", "False"):
+            raise ValueError(value)
+        return value == "True"
+    if key in _INT_COLUMNS:
+        return int(value)
+    return float(value)
+
+
+def drive_cell(n: int, percent: int, args, planners, methods, out: Path,
+               done: dict[tuple, dict] | None = None) -> list[dict]:
+    """``--drive-cases`` missions of one cell driven with every planner and method; missions in ``done``
+    (from --drive-resume) are taken from there instead of driven again."""
     size = args.drive_size or args.size
     res = args.drive_resolution or args.resolution
     inflate = drive_inflate(args)
+    done = done or {}
+    settings = drive_settings(args)
     world, grid = scenario(size, res, percent, args.seed, inflate)
     rows = []
     for case in range(args.drive_cases):
+        keys = [(p, n, percent, case, m) for p in planners for m in methods]
+        if all(k in done for k in keys):
+            rows += [done[k] for k in keys]
+            continue
         robots, yaws, tasks = mission(world, n, args.seed, percent, case, inflate)
         a_star = cost_matrix(grid, robots, tasks, planner="astar")
         optimum = hungarian(a_star)[1]
         timeout = args.drive_timeout or 30.0 + 1.5 * float(a_star.max()) / args.cruise_speed
         for p in planners:
+            if all((p, n, percent, case, m) in done for m in methods):
+                rows += [done[(p, n, percent, case, m)] for m in methods]
+                continue
             c = a_star if p == "astar" else planner_costs(grid, robots, tasks, p, args.seed * 100003 + case,
                                                           args.rrt_iterations, args.rrt_raw)
             offline = fc.run_methods(c, methods, optimum) if np.all(np.isfinite(c)) else {}
             for m in methods:
+                if (p, n, percent, case, m) in done:
+                    rows.append(done[(p, n, percent, case, m)])
+                    continue
                 run_dir = out / "drive" / f"{p}_{n}r_{percent}pct_case{case}_{m}"
                 fleet_path = write_fleet(run_dir, world, robots, yaws, tasks, p, args.cruise_speed, timeout,
                                          args.seed * 1000 + case, inflate)
@@ -322,7 +397,7 @@ def drive_cell(n: int, percent: int, args, planners, methods, out: Path) -> list
                 same = m in offline and held == offline[m]["assignment"]
                 planned = float(sum(c[i, t] for i, t in enumerate(held) if t is not None)) if d["valid"] else math.nan
                 rows.append({"planner": p, "robots": n, "obstacles_pct": percent, "method": m, "case": case,
-                             "field_m": size, "resolution_m": res, "optimum_astar": optimum,
+                             **settings, "optimum_astar": optimum,
                              "offline_global_cost": offline[m]["cost"] if m in offline else math.nan,
                              "same_assignment_as_offline": same, "valid": d["valid"],
                              "planned_cost": planned, "bid_cost": d["bid_cost"], "driven_m": d["driven"],
@@ -511,6 +586,7 @@ def _check(args) -> tuple:
 
 def run(args: argparse.Namespace) -> int:
     robots, fractions, planners, methods = _check(args)
+    resumed = load_resume(args.drive_resume, args) if args.drive and args.drive_resume else {}   # fail early
     out = Path(args.out)
     t0 = time.perf_counter()
     rows: list[dict] = []
@@ -528,16 +604,22 @@ def run(args: argparse.Namespace) -> int:
     if args.drive:
         driven = fc.parse_ints(args.drive_robots, "--drive-robots", 2, 250) if args.drive_robots else robots
         cells = [(n, pct) for pct in fractions for n in driven]
+        mine = {cell: {k: r for k, r in resumed.items() if (k[1], k[2]) == cell} for cell in cells}
+        if resumed:
+            log.info("--drive-resume: %d earlier missions of this run's cells kept",
+                     sum(1 for c in mine.values() for k in c if k[3] < args.drive_cases and k[0] in planners
+                         and k[4] in methods))
         if args.jobs == 1 or len(cells) == 1:
             for n, pct in cells:
-                drive_rows += drive_cell(n, pct, args, planners, methods, out)
+                drive_rows += drive_cell(n, pct, args, planners, methods, out, mine[(n, pct)])
         else:
             from concurrent.futures import ProcessPoolExecutor
             # largest fleets first (they take longest); results kept in the cells' order
             order = sorted(range(len(cells)), key=lambda k: -cells[k][0])
             plain = argparse.Namespace(**{k: v for k, v in vars(args).items() if not callable(v)})   # picklable
             with ProcessPoolExecutor(max_workers=min(args.jobs, len(cells))) as pool:
-                jobs = {k: pool.submit(drive_cell, *cells[k], plain, planners, methods, out) for k in order}
+                jobs = {k: pool.submit(drive_cell, *cells[k], plain, planners, methods, out, mine[cells[k]])
+                        for k in order}
                 for k in range(len(cells)):
                     drive_rows += jobs[k].result()
     drive_wall = time.perf_counter() - t1
@@ -557,6 +639,8 @@ def run(args: argparse.Namespace) -> int:
             cmd += f" --drive-size {args.drive_size:g}"
         if args.drive_resolution:
             cmd += f" --drive-resolution {args.drive_resolution:g}"
+        if args.drive_resume:
+            cmd += f" --drive-resume {args.drive_resume}"
     fields = ", ".join(f"{pct} %: {k} boxes, {100 * occ:.1f} % of cells blocked after inflation"
                        for pct, (k, occ) in worlds.items())
     setup = (f"{args.size:g} x {args.size:g} m field, grid {args.resolution:g} m, walls; one random field of "

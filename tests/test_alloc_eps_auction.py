@@ -289,3 +289,26 @@ def test_no_robot_steps_below_a_rung_another_robot_still_stands_above(seed, n, d
     assignment = [held[rid] for rid in sorted(held)]
     assert is_permutation(assignment, n)
     assert sum(c[i, t] for i, t in enumerate(assignment)) == hungarian(c)[1]
+
+
+def test_task_set_is_served_by_survivors_once_the_initiator_is_lost():
+    """Robot 3 missed part of the task set and robot 1, which announced it, is gone: robot 2 serves the set
+    (only then), so robot 3 can bid and the rung barrier does not hold the fleet back for ever."""
+    init = EpsAuctionAgent(1, [2, 3], [1.0, 2.0, 3.0].__getitem__, bid_timeout=1.0)
+    two = EpsAuctionAgent(2, [1, 3], [2.0, 1.0, 3.0].__getitem__, bid_timeout=1.0)
+    three = EpsAuctionAgent(3, [1, 2], [3.0, 2.0, 1.0].__getitem__, bid_timeout=1.0)
+    infos = [m for m in init.start({0: (0.0, 0.0), 1: (1.0, 0.0), 2: (2.0, 0.0)}, 0.0) if isinstance(m, TaskInfo)]
+    for m in infos:
+        two.on_message(m, 0.01)
+    three.on_message(infos[0], 0.01)                  # the other two notifications are lost
+    ask = [m for m in three.on_tick(1.1) if isinstance(m, Status)]
+    assert ask and ask[0].task == NO_TASK
+    assert not [m for m in two.on_message(ask[0], 1.11) if isinstance(m, TaskInfo)]   # robot 1 still serves it
+    for a in (two, three):
+        a.on_peer_lost(1, 2.0)
+    ask = [m for m in three.on_tick(2.2) if isinstance(m, Status)]
+    served = [m for m in two.on_message(ask[0], 2.21) if isinstance(m, TaskInfo)]
+    assert sorted(m.task for m in served) == [0, 1, 2]
+    for m in served:
+        three.on_message(m, 2.22)
+    assert three.schedule and three.held is not None

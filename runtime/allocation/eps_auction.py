@@ -27,7 +27,8 @@ Loss: a robot whose table is incomplete and unchanged for ``bid_timeout`` (or th
 part of the task set ``bid_timeout`` after it first heard from the fleet) broadcasts
 ``Status(auction=0, task=held or NO_TASK, converged=False)`` (no auction here: ``auction`` is always 0);
 every holder rebroadcasts its own entry and the initial auctioneer the task set if the robot holds
-nothing (each at most once per ``bid_timeout``).
+nothing (each at most once per ``bid_timeout``); once the initial auctioneer is lost, every robot that
+knows the whole set serves it instead (the barrier would otherwise hold the fleet on a coarse eps).
 A robot that outbids another and hears nothing from it within ``bid_timeout / 4`` sends it the new
 entry directly (up to 3 times); a holder answers any stale ``Price`` for its task with the current
 entry; every holder rebroadcasts its entry every ``keepalive`` seconds.  Task positions and N_T come
@@ -81,6 +82,7 @@ class EpsAuctionAgent:
         self.sent = 0
         self._holders: Counter = Counter()         # robot -> number of tasks it holds in my table
         self._initiator = False
+        self._task_source: int | None = None       # the robot whose TaskInfo taught me the task set
         self._active = False
         self._active_since = INF
         self._now = 0.0
@@ -340,6 +342,7 @@ class EpsAuctionAgent:
         if not self.book.learn(m.task, m.x, m.y, m.n_tasks):
             self.dropped["contradicts task set"] += 1
             return []
+        self._task_source = m.sender if self._task_source is None else self._task_source
         return self._ready(now)
 
     def _on_status(self, m: Status, now: float) -> list:
@@ -352,7 +355,9 @@ class EpsAuctionAgent:
         out = []
         if self.held is not None and self._serve("entry", now):
             out.append(self._entry(self.held, BROADCAST))
-        if m.task == NO_TASK and self._initiator and self._serve("tasks", now):
+        source_lost = self._task_source is not None and self._task_source not in self.alive
+        if (m.task == NO_TASK and (self._initiator or (source_lost and self.book.complete))
+                and self._serve("tasks", now)):
             out += self._task_set(BROADCAST)
         return out
 

@@ -115,6 +115,7 @@ class CommsConfig:
     gcs: Optional[str] = "127.0.0.1:14550"
     signing_key: Optional[str] = None     # path to a fleet key file (32 bytes hex)
     heartbeat_timeout: float = field(default=3.0, metadata=rng(0.1, 60))
+    startup_grace: float = field(default=15.0, metadata=rng(0.1, 3600))   # s: a peer never heard by then is lost
 
 
 @dataclass(frozen=True)

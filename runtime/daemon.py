@@ -98,6 +98,9 @@ class Daemon:
         self.period = 1.0 / c.rate
         self._last_step: float | None = None
         self._last_odom_t: float | None = None
+        self._first_cycle: float | None = None
+        self._heard: set[int] = set()            # peers heard at least once
+        self._never_heard_reported = False
         self._started = False
         self._target: int | None = None
         self._path: list[tuple[float, float]] = []
@@ -216,11 +219,29 @@ class Daemon:
             self.log.warning("peer %d lost (no heartbeat for %.1f s): re-auctioning its work",
                              lost, self.cfg.comms.heartbeat_timeout)
             out += self.agent.on_peer_lost(lost, now)
+        for lost in self._never_heard(now):
+            self.stats.peers_lost.append(lost)
+            self.log.warning("peer %d never heard in %.1f s (comms.startup_grace): treating it as lost",
+                             lost, self.cfg.comms.startup_grace)
+            out += self.agent.on_peer_lost(lost, now)
         if self._started:
             out += self.agent.on_tick(now)
         if out:
             self.stats.agent_sent += len(out)
             self.link.send_agent(out, now)
+
+    def _never_heard(self, now: float) -> list[int]:
+        """Configured peers not heard once within ``comms.startup_grace`` of the first cycle, reported once:
+        the link only times out peers it has heard, and a robot that never came up must not hold the
+        allocation back (the epsilon auction waits for every live peer's rung).  If it turns up later, its
+        first message makes it live again."""
+        if self._first_cycle is None:
+            self._first_cycle = now
+        self._heard.update(getattr(self.link, "peers_alive", ()))
+        if self._never_heard_reported or now - self._first_cycle < self.cfg.comms.startup_grace:
+            return []
+        self._never_heard_reported = True
+        return sorted(p.id for p in self.cfg.comms.peers if p.id not in self._heard)
 
     def _control(self, now: float) -> None:
         """Path to the held task, followed by pure pursuit under the DAMN-style arbiter (bumpers)."""

@@ -312,3 +312,20 @@ def test_task_set_is_served_by_survivors_once_the_initiator_is_lost():
     for m in served:
         three.on_message(m, 2.22)
     assert three.schedule and three.held is not None
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), n=st.integers(3, 9), t_fail=st.floats(0.05, 4.0),
+       delay=st.sampled_from([0.01, 0.05]), lossy=st.booleans())
+def test_robot_lost_while_bidding_leaves_the_rest_converged_on_distinct_tasks(seed, n, t_fail, delay, lossy):
+    """Fewer robots than tasks from mid-auction on: a task a robot left for a better one at a new eps stays
+    open (nobody has to take it), and that must not keep the survivors from converging."""
+    from runtime.allocation.simulate import make_agents
+    c = integer_instance(seed, n, 1000)
+    agents = make_agents("auction", c)
+    extra = dict(drop=0.1, duplicate=0.1, jitter=0.5 * delay) if lossy else {}
+    bus = BusParams(delay=delay, seed=seed, **extra)
+    held, _, _, converged = run(agents, {j: (float(j), 0.0) for j in range(n)}, bus, failures={2: t_fail},
+                                until=600)
+    assert converged
+    assert 2 not in held and None not in held.values() and len(set(held.values())) == n - 1

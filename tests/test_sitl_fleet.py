@@ -83,3 +83,32 @@ def test_fleet_plans_around_boxes(tmp_path):
     assert res["valid"], res
     assert all(e < 0.25 for e in res["final_error"].values()), res["final_error"]
     assert res["sim_time"] < 120
+
+
+@pytest.mark.slow
+def test_a_robot_that_never_comes_up_is_treated_as_lost_and_the_rest_converge(tmp_path):
+    """Robot 4 is configured as every daemon's peer but never starts.  The link only times out peers it
+    has heard, so without comms.startup_grace the epsilon auction would wait for robot 4's rung for ever."""
+    from runtime import config as C
+    from runtime.daemon import Daemon
+    f = launcher.build(_fleet_copy(tmp_path), tmp_path / "run", seed=3)
+    daemons = {}
+    try:
+        daemons = {rid: Daemon(C.load_robot(r.config_path)) for rid, r in f.robots.items() if rid != 4}
+        grace = daemons[1].cfg.comms.startup_grace
+        for d in daemons.values():
+            d.open(f.world.t)
+        while f.world.t < grace + 60:
+            f.advance_to(f.world.t + 0.05)
+            for d in daemons.values():
+                d.step(f.world.t)
+            if f.world.t > grace and all(d.agent.converged for d in daemons.values()):
+                break
+        assert all(d.agent.converged for d in daemons.values())
+        assert all(d.stats.peers_lost == [4] for d in daemons.values())
+        held = [d.agent.assignment for d in daemons.values()]
+        assert None not in held and len(set(held)) == 3
+    finally:
+        for d in daemons.values():
+            d.close()
+        f.close()

@@ -300,11 +300,14 @@ class EpsAuctionAgent:
         self.holder[task] = holder
 
     def _full(self) -> bool:
-        """My table shows every live robot (up to N_T of them) on a distinct task."""
+        """My table shows every live robot (up to N_T of them) holding a task.  A robot may appear on two
+        tasks: one it left when a new eps made another better, or one whose displacement I have not heard
+        of yet.  With fewer robots than tasks nobody takes the task it left, so counting entries instead of
+        robots would keep the fleet from converging; the left task is simply open at its price."""
         if self.book.n_tasks is None:
             return False
         target = min(self.book.n_tasks + len(self._dummies), len(self.alive) + 1)
-        return len(self._holders) == target and sum(self._holders.values()) == target
+        return len(self._holders) == target
 
     # ------------------------------------------------------------------ messages
     def _on_price(self, m: Price, now: float) -> list:
@@ -332,6 +335,13 @@ class EpsAuctionAgent:
             return []
         if new_key < cur_key and cur_h == self.robot_id:
             return [self._entry(m.task, m.sender)]       # the sender's view is stale
+        if new_key < cur_key and cur_h == 0 and m.holder == m.sender and m.sender in self.alive:
+            # The task was freed when its holder was lost, and the sender still claims it at an older, lower
+            # price: it never heard the lost robot outbid it.  Nobody else holds it, so the claim stands, at the
+            # price I know; telling the sender that price makes our tables agree.
+            self._set(m.task, cur_p, m.sender)
+            self._last_change = now
+            return [self._entry(m.task, m.sender)]
         return []
 
     def _on_taskinfo(self, m: TaskInfo, now: float) -> list:

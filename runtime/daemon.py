@@ -235,10 +235,12 @@ class Daemon:
         the link only times out peers it has heard, and a robot that never came up must not hold the
         allocation back (the epsilon auction waits for every live peer's rung).  If it turns up later, its
         first message makes it live again."""
+        if self._never_heard_reported:
+            return []
         if self._first_cycle is None:
             self._first_cycle = now
         self._heard.update(getattr(self.link, "peers_alive", ()))
-        if self._never_heard_reported or now - self._first_cycle < self.cfg.comms.startup_grace:
+        if now - self._first_cycle < self.cfg.comms.startup_grace:
             return []
         self._never_heard_reported = True
         return sorted(p.id for p in self.cfg.comms.peers if p.id not in self._heard)

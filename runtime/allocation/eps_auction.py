@@ -10,7 +10,7 @@ order, loss or duplication of messages.  A robot that sees its task taken at a h
 Epsilon-scaling: eps runs down one ladder the whole fleet shares, eps_k = ``eps_final`` * ``theta``**k
 with ``eps_final`` = ``cost_unit`` / (n + 1), from the first rung at or above (my largest cost) / ``theta``
 down to k = 0.  ``Price.phase`` carries the sender's k, the rungs it has left.  A robot steps down a rung
-when its table shows every robot holding a distinct task and nothing has changed for ``bid_timeout / 4``
+when its table shows every live robot holding a task and nothing has changed for ``bid_timeout / 4``
 (or nothing at all for twice that: its table may be stale), and only when every live peer has told it
 (by any ``Price`` it sent) that it stands on the same rung or a lower one; it then tells everyone its
 new rung with its entry, and keeps its task only if the task is still within the new eps of its best
@@ -93,7 +93,6 @@ class EpsAuctionAgent:
         self._notices: dict[int, list] = {}        # displaced robot -> [task, deadline, tries]
         self._dummies: set[int] = set()            # "no task" slots when robots outnumber tasks
         self._peer_rung: dict[int, int] = {}       # robot -> lowest rung it has reported
-        self.barrier_waits = 0                     # ticks spent quiet but held back by a peer's rung
         self.log = get_logger("alloc.auction", self.robot_id)
 
     # ------------------------------------------------------------------ agent interface
@@ -155,7 +154,7 @@ class EpsAuctionAgent:
         full = self._full()
         still = now - self._last_change
         quiet = (full and still >= self.settle) or still >= 2 * self.settle
-        stepping = self.schedule and self.phase < len(self.schedule) - 1 and quiet
+        stepping = bool(self.schedule) and self.phase < len(self.schedule) - 1 and quiet
         if stepping and self._fleet_caught_up():
             self.phase += 1
             self._last_change = now
@@ -163,12 +162,13 @@ class EpsAuctionAgent:
             out += rebid
             if not rebid and self.held is not None:
                 out.append(self._entry(self.held, BROADCAST))      # my new rung, for the others' barrier
-        elif (not full or stepping or not self.schedule) and self._active and now - self._last_solicit >= self.bid_timeout and (
-                still >= self.bid_timeout or (not self.schedule and now - self._active_since >= self.bid_timeout)):
+        elif ((not full or stepping or not self.schedule) and self._active
+              and now - self._last_solicit >= self.bid_timeout
+              and (still >= self.bid_timeout
+                   or (not self.schedule and now - self._active_since >= self.bid_timeout))):
+            # missing entries, a peer's rung (I wait at the barrier) or part of the task set: ask
             self._last_solicit = now
             out.append(Status(self.robot_id, BROADCAST, 0, NO_TASK if self.held is None else self.held, False))
-        if stepping and not self._fleet_caught_up():
-            self.barrier_waits += 1
         if self.held is not None and now - self._last_own >= self.keepalive:
             out.append(self._entry(self.held, BROADCAST))
         out += self._resend_notices(now)
@@ -352,7 +352,8 @@ class EpsAuctionAgent:
         if not self.book.learn(m.task, m.x, m.y, m.n_tasks):
             self.dropped["contradicts task set"] += 1
             return []
-        self._task_source = m.sender if self._task_source is None else self._task_source
+        if self._task_source is None:
+            self._task_source = m.sender
         return self._ready(now)
 
     def _on_status(self, m: Status, now: float) -> list:

@@ -261,3 +261,11 @@ def test_positive_accepts_only_finite_positive(value):
         assert not (math.isfinite(value) and 0 < value <= 1000) and "--size" in str(exc)
     else:
         assert 0 < v <= 1000
+
+
+def test_mission_timeout_covers_the_longest_path_of_either_planner():
+    from sitl.experiments.formation_world import mission_timeout
+    a_star = np.array([[10.0, 20.0], [15.0, 12.0]])
+    rrt = np.array([[14.0, 60.0], [np.inf, 13.0]])          # a detour, and a pair RRT did not connect
+    assert mission_timeout(a_star, a_star, 0.5) == pytest.approx(30 + 2 * 20 / 0.5)
+    assert mission_timeout(a_star, rrt, 0.5) == pytest.approx(30 + 2 * 60 / 0.5)

@@ -100,7 +100,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                    help="a formation_world_drive.csv of an earlier run with the same settings: its missions are "
                         "kept, only the missing ones are driven (so --drive-cases can grow over several runs)")
     d.add_argument("--drive-timeout", type=float, default=None,
-                   help="sim seconds per driven mission (default: 30 + 1.5 x the longest A* cost / cruise speed)")
+                   help="sim seconds per driven mission (default: 30 + 2 x the longest path of the mission's "
+                        "A* or planner costs / cruise speed)")
 
 
 # ---------------------------------------------------------------------- scenarios and missions
@@ -301,6 +302,14 @@ def drive_inflate(args) -> float:
     return CREATE2_RADIUS + 0.5 * (args.drive_resolution or args.resolution)
 
 
+def mission_timeout(a_star: np.ndarray, costs: np.ndarray, cruise: float) -> float:
+    """Sim seconds a driven mission may take: 30 s plus twice the longest path in the mission's A* or planner
+    matrix at cruise speed.  An RRT path can be far longer than the A* one (the daemons plan their own RRT),
+    and a bound from the A* costs alone cut off robots still driving such detours."""
+    finite = [float(m[np.isfinite(m)].max()) for m in (a_star, costs) if np.isfinite(m).any()]
+    return 30.0 + 2.0 * max(finite, default=0.0) / cruise
+
+
 def drive_settings(args) -> dict:
     """What a driven mission's outcome depends on besides its cell, case and method (kept in every row, so
     that --drive-resume can refuse rows driven otherwise)."""
@@ -377,7 +386,6 @@ def drive_cell(n: int, percent: int, args, planners, methods, out: Path,
         robots, yaws, tasks = mission(world, n, args.seed, percent, case, inflate)
         a_star = cost_matrix(grid, robots, tasks, planner="astar")
         optimum = hungarian(a_star)[1]
-        timeout = args.drive_timeout or 30.0 + 1.5 * float(a_star.max()) / args.cruise_speed
         for p in planners:
             if all((p, n, percent, case, m) in done for m in methods):
                 rows += [done[(p, n, percent, case, m)] for m in methods]
@@ -385,6 +393,7 @@ def drive_cell(n: int, percent: int, args, planners, methods, out: Path,
             c = a_star if p == "astar" else planner_costs(grid, robots, tasks, p, args.seed * 100003 + case,
                                                           args.rrt_iterations, args.rrt_raw)
             offline = fc.run_methods(c, methods, optimum) if np.all(np.isfinite(c)) else {}
+            timeout = args.drive_timeout or mission_timeout(a_star, c, args.cruise_speed)
             for m in methods:
                 if (p, n, percent, case, m) in done:
                     rows.append(done[(p, n, percent, case, m)])

@@ -269,3 +269,35 @@ def test_mission_timeout_covers_the_longest_path_of_either_planner():
     rrt = np.array([[14.0, 60.0], [np.inf, 13.0]])          # a detour, and a pair RRT did not connect
     assert mission_timeout(a_star, a_star, 0.5) == pytest.approx(30 + 2 * 20 / 0.5)
     assert mission_timeout(a_star, rrt, 0.5) == pytest.approx(30 + 2 * 60 / 0.5)
+
+
+_DRIVE_HEADER = ("planner,robots,obstacles_pct,method,case,field_m,resolution_m,seed,cruise_speed,inflate_m,"
+                 "rrt_iterations,rrt_raw,drive_timeout,driven_m,arrived,valid\n")
+_DRIVE_ROW = "astar,4,5,rtma,0,75.0,0.5,1,0.5,0.42,20000,False,nan,101.5,4,True\n"
+
+
+@settings(max_examples=150, deadline=None)
+@given(body=st.text(max_size=200) | st.builds(lambda k: (_DRIVE_HEADER + _DRIVE_ROW)[:k], st.integers(0, 200)),
+       raw=st.binary(max_size=60))
+def test_drive_resume_file_never_raises_anything_but_input_error(tmp_path_factory, body, raw):
+    """Random, truncated and undecodable --drive-resume files: rows or one InputError, nothing else."""
+    import argparse
+    from runtime.errors import InputError
+    from sitl.experiments.formation_world import load_resume
+    args = argparse.Namespace(drive_size=None, size=75.0, drive_resolution=None, resolution=0.5, seed=1,
+                              cruise_speed=0.5, drive_inflate=0.42, rrt_iterations=20000, rrt_raw=False,
+                              drive_timeout=None)
+    d = tmp_path_factory.mktemp("resume")
+    for name, data in (("text.csv", body.encode()), ("bytes.csv", raw)):
+        path = d / name
+        path.write_bytes(data)
+        try:
+            load_resume(path, args)
+        except InputError:
+            pass
+    assert load_resume(_write(d / "ok.csv", _DRIVE_HEADER + _DRIVE_ROW), args)[("astar", 4, 5, 0, "rtma")]["valid"]
+
+
+def _write(path, text):
+    path.write_text(text)
+    return path

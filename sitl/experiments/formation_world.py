@@ -333,16 +333,18 @@ def load_resume(path: str | Path, args) -> dict[tuple, dict]:
             raw = list(csv.DictReader(fh))
     except OSError as e:
         raise InputError(f"--drive-resume {path}: cannot read it ({e.strerror or e})") from None
+    except (UnicodeDecodeError, csv.Error) as e:
+        raise InputError(f"--drive-resume {path}: expected a CSV file ({e})") from None
     want = drive_settings(args)
     out: dict[tuple, dict] = {}
     for i, r in enumerate(raw, start=2):          # line numbers: the header is line 1
-        missing = [k for k in (*want, *_INT_COLUMNS, *_TEXT_COLUMNS[:2], "driven_m") if k not in r]
+        missing = [k for k in (*want, *_INT_COLUMNS, "planner", "method", "driven_m") if r.get(k) is None]
         if missing:
             raise InputError(f"--drive-resume {path}: expected a formation_world_drive.csv written with "
                              f"--drive-resume support, line {i} has no column {missing[0]!r}")
         try:
-            row = {k: _parse_cell(k, v) for k, v in r.items()}
-        except ValueError:
+            row = {k: _parse_cell(k, v) for k, v in r.items() if k is not None}     # None: extra fields
+        except (ValueError, TypeError):
             raise InputError(f"--drive-resume {path} line {i}: expected numbers in the numeric columns") from None
         for k, mine in want.items():
             theirs = row[k]

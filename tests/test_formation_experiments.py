@@ -301,3 +301,35 @@ def test_drive_resume_file_never_raises_anything_but_input_error(tmp_path_factor
 def _write(path, text):
     path.write_text(text)
     return path
+
+
+@pytest.mark.slow
+def test_interrupted_drive_keeps_finished_cells_for_resume(tmp_path, monkeypatch):
+    """Each driven cell is saved when it finishes: after a crash in the second cell, the first is on disk and
+    --drive-resume drives only what is missing."""
+    from sitl.experiments import formation_world as fw
+    monkeypatch.chdir(tmp_path)
+    real_cell, real_mission = fw.drive_cell, fw.drive_mission
+    cells_run, missions = [], []
+
+    def crashing_cell(n, *a, **k):
+        cells_run.append(n)
+        if len(cells_run) == 2:
+            raise RuntimeError("power cut")
+        return real_cell(n, *a, **k)
+
+    argv = ["experiment", "formation-world", "--out", "run", "--cases", "1", "--robots", "2,3", "--fractions", "5",
+            "--planners", "astar", "--methods", "rtma", "--drive", "--drive-cases", "1", "--drive-size", "20",
+            "--drive-resolution", "0.25", "--no-png", "--jobs", "1"]
+    monkeypatch.setattr(fw, "drive_cell", crashing_cell)
+    with pytest.raises(RuntimeError, match="power cut"):
+        cli.main(argv)
+    saved = _rows(tmp_path / "run" / "formation_world_drive.csv")
+    assert [r["robots"] for r in saved] == ["2"]
+    monkeypatch.setattr(fw, "drive_cell", real_cell)
+    monkeypatch.setattr(fw, "drive_mission", lambda *a, **k: missions.append(a) or real_mission(*a, **k))
+    (tmp_path / "run" / "formation_world_drive.csv").rename(tmp_path / "first.csv")
+    assert cli.main(argv + ["--drive-resume", "first.csv"]) == 0
+    assert len(missions) == 1 and "3r_5pct" in str(missions[0][1])
+    both = _rows(tmp_path / "run" / "formation_world_drive.csv")
+    assert [r["robots"] for r in both] == ["2", "3"] and both[0] == saved[0]

@@ -620,23 +620,32 @@ def run(args: argparse.Namespace) -> int:
             log.info("--drive-resume: %d earlier missions of this run's cells kept",
                      sum(1 for c in mine.values() for k in c if k[3] < args.drive_cases and k[0] in planners
                          and k[4] in methods))
+        finished: dict[int, list[dict]] = {}
+
+        def cell_done(k: int, cell_rows: list[dict]) -> None:
+            # save every finished cell at once: an interrupted run leaves them for --drive-resume
+            finished[k] = cell_rows
+            report.write_csv(out / "formation_world_drive.csv", [r for j in sorted(finished) for r in finished[j]])
+            log.info("driven cells %d/%d done (%d robots, %d%%)", len(finished), len(cells), *cells[k])
+
         if args.jobs == 1 or len(cells) == 1:
-            for n, pct in cells:
-                drive_rows += drive_cell(n, pct, args, planners, methods, out, mine[(n, pct)])
+            for k, (n, pct) in enumerate(cells):
+                cell_done(k, drive_cell(n, pct, args, planners, methods, out, mine[(n, pct)]))
         else:
-            from concurrent.futures import ProcessPoolExecutor
+            from concurrent.futures import ProcessPoolExecutor, as_completed
             # largest fleets first (they take longest); results kept in the cells' order
             order = sorted(range(len(cells)), key=lambda k: -cells[k][0])
             plain = argparse.Namespace(**{k: v for k, v in vars(args).items() if not callable(v)})   # picklable
             with ProcessPoolExecutor(max_workers=min(args.jobs, len(cells))) as pool:
-                jobs = {k: pool.submit(drive_cell, *cells[k], plain, planners, methods, out, mine[cells[k]])
+                jobs = {pool.submit(drive_cell, *cells[k], plain, planners, methods, out, mine[cells[k]]): k
                         for k in order}
-                for k in range(len(cells)):
-                    drive_rows += jobs[k].result()
+                for job in as_completed(jobs):
+                    cell_done(jobs[job], job.result())
+        drive_rows = [r for k in sorted(finished) for r in finished[k]]
     drive_wall = time.perf_counter() - t1
     written = [report.write_csv(out / "formation_world.csv", rows)]
     if drive_rows:
-        written.append(report.write_csv(out / "formation_world_drive.csv", drive_rows))
+        written.append(out / "formation_world_drive.csv")      # written as the cells finished
     cmd = (f"mrta experiment formation-world --cases {args.cases} --robots {args.robots} --fractions {args.fractions} "
            f"--planners {args.planners} --methods {','.join(methods)} --size {args.size:g} "
            f"--resolution {args.resolution:g} --seed {args.seed}" + (" --rrt-raw" if args.rrt_raw else ""))

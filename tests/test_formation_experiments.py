@@ -329,7 +329,7 @@ def test_interrupted_drive_keeps_finished_cells_for_resume(tmp_path, monkeypatch
     monkeypatch.setattr(fw, "drive_cell", real_cell)
     monkeypatch.setattr(fw, "drive_mission", lambda *a, **k: missions.append(a) or real_mission(*a, **k))
     (tmp_path / "run" / "formation_world_drive.csv").rename(tmp_path / "first.csv")
-    assert cli.main(argv + ["--drive-resume", "first.csv"]) == 0
+    assert cli.main(argv + ["--drive-resume", "first.csv", "first.csv"]) == 0       # several files: merged
     assert len(missions) == 1 and "3r_5pct" in str(missions[0][1])
     both = _rows(tmp_path / "run" / "formation_world_drive.csv")
     assert [r["robots"] for r in both] == ["2", "3"] and both[0] == saved[0]

@@ -96,9 +96,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     d.add_argument("--cruise-speed", type=float, default=0.5, help="robot cruise speed when driving (m/s)")
     d.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                    help="driven cells run in this many processes at once (default: one per CPU, %(default)s)")
-    d.add_argument("--drive-resume", default=None, metavar="CSV",
-                   help="a formation_world_drive.csv of an earlier run with the same settings: its missions are "
-                        "kept, only the missing ones are driven (so --drive-cases can grow over several runs)")
+    d.add_argument("--drive-resume", default=None, metavar="CSV", nargs="+",
+                   help="formation_world_drive.csv files of earlier runs with the same settings (later files win): "
+                        "their missions are kept, only the missing ones are driven (so --drive-cases can grow "
+                        "over several runs, and an interrupted run can go on)")
     d.add_argument("--drive-timeout", type=float, default=None,
                    help="sim seconds per driven mission (default: 30 + 2 x the longest path of the mission's "
                         "A* or planner costs / cruise speed)")
@@ -597,7 +598,9 @@ def _check(args) -> tuple:
 
 def run(args: argparse.Namespace) -> int:
     robots, fractions, planners, methods = _check(args)
-    resumed = load_resume(args.drive_resume, args) if args.drive and args.drive_resume else {}   # fail early
+    resumed = {}
+    for path in (args.drive_resume or []) if args.drive else []:    # checked before the cost tables run
+        resumed.update(load_resume(path, args))
     out = Path(args.out)
     t0 = time.perf_counter()
     rows: list[dict] = []
@@ -660,7 +663,7 @@ def run(args: argparse.Namespace) -> int:
         if args.drive_resolution:
             cmd += f" --drive-resolution {args.drive_resolution:g}"
         if args.drive_resume:
-            cmd += f" --drive-resume {args.drive_resume}"
+            cmd += " --drive-resume " + " ".join(map(str, args.drive_resume))
     fields = ", ".join(f"{pct} %: {k} boxes, {100 * occ:.1f} % of cells blocked after inflation"
                        for pct, (k, occ) in worlds.items())
     setup = (f"{args.size:g} x {args.size:g} m field, grid {args.resolution:g} m, walls; one random field of "

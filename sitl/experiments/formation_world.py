@@ -382,15 +382,11 @@ def drive_cell(n: int, percent: int, args, planners, methods, out: Path,
     world, grid = scenario(size, res, percent, args.seed, inflate)
     rows = []
     for case in range(args.drive_cases):
-        keys = [(p, n, percent, case, m) for p in planners for m in methods]
-        if all(k in done for k in keys):
-            rows += [done[k] for k in keys]
-            continue
         robots, yaws, tasks = mission(world, n, args.seed, percent, case, inflate)
         a_star = cost_matrix(grid, robots, tasks, planner="astar")
         optimum = hungarian(a_star)[1]
         for p in planners:
-            if all((p, n, percent, case, m) in done for m in methods):
+            if all((p, n, percent, case, m) in done for m in methods):     # skip the planner's costs too
                 rows += [done[(p, n, percent, case, m)] for m in methods]
                 continue
             c = a_star if p == "astar" else planner_costs(grid, robots, tasks, p, args.seed * 100003 + case,

@@ -304,32 +304,32 @@ def _write(path, text):
 
 
 @pytest.mark.slow
-def test_interrupted_drive_keeps_finished_cells_for_resume(tmp_path, monkeypatch):
-    """Each driven cell is saved when it finishes: after a crash in the second cell, the first is on disk and
-    --drive-resume drives only what is missing."""
+def test_interrupted_drive_keeps_finished_missions_for_resume(tmp_path, monkeypatch):
+    """Each driven mission is saved when it finishes: after a crash in the second mission, the first is on disk
+    and --drive-resume drives only what is missing."""
     from sitl.experiments import formation_world as fw
     monkeypatch.chdir(tmp_path)
-    real_cell, real_mission = fw.drive_cell, fw.drive_mission
-    cells_run, missions = [], []
+    real_mission = fw.drive_mission
+    missions = []
 
-    def crashing_cell(n, *a, **k):
-        cells_run.append(n)
-        if len(cells_run) == 2:
+    def crashing_mission(*a, **k):
+        missions.append(a)
+        if len(missions) == 2:
             raise RuntimeError("power cut")
-        return real_cell(n, *a, **k)
+        return real_mission(*a, **k)
 
-    argv = ["experiment", "formation-world", "--out", "run", "--cases", "1", "--robots", "2,3", "--fractions", "5",
-            "--planners", "astar", "--methods", "rtma", "--drive", "--drive-cases", "1", "--drive-size", "20",
-            "--drive-resolution", "0.25", "--no-png", "--jobs", "1"]
-    monkeypatch.setattr(fw, "drive_cell", crashing_cell)
+    argv = ["experiment", "formation-world", "--out", "run", "--cases", "1", "--robots", "2", "--fractions", "5",
+            "--planners", "astar", "--methods", "rtma", "--drive", "--drive-cases", "2", "--drive-size", "20",
+            "--drive-resolution", "0.25", "--no-png", "--jobs", "1"]          # one cell of two missions
+    monkeypatch.setattr(fw, "drive_mission", crashing_mission)
     with pytest.raises(RuntimeError, match="power cut"):
         cli.main(argv)
     saved = _rows(tmp_path / "run" / "formation_world_drive.csv")
-    assert [r["robots"] for r in saved] == ["2"]
-    monkeypatch.setattr(fw, "drive_cell", real_cell)
+    assert [r["case"] for r in saved] == ["0"]
+    missions.clear()
     monkeypatch.setattr(fw, "drive_mission", lambda *a, **k: missions.append(a) or real_mission(*a, **k))
     (tmp_path / "run" / "formation_world_drive.csv").rename(tmp_path / "first.csv")
     assert cli.main(argv + ["--drive-resume", "first.csv", "first.csv"]) == 0       # several files: merged
-    assert len(missions) == 1 and "3r_5pct" in str(missions[0][1])
+    assert len(missions) == 1 and "case1" in str(missions[0][1])
     both = _rows(tmp_path / "run" / "formation_world_drive.csv")
-    assert [r["robots"] for r in both] == ["2", "3"] and both[0] == saved[0]
+    assert [r["case"] for r in both] == ["0", "1"] and both[0] == saved[0]

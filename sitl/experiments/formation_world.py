@@ -370,53 +370,75 @@ def _parse_cell(key: str, value: str):
     return float(value)
 
 
-def drive_cell(n: int, percent: int, args, planners, methods, out: Path,
-               done: dict[tuple, dict] | None = None) -> list[dict]:
-    """``--drive-cases`` missions of one cell driven with every planner and method; missions in ``done``
-    (from --drive-resume) are taken from there instead of driven again."""
+def drive_keys(cells, cases: int, planners, methods) -> list[tuple]:
+    """Every driven mission of a run as (planner, robots, obstacles_pct, case, method), in the order of the
+    drive CSV: cell by cell, then case, planner and method."""
+    return [(p, n, pct, case, m) for n, pct in cells for case in range(cases) for p in planners for m in methods]
+
+
+def drive_one(key: tuple, args) -> dict:
+    """Drive one mission (a :func:`drive_keys` entry) with daemons in the pybullet SITL; its CSV row.  The
+    mission, its costs and its offline result are rebuilt from the settings, so missions can run in any
+    order and in any process."""
+    p, n, percent, case, m = key
+    out = Path(args.out)
     size = args.drive_size or args.size
-    res = args.drive_resolution or args.resolution
     inflate = drive_inflate(args)
-    done = done or {}
-    settings = drive_settings(args)
-    world, grid = scenario(size, res, percent, args.seed, inflate)
-    rows = []
-    for case in range(args.drive_cases):
-        robots, yaws, tasks = mission(world, n, args.seed, percent, case, inflate)
-        a_star = cost_matrix(grid, robots, tasks, planner="astar")
-        optimum = hungarian(a_star)[1]
-        for p in planners:
-            if all((p, n, percent, case, m) in done for m in methods):     # skip the planner's costs too
-                rows += [done[(p, n, percent, case, m)] for m in methods]
-                continue
-            c = a_star if p == "astar" else planner_costs(grid, robots, tasks, p, args.seed * 100003 + case,
-                                                          args.rrt_iterations, args.rrt_raw)
-            offline = fc.run_methods(c, methods, optimum) if np.all(np.isfinite(c)) else {}
-            timeout = args.drive_timeout or mission_timeout(a_star, c, args.cruise_speed)
-            for m in methods:
-                if (p, n, percent, case, m) in done:
-                    rows.append(done[(p, n, percent, case, m)])
-                    continue
-                run_dir = out / "drive" / f"{p}_{n}r_{percent}pct_case{case}_{m}"
-                fleet_path = write_fleet(run_dir, world, robots, yaws, tasks, p, args.cruise_speed, timeout,
-                                         args.seed * 1000 + case, inflate)
-                d = drive_mission(fleet_path, run_dir, m, timeout)
-                held = [d["assignment"].get(i + 1) for i in range(n)]
-                same = m in offline and held == offline[m]["assignment"]
-                planned = float(sum(c[i, t] for i, t in enumerate(held) if t is not None)) if d["valid"] else math.nan
-                rows.append({"planner": p, "robots": n, "obstacles_pct": percent, "method": m, "case": case,
-                             **settings, "optimum_astar": optimum,
-                             "offline_global_cost": offline[m]["cost"] if m in offline else math.nan,
-                             "same_assignment_as_offline": same, "valid": d["valid"],
-                             "planned_cost": planned, "bid_cost": d["bid_cost"], "driven_m": d["driven"],
-                             "driven_over_planned": d["driven"] / planned if planned > 0 else math.nan,
-                             "arrived": d["arrived"], "sim_s": d["sim_time"], "wall_s": d["wall_s"],
-                             "sim_over_wall": d["sim_time"] / d["wall_s"] if d["wall_s"] > 0 else math.nan,
-                             "events": "; ".join(d["events"])})
-                log.info("drive %s %d robots %d%% case %d %s: planned %.1f driven %.1f arrived %d/%d, %.0f s sim "
-                         "in %.0f s", p, n, percent, case, m, planned, d["driven"], d["arrived"], n,
-                         d["sim_time"], d["wall_s"])
-    return rows
+    world, grid = scenario(size, args.drive_resolution or args.resolution, percent, args.seed, inflate)
+    robots, yaws, tasks = mission(world, n, args.seed, percent, case, inflate)
+    a_star = cost_matrix(grid, robots, tasks, planner="astar")
+    optimum = hungarian(a_star)[1]
+    c = a_star if p == "astar" else planner_costs(grid, robots, tasks, p, args.seed * 100003 + case,
+                                                  args.rrt_iterations, args.rrt_raw)
+    offline = fc.run_methods(c, [m], optimum).get(m) if np.all(np.isfinite(c)) else None
+    timeout = args.drive_timeout or mission_timeout(a_star, c, args.cruise_speed)
+    run_dir = out / "drive" / f"{p}_{n}r_{percent}pct_case{case}_{m}"
+    fleet_path = write_fleet(run_dir, world, robots, yaws, tasks, p, args.cruise_speed, timeout,
+                             args.seed * 1000 + case, inflate)
+    d = drive_mission(fleet_path, run_dir, m, timeout)
+    held = [d["assignment"].get(i + 1) for i in range(n)]
+    planned = float(sum(c[i, t] for i, t in enumerate(held) if t is not None)) if d["valid"] else math.nan
+    return {"planner": p, "robots": n, "obstacles_pct": percent, "method": m, "case": case,
+            **drive_settings(args), "optimum_astar": optimum,
+            "offline_global_cost": offline["cost"] if offline else math.nan,
+            "same_assignment_as_offline": bool(offline) and held == offline["assignment"], "valid": d["valid"],
+            "planned_cost": planned, "bid_cost": d["bid_cost"], "driven_m": d["driven"],
+            "driven_over_planned": d["driven"] / planned if planned > 0 else math.nan,
+            "arrived": d["arrived"], "sim_s": d["sim_time"], "wall_s": d["wall_s"],
+            "sim_over_wall": d["sim_time"] / d["wall_s"] if d["wall_s"] > 0 else math.nan,
+            "events": "; ".join(d["events"])}
+
+
+def drive_all(keys: list[tuple], done: dict[tuple, dict], args) -> list[dict]:
+    """Drive the missions of ``keys`` not in ``done`` (``--jobs`` at a time) and return every row in the
+    order of ``keys``.  The drive CSV is rewritten as each mission finishes, so an interrupted run (a crash,
+    a session ending) loses at most the missions under way, and ``--drive-resume`` goes on from the file."""
+    have = {k: done[k] for k in keys if k in done}
+    todo = [k for k in keys if k not in have]
+    path = Path(args.out) / "formation_world_drive.csv"
+    if have:
+        log.info("--drive-resume: %d earlier missions kept, %d to drive", len(have), len(todo))
+
+    def finished(key: tuple, row: dict) -> None:
+        have[key] = row
+        report.write_csv(path, [have[k] for k in keys if k in have])
+        p, n, pct, case, m = key
+        log.info("drive %d/%d %s %d robots %d%% case %d %s: planned %.1f driven %.1f arrived %d/%d, %.0f s sim "
+                 "in %.0f s", len(have), len(keys), p, n, pct, case, m, row["planned_cost"], row["driven_m"],
+                 row["arrived"], n, row["sim_s"], row["wall_s"])
+
+    if args.jobs == 1 or len(todo) <= 1:
+        for k in todo:
+            finished(k, drive_one(k, args))
+    else:
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+        plain = argparse.Namespace(**{k: v for k, v in vars(args).items() if not callable(v)})   # picklable
+        with ProcessPoolExecutor(max_workers=min(args.jobs, len(todo))) as pool:
+            # largest fleets first: they take longest, and the small ones fill the gaps at the end
+            jobs = {pool.submit(drive_one, k, plain): k for k in sorted(todo, key=lambda k: -k[1])}
+            for job in as_completed(jobs):
+                finished(jobs[job], job.result())
+    return [have[k] for k in keys]
 
 
 # ---------------------------------------------------------------------- report
@@ -614,37 +636,11 @@ def run(args: argparse.Namespace) -> int:
     if args.drive:
         driven = fc.parse_ints(args.drive_robots, "--drive-robots", 2, 250) if args.drive_robots else robots
         cells = [(n, pct) for pct in fractions for n in driven]
-        mine = {cell: {k: r for k, r in resumed.items() if (k[1], k[2]) == cell} for cell in cells}
-        if resumed:
-            log.info("--drive-resume: %d earlier missions of this run's cells kept",
-                     sum(1 for c in mine.values() for k in c if k[3] < args.drive_cases and k[0] in planners
-                         and k[4] in methods))
-        finished: dict[int, list[dict]] = {}
-
-        def cell_done(k: int, cell_rows: list[dict]) -> None:
-            # save every finished cell at once: an interrupted run leaves them for --drive-resume
-            finished[k] = cell_rows
-            report.write_csv(out / "formation_world_drive.csv", [r for j in sorted(finished) for r in finished[j]])
-            log.info("driven cells %d/%d done (%d robots, %d%%)", len(finished), len(cells), *cells[k])
-
-        if args.jobs == 1 or len(cells) == 1:
-            for k, (n, pct) in enumerate(cells):
-                cell_done(k, drive_cell(n, pct, args, planners, methods, out, mine[(n, pct)]))
-        else:
-            from concurrent.futures import ProcessPoolExecutor, as_completed
-            # largest fleets first (they take longest); results kept in the cells' order
-            order = sorted(range(len(cells)), key=lambda k: -cells[k][0])
-            plain = argparse.Namespace(**{k: v for k, v in vars(args).items() if not callable(v)})   # picklable
-            with ProcessPoolExecutor(max_workers=min(args.jobs, len(cells))) as pool:
-                jobs = {pool.submit(drive_cell, *cells[k], plain, planners, methods, out, mine[cells[k]]): k
-                        for k in order}
-                for job in as_completed(jobs):
-                    cell_done(jobs[job], job.result())
-        drive_rows = [r for k in sorted(finished) for r in finished[k]]
+        drive_rows = drive_all(drive_keys(cells, args.drive_cases, planners, methods), resumed, args)
     drive_wall = time.perf_counter() - t1
     written = [report.write_csv(out / "formation_world.csv", rows)]
     if drive_rows:
-        written.append(out / "formation_world_drive.csv")      # written as the cells finished
+        written.append(out / "formation_world_drive.csv")      # written as the missions finished
     cmd = (f"mrta experiment formation-world --cases {args.cases} --robots {args.robots} --fractions {args.fractions} "
            f"--planners {args.planners} --methods {','.join(methods)} --size {args.size:g} "
            f"--resolution {args.resolution:g} --seed {args.seed}" + (" --rrt-raw" if args.rrt_raw else ""))

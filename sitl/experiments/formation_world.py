@@ -434,8 +434,9 @@ def drive_all(keys: list[tuple], done: dict[tuple, dict], args) -> list[dict]:
         from concurrent.futures import ProcessPoolExecutor, as_completed
         plain = argparse.Namespace(**{k: v for k, v in vars(args).items() if not callable(v)})   # picklable
         with ProcessPoolExecutor(max_workers=min(args.jobs, len(todo))) as pool:
-            # largest fleets first: they take longest, and the small ones fill the gaps at the end
-            jobs = {pool.submit(drive_one, k, plain): k for k in sorted(todo, key=lambda k: -k[1])}
+            # case by case, so that a run cut short leaves whole cases; in a case the largest fleets first
+            # (they take longest, the small ones fill the gaps)
+            jobs = {pool.submit(drive_one, k, plain): k for k in sorted(todo, key=lambda k: (k[3], -k[1]))}
             for job in as_completed(jobs):
                 finished(jobs[job], job.result())
     return [have[k] for k in keys]

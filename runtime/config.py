@@ -132,6 +132,7 @@ class PlanningConfig:
     map: Optional[str] = None       # world config used as the map (relative to this file); null: open field
     planner: Literal["astar", "rrt", "euclid"] = "astar"
     inflate: float = field(default=0.17, metadata=rng(0.0, 5.0))   # obstacle inflation: robot radius (m)
+    rrt_iterations: int = field(default=20000, metadata=rng(1, 1_000_000))   # per tree (planner rrt)
 
 
 @dataclass(frozen=True)

@@ -34,6 +34,8 @@ class DaemonStats:
     peers_lost: list = field(default_factory=list)
     cpu_seconds: float = 0.0
     wall_seconds: float = 0.0
+    plan_fallbacks: int = 0        # RRT found no path, the A* path was taken
+    plan_failures: int = 0         # no path at all: headed straight for the goal
 
 
 def make_agent(cfg: C.RobotConfig, cost):
@@ -135,20 +137,30 @@ class Daemon:
                 or math.hypot(pose[0] - self._cost_at[0], pose[1] - self._cost_at[1]) > 0.25):
             ids = sorted(self.tasks)
             row = cost_matrix(self.map, [pose[:2]], [self.tasks[i] for i in ids], planner=self.planner,
-                              seed=self.id, inflate=self.cfg.planning.inflate)[0]
+                              seed=self.id, inflate=self.cfg.planning.inflate,
+                              rrt_iterations=self.cfg.planning.rrt_iterations)[0]
             self._cost_row = {i: float(c) for i, c in zip(ids, row)}
             self._cost_at = (pose[0], pose[1])
         return self._cost_row[task]
 
     def _plan(self, pose, goal) -> list[tuple[float, float]]:
-        from runtime.planning.costs import path
+        """The path to drive to ``goal``: the configured planner's, A*'s when RRT misses (see
+        :func:`runtime.planning.costs.plan_route`), a straight line when the map has none at all."""
+        from runtime.planning.costs import plan_route
 
-        route = path(self.map, pose[:2], goal, planner=self.planner, seed=self.id,
-                     inflate=self.cfg.planning.inflate) if self.map is not None else None
+        if self.map is None:
+            return [(pose[0], pose[1]), goal]
+        p = self.cfg.planning
+        route, used = plan_route(self.map, pose[:2], goal, planner=self.planner, seed=self.id, inflate=p.inflate,
+                                 rrt_iterations=p.rrt_iterations)
         if route is None:
-            if self.map is not None:
-                self.log.warning("no path to (%.2f, %.2f) on the map: heading straight for it", *goal)
-            route = [(pose[0], pose[1]), goal]
+            self.stats.plan_failures += 1
+            self.log.warning("no path to (%.2f, %.2f) on the map: heading straight for it", *goal)
+            return [(pose[0], pose[1]), goal]
+        if used != self.planner:
+            self.stats.plan_fallbacks += 1
+            self.log.warning("%s found no path to (%.2f, %.2f) in two trees: following the %s path", self.planner,
+                             *goal, used)
         return route
 
     # ------------------------------------------------------------------ lifecycle
@@ -291,6 +303,7 @@ class Daemon:
             "base": vars(self.base.stats) if hasattr(self.base, "stats") else {},
             "link": self.link.counters.as_dict() if hasattr(self.link, "counters") else {},
             "gps_rejected": getattr(self.ekf, "gps_rejected", 0),
+            "plan_fallbacks": s.plan_fallbacks, "plan_failures": s.plan_failures,
         }
 
 

@@ -8,7 +8,7 @@ from hypothesis import given, settings, strategies as st
 from runtime.config import Box, WorldConfig
 from runtime.errors import InputError
 from runtime.planning.astar import cost_table
-from runtime.planning.costs import cost_matrix, grid_for, path
+from runtime.planning.costs import cost_matrix, grid_for, path, plan_route
 from runtime.planning.grid import OccupancyGrid, random_obstacle_field
 from runtime.planning.smoothing import path_length
 
@@ -119,3 +119,26 @@ def test_bad_inputs_raise_one_line_errors():
         assert "\n" not in str(exc.value)
     assert cost_matrix(WALL, [], [(1, 1)]).shape == (0, 1)
     assert isinstance(grid_for(WALL), OccupancyGrid)
+
+
+def test_plan_route_takes_the_astar_path_when_rrt_misses():
+    """RRT trees too small to get round the wall miss the goal; the robot gets the A* path, not a straight
+    line into the wall."""
+    start, goal = (-3.0, -2.0), (3.0, -2.0)
+    grid = grid_for(WALL)
+    route, used = plan_route(WALL, start, goal, planner="rrt", seed=1, rrt_iterations=3)
+    assert used == "astar"
+    assert route == path(WALL, start, goal, "astar")
+    assert route[0] == start and route[-1] == goal and max(y for _, y in route) > 3.0     # round the wall's end
+    assert all(grid.segment_free(a, b) for a, b in zip(route, route[1:]))
+    route, used = plan_route(WALL, start, goal, planner="rrt", seed=1)
+    assert used == "rrt" and route == path(WALL, start, goal, "rrt", seed=1)
+
+
+def test_plan_route_without_any_path():
+    boxed = WorldConfig(size=(10.0, 10.0), walls=True, resolution=0.05, obstacles=(
+        Box(center=(3.0, 1.0), size=(3.0, 0.2)), Box(center=(3.0, -1.0), size=(3.0, 0.2)),
+        Box(center=(1.6, 0.0), size=(0.2, 2.2)), Box(center=(4.4, 0.0), size=(0.2, 2.2))))
+    for planner in ("astar", "rrt"):
+        assert plan_route(boxed, (-3.0, 0.0), (3.0, 0.0), planner=planner, rrt_iterations=50) == (None, "")
+    assert plan_route(None, (0, 0), (1, 1), planner="euclid") == ([(0.0, 0.0), (1.0, 1.0)], "euclid")

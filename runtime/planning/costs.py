@@ -141,6 +141,28 @@ def cost_matrix(world_or_grid: WorldConfig | OccupancyGrid | None, robots_xy, ta
     return np.maximum(out, euclid)
 
 
+def plan_route(world_or_grid: WorldConfig | OccupancyGrid, start: Sequence[float], goal: Sequence[float],
+               planner: str = "astar", seed: int = 0, inflate: float = CREATE2_RADIUS,
+               rrt_iterations: int = 20000) -> tuple[list[Point] | None, str]:
+    """A path for a robot to drive, and the planner that found it.
+
+    RRT is only probabilistically complete: a tree can miss a goal behind a narrow gap, and a robot sent
+    straight at it would push into the boxes.  So an RRT miss grows a second tree (new seed, 4x the
+    iterations), then takes the A* path, which exists whenever the grid connects the two points.
+    (None, "") when A* finds none either.
+    """
+    route = path(world_or_grid, start, goal, planner=planner, seed=seed, inflate=inflate,
+                 rrt_iterations=rrt_iterations)
+    if route is not None or planner != "rrt":
+        return route, planner if route is not None else ""
+    route = path(world_or_grid, start, goal, planner="rrt", seed=seed + 7919, inflate=inflate,
+                 rrt_iterations=4 * rrt_iterations)
+    if route is not None:
+        return route, "rrt"
+    route = path(world_or_grid, start, goal, planner="astar", inflate=inflate)
+    return route, "astar" if route is not None else ""
+
+
 def _with_ends(grid: OccupancyGrid, pts: list[Point], start, goal) -> list[Point]:
     """Replace the snapped end points with the real ones where the straight join is clear, else prepend/append."""
     s, g = (float(start[0]), float(start[1])), (float(goal[0]), float(goal[1]))
@@ -158,8 +180,9 @@ def _with_ends(grid: OccupancyGrid, pts: list[Point], start, goal) -> list[Point
 
 def path(world_or_grid: WorldConfig | OccupancyGrid, start: Sequence[float], goal: Sequence[float],
          planner: str = "astar", seed: int = 0, inflate: float = CREATE2_RADIUS,
-         snap: float | None = None) -> list[Point] | None:
-    """Smoothed waypoints from ``start`` to ``goal`` (world metres, both included), or None if unreachable."""
+         snap: float | None = None, rrt_iterations: int = 20000) -> list[Point] | None:
+    """Smoothed waypoints from ``start`` to ``goal`` (world metres, both included), or None if unreachable
+    (for RRT: not reached within ``rrt_iterations``)."""
     _check_planner(planner)
     pts = _points([start, goal], "path end points")
     if planner == "euclid":
@@ -178,7 +201,8 @@ def path(world_or_grid: WorldConfig | OccupancyGrid, start: Sequence[float], goa
         cx, cy = grid.cell_to_world(np.array([c[0] for c in cells]), np.array([c[1] for c in cells]))
         raw = list(zip(cx.tolist(), cy.tolist()))
     else:
-        raw = rrt_multi(grid, grid.cell_to_world(ix[0], iy[0]), [grid.cell_to_world(ix[1], iy[1])], seed=seed)[0]
+        raw = rrt_multi(grid, grid.cell_to_world(ix[0], iy[0]), [grid.cell_to_world(ix[1], iy[1])],
+                        max_iter=rrt_iterations, seed=seed)[0]
         if raw is None:
             return None
     return _with_ends(grid, smooth(grid, raw), pts[0], pts[1])

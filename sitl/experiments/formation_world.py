@@ -283,16 +283,21 @@ def drive_mission(fleet_path: Path, run_dir: Path, method: str, timeout: float) 
     try:
         res = launcher.run_lockstep(f, timeout=timeout, on_step=odometer)
         bids = {}
+        events = list(res["events"])
         for rid, r in f.robots.items():
             task = r.daemon.agent.assignment
             bids[rid] = r.daemon.agent.book.cost(task) if task is not None else math.nan
+            s = r.daemon.stats
+            if s.plan_fallbacks or s.plan_failures:
+                events.append(f"robot {rid}: {s.plan_fallbacks} path(s) from A* after RRT missed, "
+                              f"{s.plan_failures} without any path")
     finally:
         f.close()
     wall = time.perf_counter() - t0
     arrived = sum(1 for e in res["final_error"].values() if e == e and e < 0.25)
     return {"assignment": res["assignment"], "valid": res["valid"], "bid_cost": float(sum(bids.values())),
             "driven": float(sum(driven.values())), "driven_per_robot": driven, "arrived": arrived,
-            "sim_time": res["sim_time"], "wall_s": wall, "events": res["events"]}
+            "sim_time": res["sim_time"], "wall_s": wall, "events": events}
 
 
 def drive_inflate(args) -> float:

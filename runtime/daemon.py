@@ -35,6 +35,7 @@ class DaemonStats:
     cpu_seconds: float = 0.0
     wall_seconds: float = 0.0
     plan_fallbacks: int = 0        # RRT found no path, the A* path was taken
+    bid_fallbacks: int = 0         # bid costs the first RRT tree missed (priced by a second tree or A*)
     plan_failures: int = 0         # no path at all: headed straight for the goal
 
 
@@ -128,7 +129,7 @@ class Daemon:
     def _cost(self, task: int) -> float:
         """Bid cost: planned path length from the current pose estimate to ``task`` (inf if unreachable).
         One search fills the row for every known task; it is reused until the robot moves 0.25 m."""
-        from runtime.planning.costs import cost_matrix
+        from runtime.planning.costs import bid_costs
 
         pose = self.pose()
         if pose is None or task not in self.tasks:
@@ -136,9 +137,10 @@ class Daemon:
         if (self._cost_at is None or task not in self._cost_row
                 or math.hypot(pose[0] - self._cost_at[0], pose[1] - self._cost_at[1]) > 0.25):
             ids = sorted(self.tasks)
-            row = cost_matrix(self.map, [pose[:2]], [self.tasks[i] for i in ids], planner=self.planner,
-                              seed=self.id, inflate=self.cfg.planning.inflate,
-                              rrt_iterations=self.cfg.planning.rrt_iterations)[0]
+            row, missed = bid_costs(self.map, pose[:2], [self.tasks[i] for i in ids], planner=self.planner,
+                                    seed=self.id, inflate=self.cfg.planning.inflate,
+                                    rrt_iterations=self.cfg.planning.rrt_iterations)
+            self.stats.bid_fallbacks += missed
             self._cost_row = {i: float(c) for i, c in zip(ids, row)}
             self._cost_at = (pose[0], pose[1])
         return self._cost_row[task]
@@ -303,7 +305,7 @@ class Daemon:
             "base": vars(self.base.stats) if hasattr(self.base, "stats") else {},
             "link": self.link.counters.as_dict() if hasattr(self.link, "counters") else {},
             "gps_rejected": getattr(self.ekf, "gps_rejected", 0),
-            "plan_fallbacks": s.plan_fallbacks, "plan_failures": s.plan_failures,
+            "plan_fallbacks": s.plan_fallbacks, "plan_failures": s.plan_failures, "bid_fallbacks": s.bid_fallbacks,
         }
 
 

@@ -1,5 +1,6 @@
 """The daemon's path to its task: what it drives when the configured planner finds none."""
 import logging
+import math
 from pathlib import Path
 
 from runtime import config as C
@@ -15,6 +16,8 @@ class _Link:                      # what the daemon's constructor touches; _plan
 
 def _daemon(planner: str, rrt_iterations: int = 20000) -> Daemon:
     cfg = C.from_dict(C.RobotConfig, {"robot": {"id": 3}, "gps": {"enabled": False},
+                                      "localization": {"initial_pose": [-2.0, 0.0, 0.0]},
+                                      "allocation": {"formation": [[2.0, 0.0], [-2.0, 3.5]]},
                                       "planning": {"map": str(BOXES), "planner": planner,
                                                    "rrt_iterations": rrt_iterations}})
     return Daemon(cfg, base=object(), link=_Link())
@@ -46,3 +49,15 @@ def test_a_found_path_is_the_configured_planners():
     d = _daemon("rrt")
     d._plan((-2.0, 0.0, 0.0), (2.0, 0.0))
     assert (d.stats.plan_fallbacks, d.stats.plan_failures) == (0, 0)
+
+
+def test_rrt_misses_in_bids_are_priced_not_bid_as_cannot():
+    """A robot bidding inf for a task it can reach leaves BS and RTMA without a buyer when they resell it
+    (found driving 6 robots among 40 % obstacles: one task unallocated, one robot idle)."""
+    d = _daemon("rrt", rrt_iterations=3)
+    astar = _daemon("astar")
+    assert d._cost(0) == astar._cost(0) and d._cost(1) == astar._cost(1)     # the A* lengths
+    assert math.isfinite(d._cost(0)) and math.isfinite(d._cost(1))
+    assert d.stats.bid_fallbacks == 2 and d.snapshot()["bid_fallbacks"] == 2
+    fine = _daemon("rrt")
+    assert 4.0 < fine._cost(0) < 6.0 and fine.stats.bid_fallbacks == 0

@@ -8,7 +8,7 @@ from hypothesis import given, settings, strategies as st
 from runtime.config import Box, WorldConfig
 from runtime.errors import InputError
 from runtime.planning.astar import cost_table
-from runtime.planning.costs import cost_matrix, grid_for, path, plan_route
+from runtime.planning.costs import bid_costs, cost_matrix, grid_for, path, plan_route
 from runtime.planning.grid import OccupancyGrid, random_obstacle_field
 from runtime.planning.smoothing import path_length
 
@@ -142,3 +142,18 @@ def test_plan_route_without_any_path():
     for planner in ("astar", "rrt"):
         assert plan_route(boxed, (-3.0, 0.0), (3.0, 0.0), planner=planner, rrt_iterations=50) == (None, "")
     assert plan_route(None, (0, 0), (1, 1), planner="euclid") == ([(0.0, 0.0), (1.0, 1.0)], "euclid")
+
+
+def test_bid_costs_price_rrt_misses_by_a_second_tree_then_astar():
+    start, tasks = (-3.0, -2.0), [(3.0, -2.0), (-3.0, 0.0)]
+    row, missed = bid_costs(WALL, start, tasks, planner="rrt", seed=1, rrt_iterations=3)   # both trees too small
+    assert missed == 2 and row == pytest.approx(cost_matrix(WALL, [start], tasks, "astar")[0])
+    row, missed = bid_costs(WALL, start, tasks, planner="rrt", seed=1)
+    assert missed == 0 and np.array_equal(row, cost_matrix(WALL, [start], tasks, "rrt", seed=1)[0])
+    row, missed = bid_costs(WALL, start, tasks, planner="astar", rrt_iterations=3)
+    assert missed == 0 and np.array_equal(row, cost_matrix(WALL, [start], tasks, "astar")[0])
+    boxed = WorldConfig(size=(10.0, 10.0), walls=True, resolution=0.05, obstacles=(
+        Box(center=(3.0, 1.0), size=(3.0, 0.2)), Box(center=(3.0, -1.0), size=(3.0, 0.2)),
+        Box(center=(1.6, 0.0), size=(0.2, 2.2)), Box(center=(4.4, 0.0), size=(0.2, 2.2))))
+    row, missed = bid_costs(boxed, (-3.0, 0.0), [(3.0, 0.0)], planner="rrt", rrt_iterations=50)
+    assert missed == 1 and row[0] == math.inf                # unreachable stays "cannot"

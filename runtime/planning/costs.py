@@ -141,6 +141,30 @@ def cost_matrix(world_or_grid: WorldConfig | OccupancyGrid | None, robots_xy, ta
     return np.maximum(out, euclid)
 
 
+def bid_costs(world_or_grid: WorldConfig | OccupancyGrid | None, start: Sequence[float], tasks_xy,
+              planner: str = "astar", seed: int = 0, inflate: float = CREATE2_RADIUS,
+              rrt_iterations: int = 20000) -> tuple[np.ndarray, int]:
+    """One robot's bid costs to ``tasks_xy``, priced like the paths :func:`plan_route` gives it, and how many
+    tasks needed a fallback.
+
+    With RRT, tasks the tree missed get a second tree (new seed, 4x the iterations), then their A* length:
+    a robot must not bid "cannot" for a task it can reach, or an auction may have no buyer for it (BS and
+    RTMA resell only to a worse bid).  inf only where A* finds no path either.
+    """
+    row = cost_matrix(world_or_grid, [start], tasks_xy, planner=planner, seed=seed, inflate=inflate,
+                      rrt_iterations=rrt_iterations)[0]
+    missed = np.flatnonzero(~np.isfinite(row))
+    if planner != "rrt" or missed.size == 0:
+        return row, 0
+    tasks = _points(tasks_xy, "task positions")
+    row[missed] = cost_matrix(world_or_grid, [start], tasks[missed], planner="rrt", seed=seed + 7919,
+                              inflate=inflate, rrt_iterations=4 * rrt_iterations)[0]
+    still = missed[~np.isfinite(row[missed])]
+    if still.size:
+        row[still] = cost_matrix(world_or_grid, [start], tasks[still], planner="astar", inflate=inflate)[0]
+    return row, int(missed.size)
+
+
 def plan_route(world_or_grid: WorldConfig | OccupancyGrid, start: Sequence[float], goal: Sequence[float],
                planner: str = "astar", seed: int = 0, inflate: float = CREATE2_RADIUS,
                rrt_iterations: int = 20000) -> tuple[list[Point] | None, str]:

@@ -288,9 +288,9 @@ def drive_mission(fleet_path: Path, run_dir: Path, method: str, timeout: float) 
             task = r.daemon.agent.assignment
             bids[rid] = r.daemon.agent.book.cost(task) if task is not None else math.nan
             s = r.daemon.stats
-            if s.plan_fallbacks or s.plan_failures:
-                events.append(f"robot {rid}: {s.plan_fallbacks} path(s) from A* after RRT missed, "
-                              f"{s.plan_failures} without any path")
+            if s.plan_fallbacks or s.plan_failures or s.bid_fallbacks:
+                events.append(f"robot {rid}: {s.bid_fallbacks} bid cost(s) the first RRT tree missed, "
+                              f"{s.plan_fallbacks} path(s) from A* after RRT missed, {s.plan_failures} without any path")
     finally:
         f.close()
     wall = time.perf_counter() - t0

@@ -333,3 +333,6 @@ def test_interrupted_drive_keeps_finished_missions_for_resume(tmp_path, monkeypa
     assert len(missions) == 1 and "case1" in str(missions[0][1])
     both = _rows(tmp_path / "run" / "formation_world_drive.csv")
     assert [r["case"] for r in both] == ["0", "1"] and both[0] == saved[0]
+    missions.clear()                   # everything resumed, nothing driven: the report still has its CSV
+    assert cli.main(argv[:3] + ["again"] + argv[4:] + ["--drive-resume", "run/formation_world_drive.csv"]) == 0
+    assert not missions and _rows(tmp_path / "again" / "formation_world_drive.csv") == both

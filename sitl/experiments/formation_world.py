@@ -444,7 +444,10 @@ def drive_all(keys: list[tuple], done: dict[tuple, dict], args) -> list[dict]:
             jobs = {pool.submit(drive_one, k, plain): k for k in sorted(todo, key=lambda k: (k[3], -k[1]))}
             for job in as_completed(jobs):
                 finished(jobs[job], job.result())
-    return [have[k] for k in keys]
+    rows = [have[k] for k in keys]
+    if rows:
+        report.write_csv(path, rows)          # also when every mission came from --drive-resume
+    return rows
 
 
 # ---------------------------------------------------------------------- report

@@ -135,16 +135,18 @@ def test_plan_route_takes_the_astar_path_when_rrt_misses():
     assert used == "rrt" and route == path(WALL, start, goal, "rrt", seed=1)
 
 
-def test_plan_route_without_any_path():
+def test_plan_route_without_any_path(monkeypatch):
     boxed = WorldConfig(size=(10.0, 10.0), walls=True, resolution=0.05, obstacles=(
         Box(center=(3.0, 1.0), size=(3.0, 0.2)), Box(center=(3.0, -1.0), size=(3.0, 0.2)),
         Box(center=(1.6, 0.0), size=(0.2, 2.2)), Box(center=(4.4, 0.0), size=(0.2, 2.2))))
+    trees = _count_trees(monkeypatch)
     for planner in ("astar", "rrt"):
         assert plan_route(boxed, (-3.0, 0.0), (3.0, 0.0), planner=planner, rrt_iterations=50) == (None, "")
+    assert len(trees) == 1                       # A* says walled off: no second, 4x bigger tree
     assert plan_route(None, (0, 0), (1, 1), planner="euclid") == ([(0.0, 0.0), (1.0, 1.0)], "euclid")
 
 
-def test_bid_costs_price_rrt_misses_by_a_second_tree_then_astar():
+def test_bid_costs_price_rrt_misses_by_a_second_tree_then_astar(monkeypatch):
     start, tasks = (-3.0, -2.0), [(3.0, -2.0), (-3.0, 0.0)]
     row, missed = bid_costs(WALL, start, tasks, planner="rrt", seed=1, rrt_iterations=3)   # both trees too small
     assert missed == 2 and row == pytest.approx(cost_matrix(WALL, [start], tasks, "astar")[0])
@@ -155,5 +157,14 @@ def test_bid_costs_price_rrt_misses_by_a_second_tree_then_astar():
     boxed = WorldConfig(size=(10.0, 10.0), walls=True, resolution=0.05, obstacles=(
         Box(center=(3.0, 1.0), size=(3.0, 0.2)), Box(center=(3.0, -1.0), size=(3.0, 0.2)),
         Box(center=(1.6, 0.0), size=(0.2, 2.2)), Box(center=(4.4, 0.0), size=(0.2, 2.2))))
+    trees = _count_trees(monkeypatch)
     row, missed = bid_costs(boxed, (-3.0, 0.0), [(3.0, 0.0)], planner="rrt", rrt_iterations=50)
     assert missed == 1 and row[0] == math.inf                # unreachable stays "cannot"
+    assert len(trees) == 1                                   # without growing a second tree for it
+
+
+def _count_trees(monkeypatch) -> list:
+    from runtime.planning import costs
+    calls, real = [], costs.rrt_multi
+    monkeypatch.setattr(costs, "rrt_multi", lambda *a, **k: calls.append(k.get("max_iter")) or real(*a, **k))
+    return calls

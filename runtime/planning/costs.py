@@ -149,7 +149,8 @@ def bid_costs(world_or_grid: WorldConfig | OccupancyGrid | None, start: Sequence
 
     With RRT, tasks the tree missed get a second tree (new seed, 4x the iterations), then their A* length:
     a robot must not bid "cannot" for a task it can reach, or an auction may have no buyer for it (BS and
-    RTMA resell only to a worse bid).  inf only where A* finds no path either.
+    RTMA resell only to a worse bid).  inf only where A* finds no path either (then no second tree is grown:
+    the row is refreshed as the robot moves, and a big tree per refresh for a walled-off task would eat the CPU).
     """
     row = cost_matrix(world_or_grid, [start], tasks_xy, planner=planner, seed=seed, inflate=inflate,
                       rrt_iterations=rrt_iterations)[0]
@@ -157,11 +158,12 @@ def bid_costs(world_or_grid: WorldConfig | OccupancyGrid | None, start: Sequence
     if planner != "rrt" or missed.size == 0:
         return row, 0
     tasks = _points(tasks_xy, "task positions")
-    row[missed] = cost_matrix(world_or_grid, [start], tasks[missed], planner="rrt", seed=seed + 7919,
-                              inflate=inflate, rrt_iterations=4 * rrt_iterations)[0]
-    still = missed[~np.isfinite(row[missed])]
-    if still.size:
-        row[still] = cost_matrix(world_or_grid, [start], tasks[still], planner="astar", inflate=inflate)[0]
+    a_star = cost_matrix(world_or_grid, [start], tasks[missed], planner="astar", inflate=inflate)[0]
+    reach = missed[np.isfinite(a_star)]          # no second tree for a task nothing can reach (it is cheap)
+    if reach.size:
+        row[reach] = cost_matrix(world_or_grid, [start], tasks[reach], planner="rrt", seed=seed + 7919,
+                                 inflate=inflate, rrt_iterations=4 * rrt_iterations)[0]
+    row[missed] = np.where(np.isfinite(row[missed]), row[missed], a_star)
     return row, int(missed.size)
 
 
@@ -173,18 +175,18 @@ def plan_route(world_or_grid: WorldConfig | OccupancyGrid, start: Sequence[float
     RRT is only probabilistically complete: a tree can miss a goal behind a narrow gap, and a robot sent
     straight at it would push into the boxes.  So an RRT miss grows a second tree (new seed, 4x the
     iterations), then takes the A* path, which exists whenever the grid connects the two points.
-    (None, "") when A* finds none either.
+    (None, "") when A* finds none: then no second tree is grown.
     """
     route = path(world_or_grid, start, goal, planner=planner, seed=seed, inflate=inflate,
                  rrt_iterations=rrt_iterations)
     if route is not None or planner != "rrt":
         return route, planner if route is not None else ""
+    a_star = path(world_or_grid, start, goal, planner="astar", inflate=inflate)
+    if a_star is None:                           # nothing connects them: no second tree to grow
+        return None, ""
     route = path(world_or_grid, start, goal, planner="rrt", seed=seed + 7919, inflate=inflate,
                  rrt_iterations=4 * rrt_iterations)
-    if route is not None:
-        return route, "rrt"
-    route = path(world_or_grid, start, goal, planner="astar", inflate=inflate)
-    return route, "astar" if route is not None else ""
+    return (route, "rrt") if route is not None else (a_star, "astar")
 
 
 def _with_ends(grid: OccupancyGrid, pts: list[Point], start, goal) -> list[Point]:

@@ -23,6 +23,8 @@ from runtime.planning.rrt import rrt_multi
 from runtime.planning.smoothing import path_length, smooth
 
 PLANNERS = ("astar", "rrt", "euclid")
+RETRY_SEED = 7919     # an RRT miss grows a second tree with seed + RETRY_SEED ...
+RETRY_GROWTH = 4      # ... and RETRY_GROWTH x the iterations, before falling back to A*
 Point = tuple[float, float]
 
 
@@ -161,8 +163,8 @@ def bid_costs(world_or_grid: WorldConfig | OccupancyGrid | None, start: Sequence
     a_star = cost_matrix(world_or_grid, [start], tasks[missed], planner="astar", inflate=inflate)[0]
     reach = missed[np.isfinite(a_star)]          # no second tree for a task nothing can reach (it is cheap)
     if reach.size:
-        row[reach] = cost_matrix(world_or_grid, [start], tasks[reach], planner="rrt", seed=seed + 7919,
-                                 inflate=inflate, rrt_iterations=4 * rrt_iterations)[0]
+        row[reach] = cost_matrix(world_or_grid, [start], tasks[reach], planner="rrt", seed=seed + RETRY_SEED,
+                                 inflate=inflate, rrt_iterations=RETRY_GROWTH * rrt_iterations)[0]
     row[missed] = np.where(np.isfinite(row[missed]), row[missed], a_star)
     return row, int(missed.size)
 
@@ -184,8 +186,8 @@ def plan_route(world_or_grid: WorldConfig | OccupancyGrid, start: Sequence[float
     a_star = path(world_or_grid, start, goal, planner="astar", inflate=inflate)
     if a_star is None:                           # nothing connects them: no second tree to grow
         return None, ""
-    route = path(world_or_grid, start, goal, planner="rrt", seed=seed + 7919, inflate=inflate,
-                 rrt_iterations=4 * rrt_iterations)
+    route = path(world_or_grid, start, goal, planner="rrt", seed=seed + RETRY_SEED, inflate=inflate,
+                 rrt_iterations=RETRY_GROWTH * rrt_iterations)
     return (route, "rrt") if route is not None else (a_star, "astar")
 
 

@@ -445,8 +445,8 @@ def drive_all(keys: list[tuple], done: dict[tuple, dict], args) -> list[dict]:
             for job in as_completed(jobs):
                 finished(jobs[job], job.result())
     rows = [have[k] for k in keys]
-    if rows:
-        report.write_csv(path, rows)          # also when every mission came from --drive-resume
+    if rows and not todo:
+        report.write_csv(path, rows)          # every mission came from --drive-resume: nothing wrote it yet
     return rows
 
 

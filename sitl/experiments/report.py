@@ -3,20 +3,25 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 from pathlib import Path
 from typing import Iterable, Sequence
 
 
 def write_csv(path: str | Path, rows: Sequence[dict]) -> Path:
+    """Write ``rows`` (columns in order of first appearance) through a temporary file renamed over ``path``,
+    so that a run killed mid-write leaves the previous file whole (long runs rewrite theirs as they go)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fields: list[str] = []
     for row in rows:
         fields.extend(k for k in row if k not in fields)
-    with path.open("w", newline="") as fh:
+    tmp = path.with_name(path.name + ".tmp")
+    with tmp.open("w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=fields)
         writer.writeheader()
         writer.writerows(rows)
+    os.replace(tmp, path)
     return path
 
 

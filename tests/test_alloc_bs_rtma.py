@@ -167,6 +167,108 @@ def test_resale_goes_to_the_best_bid_worse_than_mine():
     assert 1 not in a.won and not a.auctions and a.awarded_to[1] == 4
 
 
+def test_resale_with_no_worse_bid_is_offered_to_robots_holding_no_task():
+    """Every bid for the resold task beats mine (robot 4 said "cannot" when it was first auctioned, so
+    the task skipped it).  The task is not dropped: it is offered at reserve -inf, robots that hold a
+    task answer "cannot", and the free robot wins it."""
+    a = BSAgent(1, [2, 3, 4], [1.0, 9.0].__getitem__, bid_timeout=1.0)
+    a.start({0: (0.0, 0.0), 1: (1.0, 0.0)}, 0.0)
+    out = []
+    for task, auction, bids in ((0, 1, {2: 5.0, 3: 6.0, 4: 7.0}), (1, 2, {2: 3.0, 3: 4.0, 4: math.inf})):
+        for rid, bid in bids.items():
+            out += a.on_message(Bid(rid, 1, auction, task, bid), 0.01)
+    awards = [m for m in out if isinstance(m, Award)]
+    assert a.assignment == 0 and [m.winner for m in awards] == [2]      # task 1 to robot 2
+    # robot 2 sold task 1 back (I won it at 9.0, my bid); now I hold two and resell task 1 at 9.0
+    a.on_message(Status(2, 1, 2, 1, False), 0.02)
+    out = a.on_message(Announce(2, 0, 7, 1, 1.0, 0.0, 3.0), 0.03)
+    out += a.on_message(Award(2, 1, 7, 1, 1, 9.0, 6.0), 0.04)
+    sale = [m for m in out if isinstance(m, Announce)]
+    assert len(sale) == 1 and sale[0].reserve == 9.0
+    out = []
+    for rid, bid in ((2, 3.0), (3, 4.0), (4, 8.0)):           # robot 4 can now; all beat my 9.0
+        out += a.on_message(Bid(rid, 1, sale[0].auction, 1, bid), 0.1)
+    offer = [m for m in out if isinstance(m, Announce)]
+    assert len(offer) == 1 and offer[0].task == 1 and offer[0].reserve == -math.inf
+    assert a.idle_offers == 1 and a.assignment == 0 and 1 in a.selling
+    out = []
+    for rid, bid in ((2, math.inf), (3, math.inf), (4, 8.0)):  # 2 and 3 hold tasks
+        out += a.on_message(Bid(rid, 1, offer[0].auction, 1, bid), 0.2)
+    awards = [m for m in out if isinstance(m, Award)]
+    assert [(m.winner, m.cost) for m in awards] == [(4, 8.0)]
+    assert math.isfinite(awards[0].mean)
+    a.on_message(Status(4, 1, offer[0].auction, 1, False), 0.3)
+    assert 1 not in a.won and not a.auctions and a.awarded_to[1] == 4
+
+
+@pytest.mark.parametrize("cls", [BSAgent, RTMAAgent])
+def test_only_a_robot_holding_no_task_bids_on_an_offer(cls):
+    a = cls(2, [1, 3], [4.0, 5.0].__getitem__, bid_timeout=1.0)
+    for j, (x, y) in enumerate(((0.0, 0.0), (1.0, 0.0))):
+        a.on_message(TaskInfo(1, 0, j, x, y, 2), 0.0)
+    offer = Announce(1, 0, 3, 1, 1.0, 0.0, -math.inf)
+    bids = [m for m in a.on_message(offer, 0.1) if isinstance(m, Bid)]
+    assert [b.cost for b in bids] == [a.my_bid(1)] and math.isfinite(bids[0].cost)
+    a.on_message(Award(1, 2, 3, 1, 2, bids[0].cost, bids[0].cost), 0.2)
+    assert a.assignment == 1
+    again = Announce(3, 0, 9, 0, 0.0, 0.0, -math.inf)
+    assert [m.cost for m in a.on_message(again, 0.3) if isinstance(m, Bid)] == [math.inf]
+
+
+def test_an_offer_nobody_free_takes_is_left_unallocated():
+    """More tasks than live robots: the offer closes with no bid and the task stays unallocated,
+    as before; negotiation still ends."""
+    a = BSAgent(1, [2], [1.0, 2.0].__getitem__, bid_timeout=1.0)
+    a.start({0: (0.0, 0.0), 1: (1.0, 0.0)}, 0.0)
+    out = a.on_message(Bid(2, 1, 1, 0, 5.0), 0.01) + a.on_message(Bid(2, 1, 2, 1, 0.5), 0.01)
+    a.on_message(Status(2, 1, 2, 1, False), 0.02)       # robot 2 holds task 1
+    a.on_peer_lost(2, 1.0)                                # ...and is lost: I win task 1 back
+    for t in np.arange(1.0, 40.0, 0.5):
+        a.on_tick(float(t))
+    assert a.assignment == 0 and not a.auctions and a.converged
+    assert 1 not in a.won and a.idle_offers == 1
+
+
+@pytest.mark.parametrize("method", METHODS)
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), n=st.integers(3, 10))
+def test_valid_permutation_when_heavy_loss_outlasts_the_retries(method, seed, n):
+    """30 % loss and two re-announces: auctions close with bids missing, so resales skip robots."""
+    c = instance(seed, n, integer=False)
+    r = solve(method, c, bus=BusParams(seed=seed, drop=0.3, jitter=0.01), until=600, max_retries=2)
+    assert r.converged
+    assert is_permutation(r.assignment, n)
+
+
+class _FirstAsksCannot:
+    """A robot's cost row whose first ``misses`` queries of ``task`` answer inf, as an RRT bid tree
+    that missed a reachable goal did before the daemon priced misses by A*."""
+
+    def __init__(self, row, task, misses):
+        self.row, self.task, self.misses = row, task, misses
+
+    def __call__(self, j):
+        if j == self.task and self.misses > 0:
+            self.misses -= 1
+            return math.inf
+        return self.row[j]
+
+
+@pytest.mark.parametrize("method", METHODS)
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), n=st.integers(2, 9), data=st.data())
+def test_a_task_a_robot_first_could_not_bid_for_is_still_allocated(method, seed, n, data):
+    c = instance(seed, n, integer=False)
+    agents = make_agents(method, c)
+    flaky = data.draw(st.sets(st.integers(1, n), min_size=1, max_size=n), label="robots that miss")
+    for rid in flaky:
+        task = data.draw(st.integers(0, n - 1), label="task missed")
+        agents[rid].book._cost_fn = _FirstAsksCannot(c[rid - 1], task, data.draw(st.integers(1, 3)))
+    held, _, _, converged = run(agents, {j: (float(j), 0.0) for j in range(n)}, until=300)
+    assert converged
+    assert sorted(held.values()) == list(range(n))
+
+
 def test_late_acknowledgement_does_not_cancel_my_resale_of_the_same_task():
     """Robot 1 awards task 1 to robot 2; robot 2 sells it back to 1 before 1 hears the ack; 1 resells
     it.  A duplicated ack from 2 then arrives: it answers the first award (its auction id), not the

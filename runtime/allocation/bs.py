@@ -9,8 +9,10 @@ Auctions run in parallel; the initial auctioneer is the robot on which :meth:`BS
 Wire use of the shared messages (``runtime.allocation.messages``):
 
 * ``Announce`` (broadcast): ``reserve`` = +inf for an open auction (lowest bid wins, the auctioneer's
-  own bid counts); a finite ``reserve`` is the seller's own bid, and only worse bids can win.
-* ``Bid`` (to the auctioneer): ``cost`` = the bid; +inf means "cannot do this task".
+  own bid counts); a finite ``reserve`` is the seller's own bid, and only worse bids can win;
+  ``reserve`` = -inf offers the task to robots that hold none (see below).
+* ``Bid`` (to the auctioneer): ``cost`` = the bid; +inf means "cannot do this task" (or, to a -inf
+  offer, "I hold a task").
 * ``Award`` (to the winner): ``cost`` = the winning bid, ``mean`` = mean of all bids heard.
 * ``Status`` to an auctioneer: "I hold that task", with ``auction`` = the id of the auction it
   answers - the winner's reply to an ``Award`` (sent again for every duplicate), or a holder's reply
@@ -20,10 +22,20 @@ Wire use of the shared messages (``runtime.allocation.messages``):
   auctioneer does not have open, or a task other than that auction's, is dropped ("stale status").
   Broadcast ``Status`` (``dest`` 0) carries ``auction`` 0.
 
+A resale that finds no bid worse than the seller's cannot happen with fixed costs and every bid heard
+(the resales are task-proposing deferred acceptance, and some robot is still free).  It can when a bid
+was missed: a peer silent through every re-announce, or one that said "cannot" and later can (an RRT bid
+tree that missed).  The free robot is then skipped.  The seller does not drop the task: it offers it
+once more with ``reserve`` = -inf, where only robots holding no task bid.  The winner was free, so it
+sells nothing and no chain restarts: a robot never becomes free again once it holds a task, so these
+offers are bounded by the number of free robots.  A free robot that cannot bid yet answers +inf, as do
+the robots holding a task, so an offer with no finite bid is re-armed like an open auction, but only
+``max_retries`` times: after that (more tasks than live robots) the task is left unallocated.
+
 Loss, duplication and reordering: an auction closes when every live peer has bid, else it is
 re-announced every ``bid_timeout`` (bidders re-send the same bid) up to ``max_retries`` times, to the
 silent peers only when they are fewer than half; an
-award is re-sent every ``bid_timeout`` until acknowledged.  Everything is keyed by (auctioneer,
+award is re-sent every ``bid_timeout`` until acknowledged or the winner is declared lost.  Everything is keyed by (auctioneer,
 auction id), so duplicates change nothing.  A lost peer's task is re-auctioned by whoever awarded it.
 """
 from __future__ import annotations
@@ -50,6 +62,7 @@ class _Auction:
     deadline: float
     bids: dict[int, float] = field(default_factory=dict)
     tries: int = 0
+    rearms: int = 0                       # times it closed with no bid it could take and was re-armed
     award: Award | None = None            # sent, waiting for the winner's Status
 
 
@@ -76,6 +89,7 @@ class BSAgent:
         self.awarded_to: dict[int, int] = {}        # task -> robot that acknowledged my award
         self.dropped: Counter = Counter()           # messages ignored, by reason
         self.sent = 0
+        self.idle_offers = 0                        # resales that found no worse bid (see module doc)
         self._next_auction = 1
         self._bids_sent: dict[tuple[int, int], Bid] = {}
         self._awards_seen: dict[tuple[int, int], int] = {}
@@ -156,14 +170,15 @@ class BSAgent:
                         out.append(self._announce(a))
                 else:
                     out += self._close(a, now)
-            elif a.tries < self.max_retries:
+            else:
+                # Sent until acknowledged, or until the winner is declared lost (on_peer_lost).  Assuming
+                # it arrived would strand the task whenever every copy was lost.
                 a.tries += 1
                 a.deadline = now + self.bid_timeout
+                if a.tries == self.max_retries:
+                    self.log.warning("no acknowledgement of task %d from robot %d after %d awards: still sending",
+                                     a.task, a.award.winner, a.tries)
                 out.append(a.award)
-            else:
-                self.log.warning("no acknowledgement of task %d from robot %d: assuming it holds it",
-                                 a.task, a.award.winner)
-                out += self._acknowledged(a, a.award.winner, now)
         out += self._tick_extra(now)
         return self._out(out)
 
@@ -223,20 +238,28 @@ class BSAgent:
         self._touch(now)
         cands = self._candidates(a)
         if not cands:
-            if a.reserve == INF:      # nobody can take it (yet): ask again later
-                self.log.warning("task %d: no robot can take it yet; announcing again", a.task)
+            if a.reserve == -INF and a.rearms >= self.max_retries:
+                self.log.warning("task %d: no robot without a task bid for it: leaving it unallocated", a.task)
+                del self.auctions[a.id]
+                self._release(a.task)
+                return []
+            if not math.isfinite(a.reserve):      # nobody (free) can take it yet: ask again later
+                self.log.warning("task %d: no robot%s can take it yet; announcing again", a.task,
+                                 " without a task" if a.reserve == -INF else "")
+                a.rearms += 1
                 a.bids = {r: b for r, b in a.bids.items() if math.isfinite(b)}
                 a.expected = set(self.alive)
                 a.deadline = now + self.bid_timeout
                 a.tries = 0
                 return []
-            self.log.warning("task %d: no bid worse than mine (%.3f): leaving it unallocated", a.task, a.reserve)
+            self.log.warning("task %d: no bid worse than mine (%.3f): offering it to robots holding no task",
+                             a.task, a.reserve)
             del self.auctions[a.id]
-            self._release(a.task)
-            return []
+            self.idle_offers += 1
+            return self._open(a.task, -INF, now)
         bid, winner = min(cands)
         heard = [b for b in a.bids.values() if math.isfinite(b)]
-        if a.reserve != INF:
+        if math.isfinite(a.reserve):
             heard.append(a.reserve)
         mean = wire_float(sum(heard) / len(heard))
         if winner == self.robot_id:
@@ -317,6 +340,8 @@ class BSAgent:
         return self._bid(m, now)
 
     def _bid(self, m: Announce, now: float) -> list:
+        if m.reserve == -INF and self.assignment is not None:     # an offer to free robots only
+            return [Bid(self.robot_id, m.sender, m.auction, m.task, INF)]
         value = self.my_bid(m.task)
         if value is None:
             return []

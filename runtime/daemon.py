@@ -306,6 +306,7 @@ class Daemon:
             "link": self.link.counters.as_dict() if hasattr(self.link, "counters") else {},
             "gps_rejected": getattr(self.ekf, "gps_rejected", 0),
             "plan_fallbacks": s.plan_fallbacks, "plan_failures": s.plan_failures, "bid_fallbacks": s.bid_fallbacks,
+            "idle_offers": getattr(self.agent, "idle_offers", 0),
         }
 
 

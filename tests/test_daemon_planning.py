@@ -58,6 +58,6 @@ def test_rrt_misses_in_bids_are_priced_not_bid_as_cannot():
     astar = _daemon("astar")
     assert d._cost(0) == astar._cost(0) and d._cost(1) == astar._cost(1)     # the A* lengths
     assert math.isfinite(d._cost(0)) and math.isfinite(d._cost(1))
-    assert d.stats.bid_fallbacks == 2 and d.snapshot()["bid_fallbacks"] == 2
+    assert d.stats.bid_fallbacks == 2 and d.snapshot()["bid_fallbacks"] == 2 and d.snapshot()["idle_offers"] == 0
     fine = _daemon("rrt")
     assert 4.0 < fine._cost(0) < 6.0 and fine.stats.bid_fallbacks == 0

@@ -291,6 +291,9 @@ def drive_mission(fleet_path: Path, run_dir: Path, method: str, timeout: float) 
             if s.plan_fallbacks or s.plan_failures or s.bid_fallbacks:
                 events.append(f"robot {rid}: {s.bid_fallbacks} bid cost(s) the first RRT tree missed, "
                               f"{s.plan_fallbacks} path(s) from A* after RRT missed, {s.plan_failures} without any path")
+            offers = getattr(r.daemon.agent, "idle_offers", 0)
+            if offers:
+                events.append(f"robot {rid}: {offers} resale(s) found no worse bid and went to a robot holding no task")
     finally:
         f.close()
     wall = time.perf_counter() - t0

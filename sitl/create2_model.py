@@ -155,6 +155,7 @@ class SimCreate2:
         ambient = float(rng.uniform(22.0, 26.0))
         self._battery = Battery(charge_mah=float(rng.uniform(0.9, 1.0)) * CAPACITY_MAH,
                                 temperature_c=ambient, ambient_c=ambient)
+        self._contacts: list | None = None     # this step's contacts; the world clears it as it steps
 
     # -------------------------------------------------------------- commands
     def set_wheel_speeds(self, left_mps: float, right_mps: float) -> None:
@@ -205,8 +206,8 @@ class SimCreate2:
         x, y, yaw = self.pose()
         c, s = math.cos(yaw), math.sin(yaw)
         left = right = False
-        for cp in p.getContactPoints(bodyA=self.body_id, linkIndexA=-1, **self._kw):
-            if cp[2] == self.body_id or cp[8] > CONTACT_MARGIN:
+        for cp in self.contacts():
+            if cp[3] != -1:
                 continue
             dx, dy = cp[5][0] - x, cp[5][1] - y
             lx, ly = c * dx + s * dy, -s * dx + c * dy
@@ -224,10 +225,20 @@ class SimCreate2:
         return (not self._touching(LEFT), not self._touching(RIGHT))
 
     def _touching(self, link: int) -> bool:
-        for cp in p.getContactPoints(bodyA=self.body_id, linkIndexA=link, **self._kw):
-            if cp[2] != self.body_id and cp[8] <= CONTACT_MARGIN:
-                return True
-        return False
+        return any(cp[3] == link for cp in self.contacts())
+
+    def contacts(self) -> list:
+        """Contact points of this body with other bodies, closer than the margin, as pybullet reports them
+        (``linkIndexA`` at [3]).  Asked once per physics step: the device samples bumpers and wheel drop
+        every step, and contacts only change when the world steps (:meth:`stepped`)."""
+        if self._contacts is None:
+            self._contacts = [cp for cp in p.getContactPoints(bodyA=self.body_id, **self._kw)
+                              if cp[2] != self.body_id and cp[8] <= CONTACT_MARGIN]
+        return self._contacts
+
+    def stepped(self) -> None:
+        """The world stepped: contacts are stale."""
+        self._contacts = None
 
     def pose(self) -> tuple[float, float, float]:
         """Ground truth x, y (m) and yaw (rad), ENU."""

@@ -119,6 +119,8 @@ class World:
         for _ in range(n):
             p.stepSimulation(**self._kw)
         self._steps += n
+        for body in self._bodies.values():
+            body.stepped()
         self._unsampled += n
         if self._unsampled >= self._sample_every:
             elapsed = self._unsampled * self.dt

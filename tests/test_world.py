@@ -183,6 +183,42 @@ def test_wheel_drop_only_when_lifted(world):
     assert bot.height() == pytest.approx(M.SHELL_CENTRE_Z, abs=0.003)
 
 
+def _per_link(bot: SimCreate2, link: int) -> list:
+    import pybullet as pb
+    return sorted(cp[5] for cp in pb.getContactPoints(bodyA=bot.body_id, linkIndexA=link, physicsClientId=bot._client)
+                  if cp[2] != bot.body_id and cp[8] <= M.CONTACT_MARGIN)
+
+
+def test_contacts_are_fetched_once_per_step_and_match_per_link_queries(world, monkeypatch):
+    """Bumpers and wheel drop share one contact query per physics step.  Each step, the shared list
+    split by link equals what pybullet answers when asked per link (shell and both wheels), through a
+    drive into the wall, a lift and a fall."""
+    bot = world.add_create2(1, (4.0, 0.0, math.radians(20)))
+    bot.set_wheel_speeds(0.3, 0.3)
+    calls = {"n": 0}
+    real = M.p.getContactPoints
+
+    def counting(*a, **k):
+        calls["n"] += 1
+        return real(*a, **k)
+
+    seen_bump = seen_drop = False
+    for i in range(1200):
+        if i == 900:
+            bot.place(4.0, 0.0, 0.0, z=0.3)
+        world.step()
+        monkeypatch.setattr(M.p, "getContactPoints", counting)
+        before = calls["n"]
+        for _ in range(3):                       # the device asks several times per step
+            seen_bump |= any(bot.bumps())
+            seen_drop |= any(bot.wheel_drop())
+        assert calls["n"] - before == 1
+        monkeypatch.setattr(M.p, "getContactPoints", real)
+        for link in (-1, M.LEFT, M.RIGHT):
+            assert sorted(cp[5] for cp in bot.contacts() if cp[3] == link) == _per_link(bot, link)
+    assert seen_bump and seen_drop
+
+
 # ------------------------------------------------------------------ battery
 
 def test_battery_discharges_and_a_stall_draws_more_than_cruising(world):

@@ -77,6 +77,8 @@ def test_round_trip_signed(mod, msg):
 def test_special_floats_and_none_task(mod):
     a = M.Announce(3, 0, 7, 2, 1.5, -2.25, math.inf)      # reserve +inf: no own cost
     assert codec.from_mavlink(_wire(mod, a)[1]) == a
+    offer = M.Announce(3, 0, 8, 2, 1.5, -2.25, -math.inf)  # reserve -inf: for robots holding no task
+    assert codec.from_mavlink(_wire(mod, offer)[1]) == offer
     b = codec.from_mavlink(_wire(mod, M.Bid(3, 0, 7, 2, math.nan))[1])
     assert math.isnan(b.cost)
     s = M.Status(4, 0, 0, 0xFFFF, False)

@@ -34,9 +34,9 @@ the robots holding a task, so an offer with no finite bid is re-armed like an op
 
 Loss, duplication and reordering: an auction closes when every live peer has bid, else it is
 re-announced every ``bid_timeout`` (bidders re-send the same bid) up to ``max_retries`` times, to the
-silent peers only when they are fewer than half; an
-award is re-sent every ``bid_timeout`` until acknowledged or the winner is declared lost.  Everything is keyed by (auctioneer,
-auction id), so duplicates change nothing.  A lost peer's task is re-auctioned by whoever awarded it.
+silent peers only when they are fewer than half; an award is re-sent every ``bid_timeout`` until
+acknowledged or the winner is declared lost.  Everything is keyed by (auctioneer, auction id), so
+duplicates change nothing.  A lost peer's task is re-auctioned by whoever awarded it.
 """
 from __future__ import annotations
 

@@ -184,8 +184,7 @@ def test_wheel_drop_only_when_lifted(world):
 
 
 def _per_link(bot: SimCreate2, link: int) -> list:
-    import pybullet as pb
-    return sorted(cp[5] for cp in pb.getContactPoints(bodyA=bot.body_id, linkIndexA=link, physicsClientId=bot._client)
+    return sorted(cp[5] for cp in M.p.getContactPoints(bodyA=bot.body_id, linkIndexA=link, physicsClientId=bot._client)
                   if cp[2] != bot.body_id and cp[8] <= M.CONTACT_MARGIN)
 
 

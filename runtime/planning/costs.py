@@ -149,7 +149,7 @@ def bid_costs(world_or_grid: WorldConfig | OccupancyGrid | None, start: Sequence
     """One robot's bid costs to ``tasks_xy``, priced like the paths :func:`plan_route` gives it, and how many
     tasks needed a fallback.
 
-    With RRT, tasks the tree missed get a second tree (new seed, 4x the iterations), then their A* length:
+    With RRT, tasks the tree missed get a second tree (RETRY_SEED, RETRY_GROWTH), then their A* length:
     a robot must not bid "cannot" for a task it can reach, or an auction may have no buyer for it (BS and
     RTMA resell only to a worse bid).  inf only where A* finds no path either (then no second tree is grown:
     the row is refreshed as the robot moves, and a big tree per refresh for a walled-off task would eat the CPU).
@@ -175,8 +175,8 @@ def plan_route(world_or_grid: WorldConfig | OccupancyGrid, start: Sequence[float
     """A path for a robot to drive, and the planner that found it.
 
     RRT is only probabilistically complete: a tree can miss a goal behind a narrow gap, and a robot sent
-    straight at it would push into the boxes.  So an RRT miss grows a second tree (new seed, 4x the
-    iterations), then takes the A* path, which exists whenever the grid connects the two points.
+    straight at it would push into the boxes.  So an RRT miss grows a second tree (RETRY_SEED,
+    RETRY_GROWTH), then takes the A* path, which exists whenever the grid connects the two points.
     (None, "") when A* finds none: then no second tree is grown.
     """
     route = path(world_or_grid, start, goal, planner=planner, seed=seed, inflate=inflate,

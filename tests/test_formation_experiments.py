@@ -167,6 +167,29 @@ def test_missions_are_reproducible_spaced_and_clear_of_boxes():
     assert np.all(np.isfinite(c)) and np.all(c >= straight_line_costs(robots, tasks) - 1e-9)
 
 
+def test_drive_summary_pools_every_mission_of_a_planner():
+    """The "all" row of each planner is the mean over its missions, not a mean of cell means: a cell with
+    more missions weighs more. An invalid mission is left out of every mean."""
+    from sitl.experiments import formation_world as fw
+
+    def row(n, pct, case, method, driven, valid=True):
+        return {"planner": "astar", "robots": n, "obstacles_pct": pct, "case": case, "method": method,
+                "driven_m": driven, "planned_cost": 100.0, "optimum_astar": 100.0, "arrived": n, "valid": valid}
+    rows = [row(4, 5, 0, "bs", 110.0), row(4, 5, 0, "rtma", 100.0),
+            row(4, 5, 1, "bs", 130.0), row(4, 5, 1, "rtma", 90.0),
+            row(6, 5, 0, "bs", 150.0), row(6, 5, 0, "rtma", 200.0, valid=False)]
+    lines = fw.drive_summary(rows, ("bs", "rtma")).splitlines()
+    every = [ln for ln in lines if ln.startswith("| A* all |")]
+    assert len(every) == 1
+    cells = [c.strip() for c in every[0].strip("|").split("|")]
+    # planner, robots, obstacles, missions, BS driven, BS planned err, BS driven err, RTMA driven, ...
+    assert cells[1:4] == ["all", "all", "3"]
+    assert float(cells[4]) == pytest.approx(130.0)                   # (110 + 130 + 150) / 3, not (120 + 150) / 2
+    assert cells[6] == "30.00 %" and cells[9] == "-5.00 %"          # RTMA: the invalid 200 m mission left out
+    assert cells[-1] == "22/22"                                       # robots over the 5 valid runs
+    assert [ln for ln in lines if ln.startswith("| A* | 6 | 5 % | 1 |")]
+
+
 @pytest.mark.slow
 def test_world_drive_one_mission(tmp_path, monkeypatch, capsys):
     """One mission driven by daemons in the pybullet SITL on a scaled field: the daemons reach an assignment,

@@ -537,25 +537,33 @@ def drive_table(rows: list[dict]) -> str:
 def drive_summary(rows: list[dict], methods) -> str:
     """Tables I-II from the driven missions: per planner and cell, each method's mean driven global cost
     (the paper's "sum of the distance traveled by all the robots") and its mean % above the A* optimum of
-    the same missions, planned and driven."""
-    out = []
-    keys = sorted({(r["planner"], r["robots"], r["obstacles_pct"]) for r in rows},
-                  key=lambda k: (PLANNERS.index(k[0]), k[1], k[2]))
-    for p, n, pct in keys:
-        cell = [r for r in rows if (r["planner"], r["robots"], r["obstacles_pct"]) == (p, n, pct) and r["valid"]]
-        line: dict = {"planner": PLANNER_LABELS[p], "robots = tasks": n, "obstacles": f"{pct} %",
-                      "missions": len({r["case"] for r in cell})}
+    the same missions, planned and driven. Each planner ends with an "all" row: the same means over every
+    mission of that planner (each mission weighs the same), with the mission count per method."""
+    def line(label: dict, cell: list[dict], missions: int) -> dict:
+        out: dict = {**label, "missions": missions}
         for m in methods:
             mine = [r for r in cell if r["method"] == m]
             if not mine:
                 continue
             lab = fc.LABELS[m]
-            line[f"{lab} driven (m)"] = statistics.fmean(r["driven_m"] for r in mine)
-            line[f"{lab} planned error"] = (f"{statistics.fmean(percent_error(r['planned_cost'], r['optimum_astar']) for r in mine):.2f} %")
-            line[f"{lab} driven error"] = (f"{statistics.fmean(percent_error(r['driven_m'], r['optimum_astar']) for r in mine):.2f} %")
-        line["A* optimum (m)"] = statistics.fmean(r["optimum_astar"] for r in cell) if cell else math.nan
-        line["arrived"] = f"{sum(r['arrived'] for r in cell)}/{sum(r['robots'] for r in cell)}"
-        out.append(line)
+            out[f"{lab} driven (m)"] = statistics.fmean(r["driven_m"] for r in mine)
+            out[f"{lab} planned error"] = (f"{statistics.fmean(percent_error(r['planned_cost'], r['optimum_astar']) for r in mine):.2f} %")
+            out[f"{lab} driven error"] = (f"{statistics.fmean(percent_error(r['driven_m'], r['optimum_astar']) for r in mine):.2f} %")
+        out["A* optimum (m)"] = statistics.fmean(r["optimum_astar"] for r in cell) if cell else math.nan
+        out["arrived"] = f"{sum(r['arrived'] for r in cell)}/{sum(r['robots'] for r in cell)}"
+        return out
+
+    out = []
+    valid = [r for r in rows if r["valid"]]
+    for p in sorted({r["planner"] for r in rows}, key=PLANNERS.index):
+        label = PLANNER_LABELS[p]
+        for n, pct in sorted({(r["robots"], r["obstacles_pct"]) for r in rows if r["planner"] == p}):
+            cell = [r for r in valid if (r["planner"], r["robots"], r["obstacles_pct"]) == (p, n, pct)]
+            out.append(line({"planner": label, "robots = tasks": n, "obstacles": f"{pct} %"}, cell,
+                            len({r["case"] for r in cell})))
+        mine = [r for r in valid if r["planner"] == p]
+        per_method = max((sum(r["method"] == m for r in mine) for m in methods), default=0)
+        out.append(line({"planner": f"{label} all", "robots = tasks": "all", "obstacles": "all"}, mine, per_method))
     cols = ["planner", "robots = tasks", "obstacles", "missions"] + [
         f"{fc.LABELS[m]} {k}" for m in methods for k in ("driven (m)", "planned error", "driven error")] + [
         "A* optimum (m)", "arrived"]

@@ -538,9 +538,10 @@ def drive_summary(rows: list[dict], methods) -> str:
     """Tables I-II from the driven missions: per planner and cell, each method's mean driven global cost
     (the paper's "sum of the distance traveled by all the robots") and its mean % above the A* optimum of
     the same missions, planned and driven. Each planner ends with an "all" row: the same means over every
-    mission of that planner (each mission weighs the same), with the mission count per method."""
-    def line(label: dict, cell: list[dict], missions: int) -> dict:
-        out: dict = {**label, "missions": missions}
+    mission of that planner (each mission weighs the same). "missions" counts the missions (cell and case)
+    that have a valid run."""
+    def summary_row(label: dict, cell: list[dict]) -> dict:
+        out: dict = {**label, "missions": len({(r["robots"], r["obstacles_pct"], r["case"]) for r in cell})}
         for m in methods:
             mine = [r for r in cell if r["method"] == m]
             if not mine:
@@ -559,11 +560,9 @@ def drive_summary(rows: list[dict], methods) -> str:
         label = PLANNER_LABELS[p]
         for n, pct in sorted({(r["robots"], r["obstacles_pct"]) for r in rows if r["planner"] == p}):
             cell = [r for r in valid if (r["planner"], r["robots"], r["obstacles_pct"]) == (p, n, pct)]
-            out.append(line({"planner": label, "robots = tasks": n, "obstacles": f"{pct} %"}, cell,
-                            len({r["case"] for r in cell})))
-        mine = [r for r in valid if r["planner"] == p]
-        per_method = max((sum(r["method"] == m for r in mine) for m in methods), default=0)
-        out.append(line({"planner": f"{label} all", "robots = tasks": "all", "obstacles": "all"}, mine, per_method))
+            out.append(summary_row({"planner": label, "robots = tasks": n, "obstacles": f"{pct} %"}, cell))
+        out.append(summary_row({"planner": f"{label} all", "robots = tasks": "all", "obstacles": "all"},
+                               [r for r in valid if r["planner"] == p]))
     cols = ["planner", "robots = tasks", "obstacles", "missions"] + [
         f"{fc.LABELS[m]} {k}" for m in methods for k in ("driven (m)", "planned error", "driven error")] + [
         "A* optimum (m)", "arrived"]

@@ -17,8 +17,8 @@ import time
 
 import numpy as np
 
-from runtime.allocation.assignment import hungarian, percent_error, straight_line_costs
-from runtime.allocation.simulate import BusParams, solve
+from runtime.allocation.formation.assignment import hungarian, percent_error, straight_line_costs
+from runtime.allocation.formation.simulate import BusParams, solve
 from sitl.experiments.formation_common import error_sweep, mean_of_max, uniform_instance
 
 METHODS = ("auction", "rtma", "bs")

@@ -23,8 +23,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from runtime.allocation import winner_determination as wd  # noqa: E402
-from runtime.allocation.wdp_model import compile_problem  # noqa: E402
+from runtime.allocation.coalition import winner_determination as wd# noqa: E402
+from runtime.allocation.coalition.wdp_model import compile_problem  # noqa: E402
 from sitl.experiments.wdp_tables import RANDOM_BIDS, TASKS, UNIFORM_BIDS, make_problem  # noqa: E402
 
 

@@ -17,8 +17,8 @@ from runtime import log
 COMMANDS = (
     "runtime.daemon",                    # mrta daemon ROBOT_CONFIG
     "sitl.launcher",                     # mrta sitl run FLEET_CONFIG
-    "runtime.allocation.assign_cli",     # mrta assign PROBLEM.json
-    "runtime.allocation.wdp_cli",        # mrta wdp BIDS.json
+    "runtime.allocation.formation.assign_cli",     # mrta assign PROBLEM.json
+    "runtime.allocation.coalition.wdp_cli",        # mrta wdp BIDS.json
     "sitl.experiments.cli",              # mrta experiment NAME
 )
 

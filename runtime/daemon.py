@@ -44,11 +44,11 @@ def make_agent(cfg: C.RobotConfig, cost):
     peers = [p.id for p in cfg.comms.peers]
     method = cfg.allocation.method
     if method == "bs":
-        from runtime.allocation.bs import BSAgent as Agent
+        from runtime.allocation.formation.bs import BSAgent as Agent
     elif method == "rtma":
-        from runtime.allocation.rtma import RTMAAgent as Agent
+        from runtime.allocation.formation.rtma import RTMAAgent as Agent
     else:
-        from runtime.allocation.eps_auction import EpsAuctionAgent as Agent
+        from runtime.allocation.formation.eps_auction import EpsAuctionAgent as Agent
     return Agent(cfg.robot.id, peers, cost, bid_timeout=cfg.allocation.bid_timeout)
 
 

@@ -7,8 +7,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from runtime import cli
-from runtime.allocation.assign_cli import load_problem
-from runtime.allocation.assignment import global_cost, hungarian, is_permutation
+from runtime.allocation.formation.assign_cli import load_problem
+from runtime.allocation.formation.assignment import global_cost, hungarian, is_permutation
 from runtime.errors import InputError
 
 COSTS = [[4, 1, 3], [2, 0, 5], [3, 2, 2]]

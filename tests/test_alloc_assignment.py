@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given, strategies as st
 
-from runtime.allocation import assignment as A
+from runtime.allocation.formation import assignment as A
 
 
 def brute_force(c) -> float:

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, example, given, settings, strategies as st
 
-from runtime.allocation.assignment import NO_TASK, hungarian, is_permutation, percent_error
-from runtime.allocation.bs import BSAgent
-from runtime.allocation.messages import Announce, Award, Bid, Price, Status, TaskInfo
-from runtime.allocation.rtma import RTMAAgent
-from runtime.allocation.simulate import BusParams, make_agents, run, solve
+from runtime.allocation.formation.assignment import NO_TASK, hungarian, is_permutation, percent_error
+from runtime.allocation.formation.bs import BSAgent
+from runtime.allocation.formation.messages import Announce, Award, Bid, Price, Status, TaskInfo
+from runtime.allocation.formation.rtma import RTMAAgent
+from runtime.allocation.formation.simulate import BusParams, make_agents, run, solve
 
 LOSSY = dict(drop=0.1, duplicate=0.1, jitter=0.01)
 METHODS = ("bs", "rtma")

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from runtime.allocation.assignment import hungarian, is_permutation
-from runtime.allocation.deferred_acceptance import (bs_outcome, deferred_acceptance, rtma_bids,
+from runtime.allocation.formation.assignment import hungarian, is_permutation
+from runtime.allocation.formation.deferred_acceptance import (bs_outcome, deferred_acceptance, rtma_bids,
                                                     rtma_outcome)
 from runtime.allocation.bus import InMemoryBus
-from runtime.allocation.simulate import BusParams, make_agents, solve
+from runtime.allocation.formation.simulate import BusParams, make_agents, solve
 
 OUTCOME = {"bs": bs_outcome, "rtma": rtma_outcome}
 

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from runtime.allocation.assignment import NO_TASK, hungarian, is_permutation, straight_line_costs
-from runtime.allocation.eps_auction import EpsAuctionAgent
-from runtime.allocation.messages import Price, Status, TaskInfo
-from runtime.allocation.simulate import BusParams, run, solve
+from runtime.allocation.formation.assignment import NO_TASK, hungarian, is_permutation, straight_line_costs
+from runtime.allocation.formation.eps_auction import EpsAuctionAgent
+from runtime.allocation.formation.messages import Price, Status, TaskInfo
+from runtime.allocation.formation.simulate import BusParams, run, solve
 
 LOSSY = dict(drop=0.1, duplicate=0.1, jitter=0.01)
 
@@ -73,7 +73,7 @@ def test_same_seed_same_run():
 def test_lost_robot_frees_its_task_and_the_rest_stay_on_distinct_tasks():
     n = 8
     c = integer_instance(11, n, 100)
-    from runtime.allocation.simulate import make_agents
+    from runtime.allocation.formation.simulate import make_agents
     agents = make_agents("auction", c)
     held, bus, _, converged = run(agents, {j: (float(j), 0.0) for j in range(n)}, failures={3: 20.0}, until=200)
     assert converged
@@ -167,7 +167,7 @@ def test_outbid_robot_that_stays_silent_is_told_directly():
 
 def test_phase_runs_down_to_eps_final_and_then_converges():
     c = integer_instance(5, 6, 1000)
-    from runtime.allocation.simulate import make_agents
+    from runtime.allocation.formation.simulate import make_agents
     agents = make_agents("auction", c)
     run(agents, {j: (float(j), 0.0) for j in range(6)})
     for a in agents.values():
@@ -220,7 +220,7 @@ def test_daemon_constructor_signature():
        lossy=st.booleans())
 def test_more_robots_than_tasks_settles_on_the_optimal_subset(seed, n_tasks, surplus, lossy):
     from scipy.optimize import linear_sum_assignment
-    from runtime.allocation.simulate import make_agents
+    from runtime.allocation.formation.simulate import make_agents
     c = np.random.default_rng(seed).integers(0, 100, (n_tasks + surplus, n_tasks))
     agents = make_agents("auction", c)
     bus = BusParams(seed=seed, **LOSSY) if lossy else BusParams()
@@ -276,7 +276,7 @@ def _watch_rungs(agents, seen):
 def test_no_robot_steps_below_a_rung_another_robot_still_stands_above(seed, n, delay, lossy):
     """The rung barrier, checked against the agents' true rungs (not their reports) on slow, jittery
     and (optionally) lossy links; the run still ends on the optimum."""
-    from runtime.allocation.simulate import make_agents
+    from runtime.allocation.formation.simulate import make_agents
     c = integer_instance(seed, n, 1000)
     agents = make_agents("auction", c)
     seen: list[bool] = []
@@ -320,7 +320,7 @@ def test_task_set_is_served_by_survivors_once_the_initiator_is_lost():
 def test_robot_lost_while_bidding_leaves_the_rest_converged_on_distinct_tasks(seed, n, t_fail, delay, lossy):
     """Fewer robots than tasks from mid-auction on: a task a robot left for a better one at a new eps stays
     open (nobody has to take it), and that must not keep the survivors from converging."""
-    from runtime.allocation.simulate import make_agents
+    from runtime.allocation.formation.simulate import make_agents
     c = integer_instance(seed, n, 1000)
     agents = make_agents("auction", c)
     extra = dict(drop=0.1, duplicate=0.1, jitter=0.5 * delay) if lossy else {}

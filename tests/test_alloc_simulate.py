@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from runtime.allocation.assignment import hungarian, is_permutation
-from runtime.allocation.simulate import BusParams, solve
+from runtime.allocation.formation.assignment import hungarian, is_permutation
+from runtime.allocation.formation.simulate import BusParams, solve
 
 
 def costs(seed=1, n=8):

@@ -8,7 +8,7 @@ import struct
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from runtime.allocation import messages as M
+from runtime.allocation.formation import messages as M
 from runtime.comms import codec, dialect
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from runtime.allocation.messages import AGENT_MESSAGES
+from runtime.allocation.formation.messages import AGENT_MESSAGES
 from runtime.comms import codec, dialect
 
 ROOT = Path(__file__).resolve().parents[1]

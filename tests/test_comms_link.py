@@ -6,7 +6,7 @@ import time
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from runtime.allocation import messages as M
+from runtime.allocation.formation import messages as M
 from runtime.comms import codec, dialect
 from runtime.comms.link import LinkCounters, MavlinkLink, load_key, parse_address, signing_timestamp
 from runtime.errors import InputError

@@ -7,7 +7,7 @@ import socket
 import pymap3d
 import pytest
 
-from runtime.allocation.messages import Status
+from runtime.allocation.formation.messages import Status
 from runtime.comms import codec, dialect
 from runtime.comms.link import MavlinkLink
 from runtime.comms.telemetry import (CUSTOM_MODE_ALLOCATING, CUSTOM_MODE_CONVERGED,

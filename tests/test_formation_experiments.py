@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from runtime import cli
-from runtime.allocation.assignment import hungarian, straight_line_costs
+from runtime.allocation.formation.assignment import hungarian, straight_line_costs
 from runtime.errors import InputError
 from runtime.planning.grid import OccupancyGrid, random_obstacle_world, rasterise_boxes
 from sitl.experiments import formation_common as fc

@@ -6,11 +6,11 @@ import math
 
 from hypothesis import given, settings, strategies as st
 
-from runtime.allocation import winner_determination as wd
+from runtime.allocation.coalition import winner_determination as wd
 from runtime.allocation.bus import InMemoryBus
-from runtime.allocation.wdp_auctioneer import CoalitionBidder, SimultaneousAuctioneer
-from runtime.allocation.wdp_messages import AwardAck, CoalitionBid, TaskDone, TaskOffer
-from runtime.allocation.wdp_model import Problem, TaskBid
+from runtime.allocation.coalition.wdp_auctioneer import CoalitionBidder, SimultaneousAuctioneer
+from runtime.allocation.coalition.wdp_messages import AwardAck, CoalitionBid, TaskDone, TaskOffer
+from runtime.allocation.coalition.wdp_model import Problem, TaskBid
 
 AUCTIONEER = 100
 # paper 001 Table 2 with tasks 1..3; each bid is sent by its lowest robot id (the coalition leader)

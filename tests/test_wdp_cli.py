@@ -9,7 +9,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from runtime import cli
-from runtime.allocation import winner_determination as wd
+from runtime.allocation.coalition import winner_determination as wd
 from runtime.errors import InputError
 
 TABLE2 = {"robots": [1, 2, 3], "tasks": ["t1", "t2", "t3"], "bids": [

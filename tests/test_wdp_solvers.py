@@ -10,9 +10,9 @@ import pytest
 from hypothesis import given, settings, strategies as st
 from scipy.optimize import Bounds, LinearConstraint, milp
 
-from runtime.allocation import wdp_bounds, wdp_dp, wdp_search
-from runtime.allocation import winner_determination as wd
-from runtime.allocation.wdp_model import Compiled, Problem, TaskBid, compile_problem
+from runtime.allocation.coalition import wdp_bounds, wdp_dp, wdp_search
+from runtime.allocation.coalition import winner_determination as wd
+from runtime.allocation.coalition.wdp_model import Compiled, Problem, TaskBid, compile_problem
 from runtime.errors import InputError
 from sitl.experiments.wdp_tables import make_problem
 

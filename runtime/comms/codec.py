@@ -1,10 +1,15 @@
-"""Agent message dataclasses <-> MAVLink messages of the private dialect.
+"""Message dataclasses <-> MAVLink messages of the private dialect.
 
-Generic over a registry: each agent dataclass maps to the MAVLink message ``MRTA_<SNAKE_NAME>``
+Generic over a registry: each dataclass maps to the MAVLink message ``MRTA_<SNAKE_NAME>``
 (``TaskInfo`` -> ``MRTA_TASK_INFO``) whose fields carry the dataclass fields by name, except that
 ``sender`` is the MAVLink header's source system id and ``dest`` is the ``target_system`` field.
-Every class in ``AGENT_MESSAGES`` is registered at import; a new message needs its XML in
-``mrta.xml``, its dataclass, and :func:`register` (or a place in ``AGENT_MESSAGES``).
+Field types: bool, int, float, and ``tuple[int, ...]`` (lists of robot or task ids), which travel as
+MAVLink arrays padded with zeros (ids are never 0), so a list ends at its first 0.
+
+Validation happens once, here: a dataclass may define ``invalid(self) -> str | None`` (why the message
+cannot be acted on, or None); :func:`from_mavlink` raises :class:`InvalidMessage` for such a message, so
+handlers trust what they get.  The fleet's classes (the runtime's own, :mod:`runtime.fleet.messages`,
+and each registered allocation method's ``Method.messages``) are registered on first use.
 """
 from __future__ import annotations
 
@@ -16,9 +21,12 @@ import typing
 from dataclasses import dataclass
 from types import ModuleType
 
-from runtime.allocation.messages import AGENT_MESSAGES
-
 _RESERVED = ("sender", "dest")
+IDS = tuple[int, ...]                  # the one array type: robot or task ids
+
+
+class InvalidMessage(ValueError):
+    """A decoded message whose values the protocol does not allow (``str()``: why)."""
 
 
 @dataclass(frozen=True)
@@ -26,7 +34,7 @@ class WireMapping:
     cls: type
     name: str                          # MAVLink message name, e.g. "MRTA_BID"
     fields: tuple[str, ...]            # dataclass fields carried in the payload (not sender/dest)
-    kinds: tuple[type, ...]            # bool, int or float per field
+    kinds: tuple[type, ...]            # bool, int, float or IDS per field
 
 
 _by_class: dict[type, WireMapping] = {}
@@ -40,8 +48,28 @@ def wire_name(cls: type) -> str:
     return "MRTA_" + re.sub(r"(?<!^)(?=[A-Z])", "_", cls.__name__).upper()
 
 
+_fleet_registered = False
+
+
+def register_fleet() -> None:
+    """Register the runtime's own message classes and every registered allocation method's (once)."""
+    global _fleet_registered
+    if _fleet_registered:
+        return
+    _fleet_registered = True
+    from runtime.allocation.registry import all_methods
+    from runtime.fleet.messages import FLEET_MESSAGES
+
+    for cls in FLEET_MESSAGES:
+        register(cls)
+    for method in all_methods():
+        for cls in method.messages:
+            if cls not in _by_class:
+                register(cls)
+
+
 def register(cls: type, name: str | None = None) -> WireMapping:
-    """Map agent dataclass ``cls`` to MAVLink message ``name`` (default :func:`wire_name`)."""
+    """Map dataclass ``cls`` to MAVLink message ``name`` (default :func:`wire_name`)."""
     if not dataclasses.is_dataclass(cls):
         raise TypeError(f"{cls!r} is not a dataclass")
     hints = typing.get_type_hints(cls)
@@ -53,8 +81,9 @@ def register(cls: type, name: str | None = None) -> WireMapping:
     kinds = []
     for n in fields:
         kind = hints[n]
-        if kind not in (bool, int, float):
-            raise TypeError(f"{cls.__name__}.{n}: wire fields must be bool, int or float, got {kind!r}")
+        if kind not in (bool, int, float, IDS):
+            raise TypeError(f"{cls.__name__}.{n}: wire fields must be bool, int, float or tuple[int, ...], "
+                            f"got {kind!r}")
         kinds.append(kind)
     m = WireMapping(cls, name or wire_name(cls), fields, tuple(kinds))
     _by_class[cls] = m
@@ -70,11 +99,13 @@ def unregister(cls: type) -> None:
 
 
 def mappings() -> tuple[WireMapping, ...]:
+    register_fleet()
     return tuple(_by_class.values())
 
 
 def check(module: ModuleType) -> None:
     """Raise ``ValueError`` unless every registered class has a matching message in ``module``."""
+    register_fleet()
     for m in _by_class.values():
         msgid = getattr(module, f"MAVLINK_MSG_ID_{m.name}", None)
         if msgid is None:
@@ -87,7 +118,9 @@ def check(module: ModuleType) -> None:
 
 
 def to_mavlink(msg, module: ModuleType):
-    """The dialect's MAVLink message object for agent message ``msg``."""
+    """The dialect's MAVLink message object for ``msg``.  Raises ValueError for an id list longer than its
+    array."""
+    register_fleet()
     m = _by_class.get(type(msg))
     if m is None:
         raise TypeError(f"{type(msg).__name__} is not a registered agent message")
@@ -97,8 +130,19 @@ def to_mavlink(msg, module: ModuleType):
     kwargs = {"target_system": int(msg.dest)}
     for name, kind in zip(m.fields, m.kinds):
         v = getattr(msg, name)
-        kwargs[name] = float(v) if kind is float else int(v)
+        if kind == IDS:
+            size = _array_length(cls, name)
+            ids = [int(i) for i in v]
+            if len(ids) > size or 0 in ids:
+                raise ValueError(f"{type(msg).__name__}.{name}: expected at most {size} non-zero ids, got {ids}")
+            kwargs[name] = ids + [0] * (size - len(ids))
+        else:
+            kwargs[name] = float(v) if kind is float else int(v)
     return cls(**kwargs)
+
+
+def _array_length(mavcls, name: str) -> int:
+    return mavcls.array_lengths[mavcls.ordered_fieldnames.index(name)]
 
 
 def encode(msg, mav) -> bytes:
@@ -117,18 +161,31 @@ def encode(msg, mav) -> bytes:
 
 
 def from_mavlink(mavmsg):
-    """The agent message for a decoded MAVLink message, or None if it is not one."""
+    """The dataclass for a decoded MAVLink message, or None if it is not one of ours.  Raises
+    :class:`InvalidMessage` if the class's ``invalid()`` finds a value the protocol does not allow."""
+    register_fleet()
     m = _by_name.get(mavmsg.get_type())
     if m is None:
         return None
     kwargs = {"sender": mavmsg.get_srcSystem(), "dest": int(mavmsg.target_system)}
     for name, kind in zip(m.fields, m.kinds):
         v = getattr(mavmsg, name)
-        kwargs[name] = bool(v) if kind is bool else kind(v)
-    return m.cls(**kwargs)
+        if kind == IDS:
+            v = list(v)
+            kwargs[name] = tuple(int(i) for i in (v[:v.index(0)] if 0 in v else v))
+        else:
+            kwargs[name] = bool(v) if kind is bool else kind(v)
+    msg = m.cls(**kwargs)
+    check_msg = getattr(msg, "invalid", None)
+    if check_msg is not None:
+        why = check_msg()
+        if why:
+            raise InvalidMessage(f"{type(msg).__name__} from {msg.sender}: {why}")
+    return msg
 
 
 def is_agent(mavmsg) -> bool:
+    register_fleet()
     return mavmsg.get_type() in _by_name
 
 
@@ -144,6 +201,3 @@ def _module_of(mav) -> ModuleType:
             return mod
     raise TypeError(f"{type(mav).__name__} is not a generated pymavlink MAVLink class")
 
-
-for _cls in AGENT_MESSAGES:
-    register(_cls)

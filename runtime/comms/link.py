@@ -5,6 +5,12 @@ to every peer address; receivers keep those whose ``target_system`` is 0 or thei
 parsed with the generated pymavlink parser (robust mode), one datagram at a time: garbage, bad CRCs,
 truncated frames and refused signatures are counted in :class:`LinkCounters`, never raised.
 
+Ground stations: frames that are not ours (MISSION_*, PARAM_*, COMMAND_*, FILE_TRANSFER_PROTOCOL ...) and
+not HEARTBEATs are queued in :attr:`MavlinkLink.gcs_inbox` with the UDP address they came from, for the
+daemon's ground-station services, which answer with :meth:`MavlinkLink.send_to`.  Telemetry goes to the
+configured ground station and to every address a GCS HEARTBEAT or request came from in the last
+``GCS_TIMEOUT`` seconds (a ground station that is not the configured one sees the robot once it talks).
+
 Liveness: :meth:`MavlinkLink.poll` sends a HEARTBEAT to every peer once per ``heartbeat_period`` and
 records the HEARTBEATs it hears; :meth:`MavlinkLink.peers_lost` names peers silent for more than
 ``heartbeat_timeout`` (once per silence).
@@ -32,6 +38,8 @@ from runtime.log import get_logger
 COMPONENT_ID = 1                       # MAV_COMP_ID_AUTOPILOT1
 SIGNING_EPOCH = 1420070400             # 2015-01-01T00:00:00Z as a Unix time
 MAX_DATAGRAMS_PER_POLL = 1024          # bounds one poll's work under a flood
+MAX_GCS_INBOX = 256                    # ground-station requests kept between two daemon cycles
+GCS_TIMEOUT = 10.0                     # s a ground station that talked to us keeps getting telemetry
 _IFLAG_SIGNED = 0x01
 
 
@@ -102,6 +110,9 @@ class LinkCounters:
     unsigned_dropped: int = 0       # unsigned frames refused because signing is on
     bad_signature_dropped: int = 0  # signed frames whose signature or timestamp is wrong
     not_for_us: int = 0             # agent messages addressed to another robot, or our own echo
+    invalid: int = 0                # our messages with values the protocol does not allow
+    gcs_requests: int = 0           # ground-station frames queued for the services
+    gcs_overflow: int = 0           # ground-station frames dropped: the inbox was full
     unknown: int = 0                # frames with a message id the dialect does not define
     ignored: int = 0                # valid frames of messages the link has no use for
     sent: int = 0                   # datagrams sent (one per message and destination)
@@ -193,6 +204,9 @@ class MavlinkLink:
         self._lost: set[int] = set()
         self._now = float("-inf")
         self.gcs_last_heartbeat: float | None = None
+        self.gcs_inbox: list[tuple[object, tuple]] = []       # (pymavlink message, source address)
+        self._gcs_seen: dict[tuple, float] = {}               # ground-station addresses -> last heard
+        self._peer_addrs = set(self._peers)
 
     # ------------------------------------------------------------------ addresses
     @property
@@ -239,17 +253,39 @@ class MavlinkLink:
             for addr in self._peers:
                 self._sendto(frame, addr)
 
+    def gcs_addresses(self) -> list[tuple]:
+        """Where telemetry goes: the configured ground station and those heard within GCS_TIMEOUT."""
+        out = [self._gcs] if self._gcs is not None else []
+        for addr, t in list(self._gcs_seen.items()):
+            if self._now - t > GCS_TIMEOUT:
+                del self._gcs_seen[addr]
+            elif addr not in out:
+                out.append(addr)
+        return out
+
     def send_gcs(self, mavmsg) -> bool:
-        """Send a message built from ``self.mav``'s dialect to the ground station, if there is one."""
-        if self._gcs is None:
+        """Send a message built from ``self.mav``'s dialect (or one of our dataclasses) to the ground
+        stations; True if it went to at least one."""
+        addrs = self.gcs_addresses()
+        if not addrs:
             return False
+        frame = self._frame(mavmsg)
+        return frame is not None and any([self._sendto(frame, a) for a in addrs])
+
+    def send_to(self, mavmsg, addr) -> bool:
+        """Send one message (pymavlink or our dataclass) to ``addr`` (a ground station's request source)."""
+        frame = self._frame(mavmsg)
+        return frame is not None and self._sendto(frame, addr)
+
+    def _frame(self, mavmsg) -> bytes | None:
         try:
-            frame = self._pack(mavmsg)
-        except Exception as e:            # struct.error: a value outside its wire type
+            if not hasattr(mavmsg, "pack"):
+                mavmsg = codec.to_mavlink(mavmsg, self.module)
+            return self._pack(mavmsg)
+        except Exception as e:            # struct.error / ValueError: a value outside its wire type
             self.counters.encode_errors += 1
-            self.log.error("not sent to the GCS: %s %s", mavmsg.get_type(), e)
-            return False
-        return self._sendto(frame, self._gcs)
+            self.log.error("not sent: %s %s", getattr(mavmsg, "get_type", lambda: type(mavmsg).__name__)(), e)
+            return None
 
     def heartbeat(self):
         """The HEARTBEAT this robot sends: ground rover, generic autopilot, current mode and state."""
@@ -268,22 +304,23 @@ class MavlinkLink:
 
     # ------------------------------------------------------------------ receiving
     def poll(self, now: float) -> list:
-        """Heartbeat the peers when due, drain the socket, return the agent messages for us."""
+        """Heartbeat the peers when due, drain the socket, return the messages for us from peers (ground-station
+        requests go to :attr:`gcs_inbox`)."""
         self._now = max(self._now, now)
         self._heartbeat_peers(now)
         out: list = []
         for _ in range(MAX_DATAGRAMS_PER_POLL):
             try:
-                data, _addr = self.sock.recvfrom(65535)
+                data, addr = self.sock.recvfrom(65535)
             except (BlockingIOError, InterruptedError):
                 break
             except OSError as e:          # e.g. ICMP errors reported on some platforms
                 self.log.debug("recv: %s", e)
                 continue
-            out += self.feed(data, now)
+            out += self.feed(data, now, addr)
         return out
 
-    def feed(self, data: bytes, now: float) -> list:
+    def feed(self, data: bytes, now: float, addr: tuple | None = None) -> list:
         """Parse one datagram; return the agent messages addressed to us.  Never raises."""
         c = self.counters
         c.datagrams += 1
@@ -303,7 +340,11 @@ class MavlinkLink:
         out: list = []
         for m in msgs:
             try:
-                agent = self._dispatch(m, now)
+                agent = self._dispatch(m, now, addr)
+            except codec.InvalidMessage as e:
+                c.invalid += 1
+                self.log.debug("dropped: %s", e)
+                continue
             except Exception as e:        # a field that will not convert; count, keep going
                 self.log.debug("dropped %s: %r", m.get_type(), e)
                 c.parse_errors += 1
@@ -316,7 +357,7 @@ class MavlinkLink:
         # only HEARTBEAT gets past pymavlink unsigned; _dispatch keeps it only if it is a GCS's
         return msg_id == self._hb_id
 
-    def _dispatch(self, m, now: float):
+    def _dispatch(self, m, now: float, addr=None):
         c = self.counters
         kind = m.get_type()
         if kind == "BAD_DATA":
@@ -335,12 +376,20 @@ class MavlinkLink:
             c.unknown += 1
             return None
         if kind == "HEARTBEAT":
-            self._on_heartbeat(m, now)
+            if self._on_heartbeat(m, now) and addr is not None and addr not in self._peer_addrs:
+                self._gcs_seen[addr] = now
             return None
         c.received += 1
         agent = codec.from_mavlink(m)
         if agent is None:
-            c.ignored += 1
+            if addr is None or addr in self._peer_addrs:
+                c.ignored += 1
+            elif len(self.gcs_inbox) >= MAX_GCS_INBOX:
+                c.gcs_overflow += 1
+            else:
+                c.gcs_requests += 1
+                self._gcs_seen[addr] = now
+                self.gcs_inbox.append((m, addr))
             return None
         if agent.sender == self.robot_id or agent.dest not in (0, self.robot_id):
             c.not_for_us += 1
@@ -348,28 +397,30 @@ class MavlinkLink:
         c.agent_received += 1
         return agent
 
-    def _on_heartbeat(self, m, now: float) -> None:
+    def _on_heartbeat(self, m, now: float) -> bool:
+        """Record a HEARTBEAT; True if it is a ground station's."""
         c = self.counters
         is_gcs = m.type == self._gcs_type
         if self.signing and not m.get_signed():
             if m.get_header().incompat_flags & _IFLAG_SIGNED:
                 c.bad_signature_dropped += 1
-                return
+                return False
             if not is_gcs:
                 c.unsigned_dropped += 1
-                return
+                return False
         c.received += 1
         c.heartbeats += 1
         if is_gcs:
             self.gcs_last_heartbeat = now
-            return
+            return True
         src = m.get_srcSystem()
         if src == self.robot_id or not 1 <= src <= 250:
-            return
+            return False
         self._last_seen[src] = max(now, self._last_seen.get(src, now))
         if src in self._lost:
             self._lost.discard(src)
             self.log.info("peer %d is back", src)
+        return False
 
     # ------------------------------------------------------------------ liveness
     def peers_lost(self, now: float) -> list[int]:

@@ -19,7 +19,7 @@ import math
 
 import pymap3d
 
-from runtime.allocation.messages import BROADCAST, Status
+from runtime.allocation.formation.messages import BROADCAST, Status
 from runtime.comms import codec
 
 CUSTOM_MODE_LOCALIZING = 0      # no pose estimate yet
@@ -84,7 +84,7 @@ class GcsTelemetry:
         ``velocity``: (v east, v north) m/s.  ``battery``: an object with ``voltage`` (V),
         ``current`` (A, negative = discharging), ``battery_charge`` and ``battery_capacity``
         (e.g. :class:`~runtime.drivers.base.BaseSensors`), or None.  ``status``: a
-        :class:`~runtime.allocation.messages.Status`, or the task held (None = none) with
+        :class:`~runtime.allocation.formation.messages.Status`, or the task held (None = none) with
         ``converged`` beside it.
         """
         task, conv = self._allocation(status, converged)

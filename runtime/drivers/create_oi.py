@@ -10,9 +10,12 @@ stops the wheels when no command came for ``watchdog`` seconds.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
+from typing import Literal, Optional
 
 import serial
 
+from runtime.config.build import rng
 from runtime.drivers import create_oi_protocol as P
 from runtime.drivers.base import BaseSensors, LinkStats, MobileBase, Odometry
 from runtime.errors import InputError
@@ -24,8 +27,27 @@ RECOVER_AFTER = 1.0        # s the wheels must be down again before Safe/Full is
 RECOVER_BACKOFF_MAX = 16.0  # s between attempts at most (a cliff, which is not streamed, may persist)
 
 
+@dataclass(frozen=True)
+class CreateOIConfig:
+    """The robot config's ``base:`` section for ``type: create_oi``."""
+    type: Literal["create_oi"] = "create_oi"
+    model: Literal["create1", "create2"] = "create2"
+    port: str = "loop://"            # any pyserial URL
+    baudrate: Optional[int] = None   # None: model default (57600 / 115200)
+    mode: Literal["safe", "full"] = "safe"
+    watchdog: float = field(default=0.5, metadata=rng(0.05, 10.0))
+    max_speed: float = field(default=0.5, metadata=rng(0.01, 0.5))   # m/s per wheel
+
+
 class CreateOI(MobileBase):
     """Create 2 or Create 1 on one serial link; non-blocking, polled with the current time."""
+
+    Config = CreateOIConfig
+
+    @classmethod
+    def from_config(cls, cfg: CreateOIConfig, robot_id=None) -> "CreateOI":
+        return cls(cfg.port, model=cfg.model, baudrate=cfg.baudrate, mode=cfg.mode, watchdog=cfg.watchdog,
+                   max_speed=cfg.max_speed, robot_id=robot_id)
 
     def __init__(self, port: str, model: str = "create2", baudrate: int | None = None, mode: str = "safe",
                  watchdog: float = 0.5, max_speed: float = 0.5, robot_id=None):

@@ -15,9 +15,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from runtime.allocation.assignment import hungarian, percent_error, straight_line_costs
-from runtime.allocation.deferred_acceptance import bs_outcome, rtma_outcome
-from runtime.allocation.simulate import BusParams, solve
+from runtime.allocation.formation.assignment import hungarian, percent_error, straight_line_costs
+from runtime.allocation.formation.deferred_acceptance import bs_outcome, rtma_outcome
+from runtime.allocation.formation.simulate import BusParams, solve
 from runtime.errors import InputError
 from runtime.log import get_logger
 from sitl.experiments import report
@@ -26,7 +26,7 @@ log = get_logger("experiments.formation")
 
 METHODS = ("bs", "rtma", "auction")
 # BS and RTMA end in the deferred-acceptance matching whatever the message order
-# (runtime.allocation.deferred_acceptance): large samples are solved in closed form
+# (runtime.allocation.formation.deferred_acceptance): large samples are solved in closed form
 CLOSED_FORM = {"bs": bs_outcome, "rtma": rtma_outcome}
 LABELS = {"bs": "BS", "rtma": "RTMA", "auction": "auction", "hungarian": "optimum"}
 FIELD_M = 1000.0          # paper 002 Section IV-A: 1000 x 1000 m, no obstacles

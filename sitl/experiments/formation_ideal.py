@@ -142,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
         agree = sum(r["same_as_closed_form"] or 0 for r in rows if r["method"] in fc.CLOSED_FORM)
         runs = sum(r["cases"] - r["not_converged"] for r in rows if r["method"] in fc.CLOSED_FORM)
         sections.append(("How the expected values are measured", (
-            "BS and RTMA are task-proposing deferred acceptance (`runtime/allocation/deferred_acceptance.py`): "
+            "BS and RTMA are task-proposing deferred acceptance (`runtime/allocation/formation/deferred_acceptance.py`): "
             "the matching they end in does not depend on message order, so it can be computed directly. "
             f"In this run the agents reached exactly the closed-form assignment in {agree}/{runs} runs. "
             f"Each size is solved in closed form on {args.repeats} samples of {args.cases} instances (the first "

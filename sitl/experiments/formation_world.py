@@ -29,7 +29,7 @@ import yaml
 from scipy import ndimage
 
 from runtime import config as C
-from runtime.allocation.assignment import hungarian, percent_error
+from runtime.allocation.formation.assignment import hungarian, percent_error
 from runtime.errors import InputError
 from runtime.log import get_logger
 from runtime.planning.costs import cost_matrix, grid_for

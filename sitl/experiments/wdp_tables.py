@@ -15,8 +15,8 @@ import statistics
 import time
 from pathlib import Path
 
-from runtime.allocation import winner_determination as wd
-from runtime.allocation.wdp_model import Problem, TaskBid
+from runtime.allocation.coalition import winner_determination as wd
+from runtime.allocation.coalition.wdp_model import Problem, TaskBid
 from runtime.errors import InputError
 from runtime.log import get_logger
 from sitl.experiments import report

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from runtime.allocation import winner_determination as wd
+from runtime.allocation.coalition import winner_determination as wd
 from runtime.errors import InputError
 
 

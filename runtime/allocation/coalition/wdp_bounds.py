@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from runtime.allocation.wdp_model import Compiled
+from runtime.allocation.coalition.wdp_model import Compiled
 
 
 def greedy(c: Compiled, order: np.ndarray, full: int, n_tasks: int) -> float:

@@ -14,7 +14,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from runtime.allocation.assignment import check_costs, global_cost, hungarian, straight_line_costs
+from runtime.allocation.formation.assignment import check_costs, global_cost, hungarian, straight_line_costs
 from runtime.allocation.bus import InMemoryBus
 
 METHODS = ("bs", "rtma", "auction", "hungarian")
@@ -43,13 +43,13 @@ class Result:
 
 def agent_class(method: str):
     if method == "bs":
-        from runtime.allocation.bs import BSAgent
+        from runtime.allocation.formation.bs import BSAgent
         return BSAgent
     if method == "rtma":
-        from runtime.allocation.rtma import RTMAAgent
+        from runtime.allocation.formation.rtma import RTMAAgent
         return RTMAAgent
     if method == "auction":
-        from runtime.allocation.eps_auction import EpsAuctionAgent
+        from runtime.allocation.formation.eps_auction import EpsAuctionAgent
         return EpsAuctionAgent
     raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from runtime.allocation.wdp_model import Compiled, SolverOutput
+from runtime.allocation.coalition.wdp_model import Compiled, SolverOutput
 
 MAX_BITS = 20          # 2^20 float64 states per layer = 8 MiB
 VIEW_MIN_FREE = 4      # bids leaving >= this many robots free update table views, not pairs

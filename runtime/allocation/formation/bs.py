@@ -6,7 +6,7 @@ bid WORSE than its own bid for that task: every resale moves a task to a robot w
 (bid, robot id), so no task can circle between two robots (paper Fig. 2) and negotiation ends.
 Auctions run in parallel; the initial auctioneer is the robot on which :meth:`BSAgent.start` is called.
 
-Wire use of the shared messages (``runtime.allocation.messages``):
+Wire use of the shared messages (``runtime.allocation.formation.messages``):
 
 * ``Announce`` (broadcast): ``reserve`` = +inf for an open auction (lowest bid wins, the auctioneer's
   own bid counts); a finite ``reserve`` is the seller's own bid, and only worse bids can win;
@@ -45,8 +45,8 @@ from collections import Counter
 from dataclasses import dataclass, field, replace
 from typing import Callable, Mapping, Sequence
 
-from runtime.allocation.assignment import TaskBook, finite, valid_task_id
-from runtime.allocation.messages import (BROADCAST, Announce, Award, Bid, Status, TaskInfo, addressed_to,
+from runtime.allocation.formation.assignment import TaskBook, finite, valid_task_id
+from runtime.allocation.formation.messages import (BROADCAST, Announce, Award, Bid, Status, TaskInfo, addressed_to,
                                          wire_float)
 from runtime.log import get_logger
 

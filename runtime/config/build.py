@@ -1,10 +1,17 @@
-"""Typed configuration: robots, fleets and worlds in YAML.
+"""Building typed configs from YAML: the schema walker, its errors, and tagged unions.
 
 Every config is a tree of frozen dataclasses.  ``_build`` walks the YAML against the dataclass
 fields and raises :class:`ConfigError` naming the file, the dotted key and what was expected, so
 the CLI can print one line and exit 2.  Ranges and choices live in field metadata::
 
     speed: float = field(default=0.3, metadata=rng(0.0, 0.5))
+
+A field may hold one of several dataclasses chosen by a key of its own mapping (a tagged union), e.g.
+``base: {type: create_oi, ...}`` or ``allocation: {method: bs, ...}``.  The choices come from a
+registry (a callable returning ``{tag value: dataclass}``, called when a config is built, so the list
+of drivers or methods exists once, in its registry); a wrong tag names the allowed values::
+
+    base: Any = union_field("type", drivers.registry.config_classes, default="create_oi")
 """
 from __future__ import annotations
 
@@ -14,7 +21,7 @@ import types
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, Optional
+from typing import Any, Callable, Literal, Mapping
 
 import yaml
 
@@ -38,145 +45,34 @@ def rng(lo: float | None = None, hi: float | None = None, **extra: Any) -> dict:
     return {"lo": lo, "hi": hi, **extra}
 
 
-# --------------------------------------------------------------------------- schema
-
 @dataclass(frozen=True)
-class Datum:
-    """Geodetic origin of the local ENU frame."""
-    lat: float = field(default=33.7756, metadata=rng(-90, 90))
-    lon: float = field(default=-84.3963, metadata=rng(-180, 180))
-    alt: float = field(default=300.0, metadata=rng(-500, 9000))
+class Tagged:
+    """A tagged union: the mapping's key ``tag`` picks the dataclass from ``choices()``."""
+    tag: str
+    choices: Callable[[], Mapping[str, type]]
+    default: str
+
+    def pick(self, value: Any, file: str, key: str) -> type:
+        if not isinstance(value, dict):
+            raise ConfigError(file, key, "a mapping", value)
+        name = value.get(self.tag, self.default)
+        if name is None:
+            raise ConfigError(file, f"{key}.{self.tag}" if key else self.tag,
+                              "one of " + "|".join(self.choices()) + " (required)")
+        options = self.choices()
+        if not isinstance(name, str) or name not in options:
+            raise ConfigError(file, f"{key}.{self.tag}" if key else self.tag, "one of " + "|".join(options), name)
+        return options[name]
 
 
-@dataclass(frozen=True)
-class Box:
-    """An axis-aligned (then yawed) box obstacle: centre and full size in metres."""
-    center: tuple[float, float]
-    size: tuple[float, float]
-    height: float = field(default=0.5, metadata=rng(0.01, 10))
-    yaw: float = field(default=0.0, metadata=rng(-math.pi, math.pi))
-
-
-@dataclass(frozen=True)
-class WorldConfig:
-    size: tuple[float, float] = (10.0, 10.0)   # metres, x by y, centred on the origin
-    obstacles: tuple[Box, ...] = ()
-    datum: Datum = Datum()
-    walls: bool = True
-    resolution: float = field(default=0.05, metadata=rng(0.005, 5.0))  # occupancy grid cell (m)
-    source: str = ""
-
-
-@dataclass(frozen=True)
-class RobotIdentity:
-    id: int = field(default=1, metadata=rng(1, 250))
-    name: str = ""
-
-
-@dataclass(frozen=True)
-class BaseConfig:
-    type: Literal["create_oi"] = "create_oi"
-    model: Literal["create1", "create2"] = "create2"
-    port: str = "loop://"            # any pyserial URL
-    baudrate: Optional[int] = None   # None: model default (57600 / 115200)
-    mode: Literal["safe", "full"] = "safe"
-    watchdog: float = field(default=0.5, metadata=rng(0.05, 10.0))
-    max_speed: float = field(default=0.5, metadata=rng(0.01, 0.5))   # m/s per wheel
-
-
-@dataclass(frozen=True)
-class GpsConfig:
-    enabled: bool = True
-    port: str = "loop://"
-    baudrate: int = field(default=9600, metadata=rng(300, 921600))
-
-
-@dataclass(frozen=True)
-class LocalizationConfig:
-    gps_sigma: float = field(default=0.5, metadata=rng(0.001, 100))        # m, 1-sigma per axis
-    odom_sigma_v: float = field(default=0.02, metadata=rng(0.0, 10))       # m/s
-    odom_sigma_w: float = field(default=0.05, metadata=rng(0.0, 10))       # rad/s
-    gate: float = field(default=13.8, metadata=rng(0.1, 1000))             # chi^2(2) 99.9 %
-    # x, y, heading in the fleet frame where the operator placed the robot; null: from the first GPS fix
-    # with heading unknown until the robot has moved
-    initial_pose: Optional[tuple[float, float, float]] = None
-
-
-@dataclass(frozen=True)
-class Peer:
-    id: int = field(metadata=rng(1, 250))
-    address: str = field(default="127.0.0.1:14601")
-
-
-@dataclass(frozen=True)
-class CommsConfig:
-    listen: str = "127.0.0.1:14601"
-    peers: tuple[Peer, ...] = ()
-    gcs: Optional[str] = "127.0.0.1:14550"
-    signing_key: Optional[str] = None     # path to a fleet key file (32 bytes hex)
-    heartbeat_timeout: float = field(default=3.0, metadata=rng(0.1, 60))
-    startup_grace: float = field(default=15.0, metadata=rng(0.1, 3600))   # s: a peer never heard by then is lost
-
-
-@dataclass(frozen=True)
-class ControlConfig:
-    rate: float = field(default=20.0, metadata=rng(1, 200))            # Hz
-    lookahead: float = field(default=0.35, metadata=rng(0.05, 10))     # m
-    cruise_speed: float = field(default=0.25, metadata=rng(0.01, 0.5)) # m/s
-    max_turn_rate: float = field(default=2.0, metadata=rng(0.1, 10))   # rad/s
-    goal_tolerance: float = field(default=0.08, metadata=rng(0.005, 5))
-
-
-@dataclass(frozen=True)
-class PlanningConfig:
-    map: Optional[str] = None       # world config used as the map (relative to this file); null: open field
-    planner: Literal["astar", "rrt", "euclid"] = "astar"
-    inflate: float = field(default=0.17, metadata=rng(0.0, 5.0))   # obstacle inflation: robot radius (m)
-    rrt_iterations: int = field(default=20000, metadata=rng(1, 1_000_000))   # per tree (planner rrt)
-
-
-@dataclass(frozen=True)
-class AllocationConfig:
-    method: Literal["bs", "rtma", "auction"] = "auction"    # epsilon auction: optimal, the default
-    bid_timeout: float = field(default=1.0, metadata=rng(0.01, 60))
-    formation: tuple[tuple[float, float], ...] = ()   # task positions in the fleet frame (m)
-    initiator: bool = False        # this robot announces the formation (one robot per fleet)
-
-
-@dataclass(frozen=True)
-class RobotConfig:
-    robot: RobotIdentity = RobotIdentity()
-    base: BaseConfig = BaseConfig()
-    gps: GpsConfig = GpsConfig()
-    localization: LocalizationConfig = LocalizationConfig()
-    comms: CommsConfig = CommsConfig()
-    control: ControlConfig = ControlConfig()
-    planning: PlanningConfig = PlanningConfig()
-    allocation: AllocationConfig = AllocationConfig()
-    datum: Datum = Datum()
-    source: str = ""
-
-
-@dataclass(frozen=True)
-class FleetRobot:
-    id: int = field(metadata=rng(1, 250))
-    start: tuple[float, float, float] = (0.0, 0.0, 0.0)   # x, y, yaw in the world frame
-
-
-@dataclass(frozen=True)
-class FleetConfig:
-    world: str
-    robot: str                                    # robot config template, relative to this file
-    robots: tuple[FleetRobot, ...]
-    formation: tuple[tuple[float, float], ...]    # task positions (m)
-    gcs: str = "127.0.0.1:14550"
-    base_port: int = field(default=14600, metadata=rng(1024, 65000))
-    signing_key: Optional[str] = None
-    seed: int = 1
-    speedup: float = field(default=1.0, metadata=rng(0.1, 100))
-    timeout: float = field(default=120.0, metadata=rng(1, 36000))    # sim seconds
-    gps_noise: float = field(default=0.3, metadata=rng(0.0, 50))     # m, 1-sigma
-    source: str = ""
+def union_field(tag: str, choices: Callable[[], Mapping[str, type]], default: str | None) -> Any:
+    """A dataclass field holding one of ``choices()`` picked by ``tag`` (absent: ``default``'s defaults;
+    ``default`` None: the section is required).  Each choice is a frozen dataclass whose own ``tag`` field
+    is a one-value Literal."""
+    t = Tagged(tag, choices, default)
+    if default is None:
+        return field(metadata={"tagged": t})
+    return field(default_factory=lambda: t.choices()[t.default](), metadata={"tagged": t})
 
 
 # --------------------------------------------------------------------------- builder
@@ -232,10 +128,22 @@ def _build(tp: Any, value: Any, file: str, key: str, meta: dict | None = None) -
         hints = typing.get_type_hints(tp)
         for name, f in fields.items():
             sub = f"{key}.{name}" if key else name
-            if name in value:
+            tagged = f.metadata.get("tagged")
+            if tagged is not None and name in value:
+                v = value[name]
+                if typing.get_origin(hints[name]) is tuple:          # a list of union members
+                    if not isinstance(v, (list, tuple)):
+                        raise ConfigError(file, sub, "a list of mappings", v)
+                    kwargs[name] = tuple(_build(tagged.pick(e, file, f"{sub}[{i}]"), e, file, f"{sub}[{i}]")
+                                         for i, e in enumerate(v))
+                else:
+                    kwargs[name] = _build(tagged.pick(v, file, sub), v, file, sub)
+            elif name in value:
                 kwargs[name] = _build(hints[name], value[name], file, sub, dict(f.metadata))
             elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-                raise ConfigError(file, sub, f"{_type_name(hints[name])} (required)")
+                what = (f"a mapping with {tagged.tag}: one of {'|'.join(tagged.choices())}" if tagged
+                        else _type_name(hints[name]))
+                raise ConfigError(file, sub, f"{what} (required)")
         if "source" in {f.name for f in dataclasses.fields(tp)}:
             kwargs["source"] = file
         return tp(**kwargs)
@@ -282,32 +190,6 @@ def from_dict(tp: type, data: Any, file: str = "<dict>") -> Any:
 
 def load(tp: type, path: str | Path) -> Any:
     return _build(tp, _read_yaml(path), str(path), "")
-
-
-def load_world(path: str | Path) -> WorldConfig:
-    return load(WorldConfig, path)
-
-
-def load_robot(path: str | Path, overrides: dict | None = None) -> RobotConfig:
-    data = _read_yaml(path)
-    if overrides:
-        data = deep_merge(data, overrides)
-    return _build(RobotConfig, data, str(path), "")
-
-
-def load_fleet(path: str | Path) -> FleetConfig:
-    fleet: FleetConfig = load(FleetConfig, path)
-    base = Path(path).parent
-    for key in ("world", "robot"):
-        target = base / getattr(fleet, key)
-        if not target.is_file():
-            raise ConfigError(path, key, "a path to an existing file relative to the fleet file", getattr(fleet, key))
-    ids = [r.id for r in fleet.robots]
-    if len(set(ids)) != len(ids):
-        raise ConfigError(path, "robots", "unique robot ids", ids)
-    if len(fleet.formation) < 1:
-        raise ConfigError(path, "formation", "at least one position")
-    return dataclasses.replace(fleet, world=str(base / fleet.world), robot=str(base / fleet.robot))
 
 
 def deep_merge(a: Any, b: Any) -> Any:

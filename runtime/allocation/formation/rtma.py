@@ -1,6 +1,6 @@
 """RTMA, the Robot and Task Mean Allocation algorithm of paper 002 (section II-B, Algorithm 1).
 
-Same auctions as BS (:mod:`runtime.allocation.bs`: parallel, resale to the best bid worse than the
+Same auctions as BS (:mod:`runtime.allocation.formation.bs`: parallel, resale to the best bid worse than the
 seller's own), with the two changes of the paper:
 
 * bid = cost - mean of this robot's costs to all N_T tasks (equation 1); the mean is built from the
@@ -19,9 +19,9 @@ from __future__ import annotations
 
 import math
 
-from runtime.allocation.assignment import NO_TASK
-from runtime.allocation.bs import BSAgent
-from runtime.allocation.messages import BROADCAST, Announce, Status, TaskInfo
+from runtime.allocation.formation.assignment import NO_TASK
+from runtime.allocation.formation.bs import BSAgent
+from runtime.allocation.formation.messages import BROADCAST, Announce, Status, TaskInfo
 
 
 class RTMAAgent(BSAgent):

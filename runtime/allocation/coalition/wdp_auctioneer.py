@@ -18,11 +18,11 @@ import math
 from dataclasses import dataclass, field
 from typing import Callable, Iterable
 
-from runtime.allocation import winner_determination as wd
-from runtime.allocation.messages import BROADCAST
-from runtime.allocation.wdp_messages import (AwardAck, AwardCancel, CoalitionAward, CoalitionBid, TaskDone,
+from runtime.allocation.coalition import winner_determination as wd
+from runtime.allocation.formation.messages import BROADCAST
+from runtime.allocation.coalition.wdp_messages import (AwardAck, AwardCancel, CoalitionAward, CoalitionBid, TaskDone,
                                              TaskOffer)
-from runtime.allocation.wdp_model import Problem, TaskBid
+from runtime.allocation.coalition.wdp_model import Problem, TaskBid
 from runtime.log import get_logger
 
 

@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from runtime.allocation import wdp_bounds, wdp_dp, wdp_milp, wdp_search
-from runtime.allocation.wdp_model import Compiled, Problem, SolverOutput, TaskBid, compile_problem
+from runtime.allocation.coalition import wdp_bounds, wdp_dp, wdp_milp, wdp_search
+from runtime.allocation.coalition.wdp_model import Compiled, Problem, SolverOutput, TaskBid, compile_problem
 from runtime.errors import InputError
 from runtime.jsonfile import read_json
 

@@ -27,6 +27,7 @@ class TaskInfo:
     x: float
     y: float
     n_tasks: int
+    round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
 
 
 @dataclass(frozen=True)
@@ -40,6 +41,7 @@ class Announce:
     x: float
     y: float
     reserve: float
+    round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
 
 
 @dataclass(frozen=True)
@@ -49,6 +51,7 @@ class Bid:
     auction: int
     task: int
     cost: float
+    round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
 
 
 @dataclass(frozen=True)
@@ -61,6 +64,7 @@ class Award:
     winner: int
     cost: float
     mean: float
+    round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
 
 
 @dataclass(frozen=True)
@@ -74,6 +78,7 @@ class Price:
     holder: int
     price: float
     phase: int
+    round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
 
 
 @dataclass(frozen=True)
@@ -87,9 +92,31 @@ class Status:
     auction: int
     task: int
     converged: bool
+    round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
+
+
+@dataclass(frozen=True)
+class RoundStart:
+    """``sender`` starts round ``round`` over the fleet tasks ``tasks`` (a task's index in the round's other
+    messages is its position here) among ``robots`` (itself included)."""
+    sender: int
+    dest: int
+    round: int
+    tasks: tuple[int, ...]
+    robots: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class RoundLeave:
+    """``sender`` takes no (further) part in round ``round``."""
+    sender: int
+    dest: int
+    round: int
 
 
 AGENT_MESSAGES = (TaskInfo, Announce, Bid, Award, Price, Status)
+ROUND_MESSAGES = (RoundStart, RoundLeave)
+MAX_ROUND = 40          # tasks and robots a RoundStart can name (its MAVLink arrays)
 
 
 def wire_float(value: float) -> float:

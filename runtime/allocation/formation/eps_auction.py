@@ -45,8 +45,8 @@ import math
 from collections import Counter
 from typing import Callable, Mapping, Sequence
 
-from runtime.allocation.assignment import MAX_TASKS, NO_TASK, TaskBook, finite, valid_task_id
-from runtime.allocation.messages import BROADCAST, Price, Status, TaskInfo, addressed_to
+from runtime.allocation.formation.assignment import MAX_TASKS, NO_TASK, TaskBook, finite, valid_task_id
+from runtime.allocation.formation.messages import BROADCAST, Price, Status, TaskInfo, addressed_to
 from runtime.log import get_logger
 
 INF = math.inf

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 
-from runtime.allocation.wdp_model import Compiled, SolverOutput
+from runtime.allocation.coalition.wdp_model import Compiled, SolverOutput
 
 DUMMY = (-1, 0, 0.0)
 

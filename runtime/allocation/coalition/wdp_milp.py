@@ -11,7 +11,7 @@ import numpy as np
 from scipy.optimize import Bounds, LinearConstraint, linear_sum_assignment, milp
 from scipy.sparse import csr_matrix
 
-from runtime.allocation.wdp_model import Compiled, SolverOutput
+from runtime.allocation.coalition.wdp_model import Compiled, SolverOutput
 
 
 def milp_matrix(c: Compiled) -> csr_matrix:

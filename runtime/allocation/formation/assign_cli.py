@@ -3,7 +3,7 @@
 PROBLEM.json is either ``{"costs": [[c_robot_task, ...], ...]}`` (square, finite, non-negative) or
 ``{"robots": [[x, y], ...], "tasks": [[x, y], ...]}`` with optional ``"world": "configs/worlds/x.yaml"``
 (then costs are planner path lengths from ``runtime.planning.costs.cost_matrix``, else straight lines).
-The distributed methods run on the in-memory bus (:func:`runtime.allocation.simulate.solve`).
+The distributed methods run on the in-memory bus (:func:`runtime.allocation.formation.simulate.solve`).
 """
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from runtime.allocation.assignment import check_costs, hungarian, percent_error, straight_line_costs
+from runtime.allocation.formation.assignment import check_costs, hungarian, percent_error, straight_line_costs
 from runtime.errors import InputError
 from runtime.jsonfile import read_json
 
@@ -86,7 +86,7 @@ def load_problem(path: str | Path) -> tuple[np.ndarray, list | None, list | None
 
 
 def run(args: argparse.Namespace) -> int:
-    from runtime.allocation.simulate import solve
+    from runtime.allocation.formation.simulate import solve
 
     if not (args.bid_timeout > 0 and math.isfinite(args.bid_timeout)):
         raise InputError(f"--bid-timeout: expected a positive number of seconds, got {args.bid_timeout}")

@@ -15,7 +15,7 @@ O(n^2) and the tests hold the agents to it.
 Both sides rank by one matrix (up to a shift per row or per column), so the stable matching is unique and
 equals the greedy one, smallest entry first: BS is greedy on the costs, RTMA greedy on the costs minus
 each robot's mean minus each task's mean.  RTMA's means act as one-shot estimates of the assignment
-problem's dual prices; the epsilon auction (:mod:`runtime.allocation.eps_auction`) finds the exact ones.  (Exact ties between floating-point keys can break the
+problem's dual prices; the epsilon auction (:mod:`runtime.allocation.formation.eps_auction`) finds the exact ones.  (Exact ties between floating-point keys can break the
 other way if the agents sum the mean in another order; random real costs have none.)
 """
 from __future__ import annotations

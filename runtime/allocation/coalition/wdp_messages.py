@@ -1,5 +1,5 @@
 """Messages of the simultaneous coalition auction (paper 001, Table 1 steps 3-4).  Plain frozen
-dataclasses, no I/O; ``sender`` and ``dest`` first as in :mod:`runtime.allocation.messages`
+dataclasses, no I/O; ``sender`` and ``dest`` first as in :mod:`runtime.allocation.formation.messages`
 (dest 0 = every peer).  ``robots`` is a tuple of robot ids (1..250); on MAVLink it maps to a
 uint8 array with its length.
 """

@@ -1,0 +1,78 @@
+"""The interface every allocation family implements, and what a registry entry says about a method.
+
+An :class:`Agent` is a sans-IO state machine for one robot: built from an :class:`AgentContext` (robot
+id, configured peers, estimator, options), it takes tasks at any time, messages, ticks, lost peers,
+progress from execution and the operator's arm/disarm; it returns the messages to send and exposes the
+robot's :class:`~runtime.tasks.Commitment` s.  It never opens a socket, sleeps or reads the wall clock:
+every input carries ``now``.  The same agent runs in the daemon, in tests on the in-memory bus, and in
+fast experiment loops.
+
+What the fleet should hear about tasks (awarded, done, failed) an agent queues as :class:`TaskEvent` s;
+the daemon drains them with :meth:`Agent.pop_events` (done tasks leave the fleet's task table; each event
+becomes a STATUSTEXT line for the ground station).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable, Protocol, Sequence
+
+from runtime.tasks import Commitment, Estimate, Profile, Progress, Task
+
+AWARDED, DONE, FAILED, RELEASED = "awarded", "done", "failed", "released"
+
+
+@dataclass(frozen=True)
+class TaskEvent:
+    task: int
+    what: str                          # AWARDED | DONE | FAILED | RELEASED
+    robots: tuple[int, ...] = ()       # who holds / did it
+    detail: str = ""
+
+
+class Estimator(Protocol):
+    """How a robot prices tasks: its profile and a batch of estimates (one planner search for all)."""
+    profile: Profile
+
+    def estimates(self, tasks: Sequence[Task]) -> list[Estimate]: ...
+
+
+@dataclass
+class AgentContext:
+    robot_id: int
+    peers: tuple[int, ...]             # configured peers (robot ids), not this robot
+    estimator: Estimator
+    options: Any                       # the method's options dataclass (the config's allocation section)
+
+
+class Agent(Protocol):
+    robot_id: int
+
+    def add_tasks(self, tasks: Sequence[Task], now: float) -> list: ...
+    def withdraw_tasks(self, task_ids: Sequence[int], now: float) -> list: ...
+    def on_message(self, msg: Any, now: float) -> list: ...
+    def on_tick(self, now: float) -> list: ...
+    def on_peer_lost(self, robot_id: int, now: float) -> list: ...
+    def on_progress(self, progress: Progress, now: float) -> list: ...
+    def set_available(self, available: bool, now: float) -> list: ...
+
+    @property
+    def commitments(self) -> tuple[Commitment, ...]: ...
+
+    @property
+    def converged(self) -> bool: ...
+
+    def pop_events(self) -> list[TaskEvent]: ...
+
+
+@dataclass(frozen=True)
+class Method:
+    """A registry entry: everything the runtime needs to know about one allocation method."""
+    name: str
+    summary: str                                   # one line for --help and docs
+    options: type                                  # options dataclass = the config schema of `allocation:`
+    make: Callable[[AgentContext], Agent]          # the daemon's agent
+    task_kinds: tuple[str, ...]                    # task kinds it can allocate
+    messages: tuple[type, ...] = ()                # message dataclasses it puts on the wire
+    dialect: str | None = None                     # its MAVLink XML (path), included in the fleet dialect
+    solver: type | None = None                     # bare sans-IO solver for in-process sweeps, if any
+    extra: dict = field(default_factory=dict)

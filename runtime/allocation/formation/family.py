@@ -1,0 +1,344 @@
+"""The formation methods (paper 002's BS and RTMA, and the epsilon-scaling auction) as daemon agents.
+
+Each method's solver (:class:`~runtime.allocation.formation.bs.BSAgent`, ``RTMAAgent``,
+``EpsAuctionAgent``) solves one assignment problem: a fixed task set among a fixed set of robots, one
+task per robot, started by one robot.  Tasks reach a fleet at any time, though, and robots finish them,
+get lost and are disarmed.  :class:`FormationAgent` runs the solver in **rounds**:
+
+* A round allocates the open tasks no robot holds (at most ``MAX_ROUND``, lowest ids first) among the
+  robots that are free (armed, localized, holding no task).  The lowest-id free robot starts it with a
+  ``RoundStart`` naming the tasks and the robots, then runs its solver's ``start``; a free robot named
+  in it joins with a solver of its own, one that is not free answers ``RoundLeave`` and its peers in the
+  round treat it as lost there.  If the lowest free robot has not started a round within ``start_wait``
+  seconds, the next one does.  Inside a round, task ids are indices into the ``RoundStart``'s list and
+  every message carries the round id, so rounds never mix.
+* A robot's commitment is its solver's current assignment (it follows re-auctions inside the round).
+  It keeps its solver, and so keeps answering as the holder, while it works on the task; when the task
+  is done or withdrawn it drops the solver and is free again.  A robot the round left without a task
+  drops out once the round has been quiet for ``linger`` seconds.
+* Robots tell each other what they hold (``RobotState``, every second and on each change).  Tasks a
+  live robot holds are not offered again; a lost robot's tasks are.  If two robots end up holding the
+  same task (rounds that overlapped), the lower id keeps it and the other lets it go.
+* A round that got no task taken is not repeated by its initiator with the same tasks and free robots
+  until a back-off (doubling, at most 30 s) has passed: a task nobody can reach is reported, not
+  auctioned in a loop.
+
+With every robot free and the tasks handed in at once (a formation), round 1 is exactly the solver's
+problem: same robots, same tasks in the same order, started by the lowest id, so the daemons give the
+same result as the in-process solver for the same costs.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+from runtime.allocation.agent import AWARDED, DONE, RELEASED, AgentContext, Method, TaskEvent
+from runtime.allocation.formation.bs import BSAgent
+from runtime.allocation.formation.eps_auction import EpsAuctionAgent
+from runtime.allocation.formation.messages import (AGENT_MESSAGES, BROADCAST, MAX_ROUND, ROUND_MESSAGES,
+                                                   RoundLeave, RoundStart)
+from runtime.allocation.formation.options import AuctionOptions, BSOptions, RTMAOptions
+from runtime.allocation.formation.rtma import RTMAAgent
+from runtime.fleet.messages import EXECUTING, IDLE, RobotState
+from runtime.log import get_logger
+from runtime.tasks import DONE as P_DONE, FAILED as P_FAILED, Commitment, Progress, Task
+
+MAX_BACKOFF = 30.0
+
+
+@dataclass
+class Round:
+    id: int
+    tasks: tuple[int, ...]             # fleet task ids; a task's index here is its id inside the round
+    robots: tuple[int, ...]
+    solver: object | None = None       # None: I only know of it
+    last_heard: float = 0.0            # last message of this round in or out
+
+
+@dataclass
+class PeerView:
+    state: int = IDLE
+    tasks: tuple[int, ...] = ()
+    heard: bool = False
+
+
+@dataclass
+class _Backoff:
+    key: tuple = ()
+    until: float = -math.inf
+    wait: float = 1.0
+
+
+class FormationAgent:
+    """One robot's formation-family agent (see the module docstring)."""
+
+    def __init__(self, ctx: AgentContext, solver: type, solver_options: dict):
+        self.robot_id = int(ctx.robot_id)
+        self.peers = tuple(sorted(set(ctx.peers) - {self.robot_id}))
+        self.estimator = ctx.estimator
+        self.options = ctx.options
+        self.solver_cls = solver
+        self.solver_options = solver_options
+        self.tasks: dict[int, Task] = {}              # open fleet tasks I know of
+        self.lost: set[int] = set()
+        self.view: dict[int, PeerView] = {p: PeerView() for p in self.peers}
+        self.rounds: dict[int, Round] = {}            # rounds I take part in
+        self.declined: set[int] = set()
+        self.available = True
+        self.localized = True
+        self._count = 0
+        self._free_since: float | None = None
+        self._held: int | None = None                 # the task of my last commitment (for events)
+        self._events: list[TaskEvent] = []
+        self._backoff = _Backoff()
+        self._now = 0.0
+        self.log = get_logger(f"alloc.{getattr(self.options, 'method', 'formation')}", self.robot_id)
+
+    # ------------------------------------------------------------------ what the daemon reads
+    @property
+    def commitments(self) -> tuple[Commitment, ...]:
+        task = self._assigned()
+        return () if task is None else (Commitment(self.tasks[task]),)
+
+    @property
+    def converged(self) -> bool:
+        return all(r.solver.converged for r in self.rounds.values())
+
+    @property
+    def allocating(self) -> bool:
+        return any(not r.solver.converged for r in self.rounds.values())
+
+    def pop_events(self) -> list[TaskEvent]:
+        out, self._events = self._events, []
+        return out
+
+    def _assigned(self) -> int | None:
+        """The fleet task my solvers give me, if it is still open (my newest round first)."""
+        for r in sorted(self.rounds.values(), key=lambda r: -r.id):
+            local = r.solver.assignment
+            if local is not None and 0 <= local < len(r.tasks) and r.tasks[local] in self.tasks:
+                return r.tasks[local]
+        return None
+
+    @property
+    def free(self) -> bool:
+        return self.available and self.localized and self._assigned() is None and not self.allocating
+
+    # ------------------------------------------------------------------ inputs
+    def add_tasks(self, tasks: Sequence[Task], now: float) -> list:
+        for t in tasks:
+            self.tasks[t.id] = t
+        return []
+
+    def withdraw_tasks(self, task_ids: Sequence[int], now: float) -> list:
+        for tid in task_ids:
+            self.tasks.pop(tid, None)
+        return self._settle(now)
+
+    def set_available(self, available: bool, now: float) -> list:
+        """Disarmed: leave every round (peers treat me as lost there, so my task is auctioned again)."""
+        self.available = bool(available)
+        if available:
+            return []
+        out = []
+        for r in list(self.rounds.values()):
+            out += self._leave(r, now, tell=True)
+        return out
+
+    def set_localized(self, localized: bool) -> None:
+        self.localized = bool(localized)
+
+    def on_peer_lost(self, robot_id: int, now: float) -> list:
+        self._now = now
+        self.lost.add(robot_id)
+        self.view.pop(robot_id, None)
+        out = []
+        for r in list(self.rounds.values()):
+            if robot_id in r.robots:
+                out += self._from(r, r.solver.on_peer_lost(robot_id, now), now)
+        return out + self._settle(now)
+
+    def on_progress(self, p: Progress, now: float) -> list:
+        self._now = now
+        if p.event == P_DONE and p.task in self.tasks:
+            self._events.append(TaskEvent(p.task, DONE, (self.robot_id,)))
+            del self.tasks[p.task]
+            return self._settle(now)
+        if p.event == P_FAILED:
+            self.log.warning("task %d failed: %s", p.task, p.detail)
+        return []
+
+    def on_message(self, msg, now: float) -> list:
+        self._now = now
+        sender = getattr(msg, "sender", None)
+        if sender in self.lost:
+            self.lost.discard(sender)             # heard again
+            self.view.setdefault(sender, PeerView())
+        if isinstance(msg, RobotState):
+            return self._on_state(msg, now)
+        if isinstance(msg, RoundStart):
+            return self._on_round_start(msg, now)
+        if isinstance(msg, RoundLeave):
+            r = self.rounds.get(msg.round)
+            if r is None or msg.sender not in r.robots:
+                return []
+            r.last_heard = now
+            return self._from(r, r.solver.on_peer_lost(msg.sender, now), now) + self._settle(now)
+        rid = getattr(msg, "round", None)
+        if rid is None:
+            return []
+        r = self.rounds.get(rid)
+        if r is None:
+            return []                             # a round I am not in (or have left): none of my business
+        r.last_heard = now
+        return self._from(r, r.solver.on_message(msg, now), now) + self._settle(now)
+
+    def on_tick(self, now: float) -> list:
+        self._now = now
+        out = []
+        for r in list(self.rounds.values()):
+            out += self._from(r, r.solver.on_tick(now), now)
+        out += self._settle(now)
+        out += self._maybe_start(now)
+        return out
+
+    # ------------------------------------------------------------------ rounds
+    def _on_state(self, m: RobotState, now: float) -> list:
+        """A peer's state.  If it holds my task from another round (rounds that overlapped) and neither of us
+        is still allocating, the lower id keeps the task.  Inside one round the solver decides: a peer's state
+        may lag a resale there."""
+        v = self.view.setdefault(m.sender, PeerView())
+        v.state, v.tasks, v.heard = m.state, tuple(m.tasks), True
+        mine = self._assigned()
+        if mine is None or mine not in v.tasks or m.sender > self.robot_id or self.allocating or m.state != EXECUTING:
+            return []
+        r = next(r for r in self.rounds.values() if r.solver.assignment is not None
+                 and r.tasks[r.solver.assignment] == mine)
+        if m.sender in r.robots:
+            return []
+        self.log.warning("robot %d holds task %d too: it keeps it (lower id), I let it go", m.sender, mine)
+        self._events.append(TaskEvent(mine, RELEASED, (self.robot_id,), f"robot {m.sender} holds it"))
+        return self._leave(r, now, tell=False) + self._settle(now)
+
+    def _on_round_start(self, m: RoundStart, now: float) -> list:
+        if self.robot_id not in m.robots or m.round in self.rounds:
+            return []
+        if not self.free or any(t not in self.tasks for t in m.tasks) and not self._learn(m.tasks):
+            self.declined.add(m.round)
+            return [RoundLeave(self.robot_id, BROADCAST, m.round)]
+        r = Round(m.round, tuple(m.tasks), tuple(m.robots), last_heard=now)
+        r.solver = self._solver(r)
+        self.rounds[r.id] = r
+        self.log.info("joined round %s: %d tasks, robots %s", _rid(r.id), len(r.tasks), list(r.robots))
+        return []
+
+    def _learn(self, task_ids) -> bool:
+        """A round names tasks I do not know: my table is behind (the daemon will sync it); I cannot price them."""
+        return False
+
+    def _solver(self, r: Round):
+        tasks = [self.tasks[t] for t in r.tasks]
+
+        def cost(local: int) -> float:          # one estimate batch for the round's tasks (cached by the estimator)
+            return self.estimator.estimates(tasks)[local].cost
+
+        peers = [p for p in r.robots if p != self.robot_id]
+        return self.solver_cls(self.robot_id, peers, cost, **self.solver_options)
+
+    def _candidates(self) -> tuple[list[int], list[int]]:
+        """(open tasks no live robot holds, free robots I know of with me first), lowest ids first."""
+        held = {t for p, v in self.view.items() if p not in self.lost for t in v.tasks}
+        in_rounds = {t for r in self.rounds.values() for t in r.tasks}
+        tasks = [t for t in sorted(self.tasks) if t not in held and t not in in_rounds][:MAX_ROUND]
+        robots = [self.robot_id] + [p for p in self.peers if p not in self.lost and self._peer_free(p)]
+        return tasks, sorted(robots)[:MAX_ROUND]
+
+    def _peer_free(self, p: int) -> bool:
+        v = self.view.get(p)
+        return v is not None and v.state == IDLE and not v.tasks
+
+    def _maybe_start(self, now: float) -> list:
+        if not self.free:
+            self._free_since = None
+            return []
+        tasks, robots = self._candidates()
+        if not tasks:
+            self._free_since = None
+            return []
+        if self._free_since is None:
+            self._free_since = now
+        lower = [p for p in robots if p < self.robot_id]
+        if lower and now - self._free_since < self.options.start_wait:
+            return []
+        key = (tuple(tasks), tuple(robots))
+        if key == self._backoff.key and now < self._backoff.until:
+            return []
+        self._count = self._count % 0xFFFF + 1
+        r = Round(self.robot_id << 16 | self._count, tuple(tasks), tuple(robots), last_heard=now)
+        r.solver = self._solver(r)
+        self.rounds[r.id] = r
+        if key == self._backoff.key:
+            self._backoff.wait = min(2 * self._backoff.wait, MAX_BACKOFF)
+        else:
+            self._backoff = _Backoff(key, wait=1.0)
+        self._backoff.until = now + self._backoff.wait
+        self.log.info("starting round %s: tasks %s, robots %s", _rid(r.id), list(tasks), list(robots))
+        out = [RoundStart(self.robot_id, BROADCAST, r.id, r.tasks, r.robots)]
+        positions = {i: self.tasks[t].position for i, t in enumerate(r.tasks)}
+        out += self._from(r, r.solver.start(positions, now), now)
+        out += self._from(r, r.solver.on_tick(now), now)
+        return out
+
+    def _from(self, r: Round, msgs: list, now: float) -> list:
+        """Solver output, stamped with its round."""
+        if msgs:
+            r.last_heard = now
+        return [dataclasses.replace(m, round=r.id) for m in msgs]
+
+    def _leave(self, r: Round, now: float, tell: bool) -> list:
+        self.rounds.pop(r.id, None)
+        self.log.info("leaving round %s", _rid(r.id))
+        return [RoundLeave(self.robot_id, BROADCAST, r.id)] if tell else []
+
+    def _settle(self, now: float) -> list:
+        """Drop rounds that are over for me; report a new commitment."""
+        out = []
+        for r in list(self.rounds.values()):
+            local = r.solver.assignment
+            task = r.tasks[local] if local is not None and 0 <= local < len(r.tasks) else None
+            if task is not None and task not in self.tasks:
+                out += self._leave(r, now, tell=False)          # done or withdrawn: I am free
+            elif task is None and r.solver.converged and now - r.last_heard >= self.options.linger:
+                out += self._leave(r, now, tell=False)          # the round left me without a task
+        held = self._assigned()
+        if held != self._held:
+            if held is not None:
+                self._events.append(TaskEvent(held, AWARDED, (self.robot_id,)))
+                self._backoff = _Backoff()
+            self._held = held
+        return out
+
+
+def _rid(round_id: int) -> str:
+    return f"{round_id >> 16}.{round_id & 0xFFFF}"
+
+
+def _make(solver: type, extra: tuple[str, ...]):
+    def make(ctx: AgentContext) -> FormationAgent:
+        o = ctx.options
+        opts = {"bid_timeout": o.bid_timeout, **{k: getattr(o, k) for k in extra}}
+        return FormationAgent(ctx, solver, opts)
+    return make
+
+
+_XML = str(__import__("pathlib").Path(__file__).with_name("formation.xml"))
+_MSGS = AGENT_MESSAGES + ROUND_MESSAGES
+
+BS = Method("bs", "paper 002 basic market algorithm: auction, resell the dearer of two tasks", BSOptions,
+            _make(BSAgent, ("max_retries",)), ("goto",), _MSGS, _XML, BSAgent)
+RTMA = Method("rtma", "paper 002 RTMA: BS with bids relative to each robot's mean cost", RTMAOptions,
+              _make(RTMAAgent, ("max_retries",)), ("goto",), _MSGS, _XML, RTMAAgent)
+AUCTION = Method("auction", "epsilon-scaling auction (Bertsekas): optimal assignment, the default", AuctionOptions,
+                 _make(EpsAuctionAgent, ("cost_unit", "theta")), ("goto",), _MSGS, _XML, EpsAuctionAgent)

@@ -1,0 +1,37 @@
+"""Allocation methods by name: the only list of them.
+
+Each entry names ``module:attribute`` of a :class:`runtime.allocation.agent.Method`; the family package
+is imported only when asked for.  A new family is one package plus one line here.
+"""
+from __future__ import annotations
+
+import importlib
+
+from runtime.allocation.agent import Method
+
+METHODS: dict[str, str] = {
+    "auction": "runtime.allocation.formation.family:AUCTION",    # epsilon-scaling auction (optimal)
+    "bs": "runtime.allocation.formation.family:BS",              # paper 002 basic market algorithm
+    "rtma": "runtime.allocation.formation.family:RTMA",          # paper 002 robot and task mean allocation
+}
+DEFAULT = "auction"
+
+
+def names() -> tuple[str, ...]:
+    return tuple(METHODS)
+
+
+def method(name: str) -> Method:
+    if name not in METHODS:
+        raise KeyError(f"allocation method {name!r}: expected one of {'|'.join(METHODS)}")
+    module, _, attr = METHODS[name].partition(":")
+    return getattr(importlib.import_module(module), attr)
+
+
+def options_classes() -> dict[str, type]:
+    """``{method: options dataclass}``: the robot config's ``allocation:`` union."""
+    return {name: method(name).options for name in METHODS}
+
+
+def all_methods() -> list[Method]:
+    return [method(name) for name in METHODS]

@@ -1,0 +1,70 @@
+"""SITL fleet configs: the world, the robots (each from a robot template) and the scenario.
+
+A fleet names a default robot template (``robot:``); a robot may name its own (``robots[i].robot``), so
+one fleet can mix bases.  ``scenario:`` is a union chosen by ``scenario.type`` (:mod:`sitl.scenarios`):
+what the operator hands the fleet and when, and when the run's goal is met.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Optional
+
+from runtime.config.build import ConfigError, load, rng, union_field
+
+
+def _scenarios():
+    from sitl.scenarios import config_classes
+    return config_classes()
+
+
+@dataclass(frozen=True)
+class FleetRobot:
+    id: int = field(metadata=rng(1, 250))
+    start: tuple[float, float, float] = (0.0, 0.0, 0.0)   # x, y, yaw in the world frame
+    robot: Optional[str] = None         # this robot's template (relative to the fleet file); null: the fleet's
+
+
+@dataclass(frozen=True)
+class FleetConfig:
+    world: str
+    robot: str                                    # default robot config template, relative to this file
+    robots: tuple[FleetRobot, ...]
+    scenario: Any = union_field("type", _scenarios, None)
+    gcs: str = "127.0.0.1:14550"
+    base_port: int = field(default=14600, metadata=rng(1024, 65000))
+    signing_key: Optional[str] = None
+    seed: int = 1
+    speedup: float = field(default=1.0, metadata=rng(0.1, 100))
+    timeout: float = field(default=120.0, metadata=rng(1, 36000))    # sim seconds
+    gps_noise: float = field(default=0.3, metadata=rng(0.0, 50))     # m, 1-sigma
+    source: str = ""
+
+    def template(self, robot_id: int) -> str:
+        """The robot config template of robot ``robot_id`` (absolute path)."""
+        r = next(r for r in self.robots if r.id == robot_id)
+        return r.robot or self.robot
+
+
+def load_fleet(path: str | Path) -> FleetConfig:
+    fleet: FleetConfig = load(FleetConfig, path)
+    base = Path(path).parent
+
+    def resolve(value: str, key: str) -> str:
+        target = base / value
+        if not target.is_file():
+            raise ConfigError(path, key, "a path to an existing file relative to the fleet file", value)
+        return str(target)
+
+    ids = [r.id for r in fleet.robots]
+    if not ids:
+        raise ConfigError(path, "robots", "at least one robot")
+    if len(set(ids)) != len(ids):
+        raise ConfigError(path, "robots", "unique robot ids", ids)
+    robots = tuple(dataclasses.replace(r, robot=resolve(r.robot, f"robots[{i}].robot") if r.robot else None)
+                   for i, r in enumerate(fleet.robots))
+    fleet = dataclasses.replace(fleet, world=resolve(fleet.world, "world"), robot=resolve(fleet.robot, "robot"),
+                                robots=robots)
+    fleet.scenario.check(fleet, str(path))
+    return fleet

@@ -1,0 +1,103 @@
+"""Robot configs: one robot's identity, base, GPS, localization, comms, control, planning and allocation.
+
+``base:`` is a union chosen by ``base.type`` (the drivers' registry, :mod:`runtime.drivers.registry`)
+and ``allocation:`` a union chosen by ``allocation.method`` (:mod:`runtime.allocation.registry`): each
+driver and each method brings its own options dataclass, which is the schema of its section.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal, Optional
+
+from runtime.config.build import _build, _read_yaml, deep_merge, rng, union_field
+from runtime.config.world import Datum
+
+
+def _bases():
+    from runtime.drivers.registry import config_classes
+    return config_classes()
+
+
+def _methods():
+    from runtime.allocation.registry import options_classes
+    return options_classes()
+
+
+@dataclass(frozen=True)
+class RobotIdentity:
+    id: int = field(default=1, metadata=rng(1, 250))
+    name: str = ""
+    armed: bool = True       # at start: allowed to drive and take tasks (a ground station can disarm it)
+
+
+@dataclass(frozen=True)
+class GpsConfig:
+    enabled: bool = True
+    port: str = "loop://"
+    baudrate: int = field(default=9600, metadata=rng(300, 921600))
+
+
+@dataclass(frozen=True)
+class LocalizationConfig:
+    gps_sigma: float = field(default=0.5, metadata=rng(0.001, 100))        # m, 1-sigma per axis
+    odom_sigma_v: float = field(default=0.02, metadata=rng(0.0, 10))       # m/s
+    odom_sigma_w: float = field(default=0.05, metadata=rng(0.0, 10))       # rad/s
+    gate: float = field(default=13.8, metadata=rng(0.1, 1000))             # chi^2(2) 99.9 %
+    # x, y, heading in the fleet frame where the operator placed the robot; null: from the first GPS fix
+    # with heading unknown until the robot has moved
+    initial_pose: Optional[tuple[float, float, float]] = None
+
+
+@dataclass(frozen=True)
+class Peer:
+    id: int = field(metadata=rng(1, 250))
+    address: str = field(default="127.0.0.1:14601")
+
+
+@dataclass(frozen=True)
+class CommsConfig:
+    listen: str = "127.0.0.1:14601"
+    peers: tuple[Peer, ...] = ()
+    gcs: Optional[str] = "127.0.0.1:14550"
+    signing_key: Optional[str] = None     # path to a fleet key file (32 bytes hex)
+    heartbeat_timeout: float = field(default=3.0, metadata=rng(0.1, 60))
+    startup_grace: float = field(default=15.0, metadata=rng(0.1, 3600))   # s: a peer never heard by then is lost
+
+
+@dataclass(frozen=True)
+class ControlConfig:
+    rate: float = field(default=20.0, metadata=rng(1, 200))            # Hz
+    lookahead: float = field(default=0.35, metadata=rng(0.05, 10))     # m
+    cruise_speed: float = field(default=0.25, metadata=rng(0.01, 2.0)) # m/s (the base clips to its limit)
+    max_turn_rate: float = field(default=2.0, metadata=rng(0.1, 10))   # rad/s
+    goal_tolerance: float = field(default=0.08, metadata=rng(0.005, 5))
+
+
+@dataclass(frozen=True)
+class PlanningConfig:
+    map: Optional[str] = None       # world config used as the map (relative to this file); null: open field
+    planner: Literal["astar", "rrt", "euclid"] = "astar"
+    inflate: Optional[float] = field(default=None, metadata=rng(0.0, 5.0))   # m; null: the base's radius
+    rrt_iterations: int = field(default=20000, metadata=rng(1, 1_000_000))   # per tree (planner rrt)
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    robot: RobotIdentity = RobotIdentity()
+    base: Any = union_field("type", _bases, "create_oi")
+    gps: GpsConfig = GpsConfig()
+    localization: LocalizationConfig = LocalizationConfig()
+    comms: CommsConfig = CommsConfig()
+    control: ControlConfig = ControlConfig()
+    planning: PlanningConfig = PlanningConfig()
+    allocation: Any = union_field("method", _methods, "auction")
+    datum: Datum = Datum()
+    source: str = ""
+
+
+def load_robot(path: str | Path, overrides: dict | None = None) -> RobotConfig:
+    data = _read_yaml(path)
+    if overrides:
+        data = deep_merge(data, overrides)
+    return _build(RobotConfig, data, str(path), "")

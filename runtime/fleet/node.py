@@ -1,0 +1,154 @@
+"""A robot's place in the fleet (sans-IO): the replicated task table, the allocation agent, and the state it
+tells its peers and the ground station.
+
+The daemon feeds it the operator's uploads, every decoded message from peers, lost peers, progress from
+execution and the arm/disarm switch; it returns the messages to send.  Between it and the agent sits the
+task table: a task entered here or learnt from a peer is handed to the agent (``add_tasks``) on every
+robot, a task done or withdrawn anywhere is taken back (``withdraw_tasks``), and a task the agent reports
+done is marked in the table and broadcast.  The same object runs in the daemon and, with a simulated
+executor, on the in-memory bus in tests.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from runtime.allocation.agent import AWARDED, DONE, TaskEvent
+from runtime.fleet.messages import (ALLOCATING, BROADCAST, DISARMED, DONE as T_DONE, EXECUTING, IDLE, LOCALIZING,
+                                    MAX_HELD, OPEN, RobotState, TableRequest, TaskRecord)
+from runtime.fleet.table import TaskTable
+from runtime.log import get_logger
+from runtime.tasks import Progress
+
+
+@dataclass(frozen=True)
+class Notice:
+    """Something a ground station should hear about: a STATUSTEXT line, and for arrivals the mission seq."""
+    text: str
+    severity: int = 6                 # MAV_SEVERITY_INFO
+    reached_seq: int | None = None    # MISSION_ITEM_REACHED
+
+
+class FleetNode:
+    def __init__(self, robot_id: int, agent, *, state_period: float = 1.0, armed: bool = True):
+        self.robot_id = int(robot_id)
+        self.agent = agent
+        self.table = TaskTable(self.robot_id)
+        self.state_period = float(state_period)
+        self.armed = bool(armed)
+        self.localized = False
+        self.pose: tuple[float, float] | None = None
+        self.notices: list[Notice] = []
+        self.events: list[TaskEvent] = []          # every agent event, for the run's trace
+        self._last_state: tuple | None = None
+        self._next_state = -math.inf
+        self.log = get_logger("fleet", self.robot_id)
+        if not self.armed:
+            agent.set_available(False, 0.0)
+
+    # ------------------------------------------------------------------ the operator
+    def add_items(self, items, now: float) -> list:
+        """An accepted upload: ``(command, frame, params, x, y)`` per item, fleet frame.  Returns messages."""
+        tasks, out = self.table.add(items)
+        out += self.agent.add_tasks(tasks, now)
+        self.log.info("operator handed in %d task(s): %s", len(tasks), [t.id for t in tasks])
+        return out
+
+    def clear(self, now: float) -> list:
+        withdrawn, out = self.table.clear()
+        if withdrawn:
+            out += self.agent.withdraw_tasks(withdrawn, now)
+            self.notices.append(Notice(f"mission cleared: {len(withdrawn)} task(s) withdrawn", 5))
+        return out
+
+    def set_armed(self, armed: bool, now: float) -> list:
+        if armed == self.armed:
+            return []
+        self.armed = bool(armed)
+        self.notices.append(Notice("armed: taking tasks again" if armed else "disarmed: stopped, tasks released", 4))
+        return self.agent.set_available(armed, now) + self._state_now(now)
+
+    # ------------------------------------------------------------------ peers
+    def on_message(self, msg, now: float) -> list:
+        if isinstance(msg, TaskRecord):
+            task, state = self.table.merge(msg)
+            out = []
+            if task is not None and state == OPEN:
+                out += self.agent.add_tasks([task], now)
+            elif state is not None and state != OPEN:
+                out += self.agent.withdraw_tasks([msg.task], now)
+            return out
+        if isinstance(msg, TableRequest):
+            return [] if msg.digest == self.table.digest else self.table.records(msg.sender)
+        if isinstance(msg, RobotState):
+            return self.table.compare(msg.sender, msg.known, msg.digest, now) + self.agent.on_message(msg, now)
+        return self.agent.on_message(msg, now)
+
+    def on_peer_lost(self, robot_id: int, now: float) -> list:
+        return self.agent.on_peer_lost(robot_id, now)
+
+    def on_progress(self, p: Progress, now: float) -> list:
+        if p.event == "arrived":
+            seq = self.table.seq(p.task)
+            self.notices.append(Notice(f"task {_tid(p.task)} reached", 6, seq))
+        return self.agent.on_progress(p, now)
+
+    # ------------------------------------------------------------------ each cycle
+    def begin(self, pose: tuple[float, float] | None) -> None:
+        """The pose estimate of this cycle (None: not localized yet), before any input is handled."""
+        self.pose = pose
+        self.localized = pose is not None
+        setter = getattr(self.agent, "set_localized", None)
+        if setter is not None:
+            setter(self.localized)
+
+    def tick(self, now: float) -> list:
+        out = self.agent.on_tick(now)
+        for ev in self.agent.pop_events():
+            self.events.append(ev)
+            who = "+".join(f"R{r}" for r in ev.robots)
+            if ev.what == DONE:
+                out += self.table.mark(ev.task, T_DONE)
+                self.notices.append(Notice(f"task {_tid(ev.task)} done by {who}", 5))
+            elif ev.what == AWARDED:
+                self.notices.append(Notice(f"task {_tid(ev.task)} awarded to {who}", 6))
+            else:
+                self.notices.append(Notice(f"task {_tid(ev.task)} {ev.what} by {who}"
+                                           + (f": {ev.detail}" if ev.detail else ""), 4))
+        return out + self._state_now(now)
+
+    @property
+    def state(self) -> int:
+        if not self.armed:
+            return DISARMED
+        if not self.localized:
+            return LOCALIZING
+        if getattr(self.agent, "allocating", False):
+            return ALLOCATING
+        return EXECUTING if self.agent.commitments else IDLE
+
+    def held(self) -> tuple[int, ...]:
+        return tuple(c.task_id for c in self.agent.commitments)[:MAX_HELD]
+
+    def robot_state(self, dest: int = BROADCAST) -> RobotState:
+        x, y = self.pose if self.pose is not None else (math.nan, math.nan)
+        return RobotState(self.robot_id, dest, self.state, self.held(), float(x), float(y), len(self.table.entries),
+                          self.table.digest)
+
+    def _state_now(self, now: float) -> list:
+        """My state to the peers: at once when it changes, else every ``state_period``."""
+        key = (self.state, self.held(), self.table.digest)
+        if key == self._last_state and now < self._next_state:
+            return []
+        self._last_state = key
+        self._next_state = now + self.state_period
+        return [self.robot_state()]
+
+    def pop_notices(self) -> list[Notice]:
+        out, self.notices = self.notices, []
+        return out
+
+
+def _tid(task_id: int) -> str:
+    """A fleet task id as people read it: origin robot and number, e.g. 1.3."""
+    return f"{task_id >> 16}.{task_id & 0xFFFF}"

@@ -1,0 +1,22 @@
+"""SITL scenarios by ``scenario.type``: the only list of them.
+
+A scenario module has ``Config`` (the fleet config's ``scenario:`` section, with a ``check(fleet, file)``
+that raises ConfigError) and ``Scenario`` (built from the fleet; says what the operator hands the fleet
+and when, when the run's goal is met, and prints the summary).  A new scenario is one module plus one line.
+"""
+from __future__ import annotations
+
+import importlib
+
+SCENARIOS: dict[str, str] = {
+    "formation": "sitl.scenarios.formation",     # paper 002: robots take up formation positions
+    "mission": "sitl.scenarios.mission",         # tasks handed in over time, by an operator or a timetable
+}
+
+
+def module(name: str):
+    return importlib.import_module(SCENARIOS[name])
+
+
+def config_classes() -> dict[str, type]:
+    return {name: module(name).Config for name in SCENARIOS}

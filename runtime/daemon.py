@@ -1,12 +1,19 @@
-"""The robot daemon: driver -> localization -> control, allocation agent <-> comms.
+"""The robot daemon: wiring only.  sense -> allocate -> execute -> command -> report.
 
-One :class:`Daemon` per robot.  It is a polled object: :meth:`Daemon.step` does one control cycle at
-time ``now`` and never blocks, so the same object runs in its own process against real devices
-(:func:`run`, wall or scaled clock) or lock-stepped inside the SITL process (tests, experiments).
+One :class:`Daemon` per robot.  It is a polled object: :meth:`Daemon.step` does one control cycle at time
+``now`` and never blocks, so the same object runs in its own process against real devices (:func:`run`,
+wall or scaled clock) or lock-stepped inside the SITL process (tests, experiments).
 
-Cycle: read the base (odometry, bumpers) and GPS -> EKF -> drain MAVLink (agent messages, peer
-liveness) -> agent tick -> send agent messages -> follow the path to the held task (pure pursuit under
-the arbiter) -> command the base -> ground-station telemetry.
+Cycle:
+1. sense: the base (odometry, bumpers, ranges) and GPS -> EKF pose;
+2. allocate: MAVLink from peers -> the fleet node (task table + allocation agent), lost peers, requests
+   from ground stations (missions, parameters, commands) -> the agent's messages out;
+3. execute: the executive matches executors to the agent's commitments; they and the robot-wide
+   behaviours vote in the arbiter -> the command to the base; progress (arrived, done) back to the agent;
+4. report: telemetry, the robot's state, and what happened to tasks, to the ground stations.
+
+Every part it wires is chosen by the config through a registry: the base driver (``base.type``), the
+allocation method (``allocation.method``), the executor (task kind).
 """
 from __future__ import annotations
 
@@ -34,30 +41,20 @@ class DaemonStats:
     peers_lost: list = field(default_factory=list)
     cpu_seconds: float = 0.0
     wall_seconds: float = 0.0
-    plan_fallbacks: int = 0        # RRT found no path, the A* path was taken
-    bid_fallbacks: int = 0         # bid costs the first RRT tree missed (priced by a second tree or A*)
-    plan_failures: int = 0         # no path at all: headed straight for the goal
-
-
-def make_agent(cfg: C.RobotConfig, cost):
-    """The allocation agent named by ``cfg.allocation.method``."""
-    peers = [p.id for p in cfg.comms.peers]
-    method = cfg.allocation.method
-    if method == "bs":
-        from runtime.allocation.formation.bs import BSAgent as Agent
-    elif method == "rtma":
-        from runtime.allocation.formation.rtma import RTMAAgent as Agent
-    else:
-        from runtime.allocation.formation.eps_auction import EpsAuctionAgent as Agent
-    return Agent(cfg.robot.id, peers, cost, bid_timeout=cfg.allocation.bid_timeout)
 
 
 class Daemon:
     def __init__(self, cfg: C.RobotConfig, *, base=None, gps=None, link=None):
-        from runtime.control.arbiter import Arbiter, ArcSet, AvoidObstacles, FollowPath, Stop
-        from runtime.control.pure_pursuit import PurePursuit
+        from runtime.allocation import registry
+        from runtime.allocation.agent import AgentContext
+        from runtime.comms.ground import GroundServices
+        from runtime.comms.telemetry import GcsTelemetry
+        from runtime.execution.executive import ExecContext, Executive, Tunables
+        from runtime.fleet.node import FleetNode
         from runtime.localization.ekf import PoseEKF
         from runtime.localization.enu import geodetic_to_enu
+        from runtime.planning.robot_planner import RobotPlanner, TravelEstimator
+        from runtime.tasks import Profile
 
         self.cfg = cfg
         self.id = cfg.robot.id
@@ -65,10 +62,8 @@ class Daemon:
         self.stats = DaemonStats()
         self._geodetic_to_enu = geodetic_to_enu
         if base is None:
-            from runtime.drivers.create_oi import CreateOI
-            b = cfg.base
-            base = CreateOI(b.port, model=b.model, baudrate=b.baudrate, mode=b.mode,
-                            watchdog=b.watchdog, max_speed=b.max_speed, robot_id=self.id)
+            from runtime.drivers.registry import open_base
+            base = open_base(cfg.base, self.id)
         self.base = base
         if gps is None and cfg.gps.enabled:
             from runtime.drivers.nmea_gps import NmeaGps
@@ -81,97 +76,43 @@ class Daemon:
                                cfg.comms.gcs, signing_key=key,
                                heartbeat_timeout=cfg.comms.heartbeat_timeout)
         self.link = link
-        from runtime.comms.telemetry import GcsTelemetry
         self.telemetry = GcsTelemetry(link, self.id, cfg.datum)
         self.ekf = PoseEKF(cfg.localization)
         if cfg.localization.initial_pose is not None:
             self.ekf.initialise(*cfg.localization.initial_pose)
-        self.tasks = {i: tuple(xy) for i, xy in enumerate(cfg.allocation.formation)}
-        self.agent = make_agent(cfg, self._cost)
+        radius = _radius(base)
         c = cfg.control
-        self.pursuit = PurePursuit(lookahead=c.lookahead, cruise_speed=c.cruise_speed,
-                                   max_turn_rate=c.max_turn_rate, goal_tolerance=c.goal_tolerance)
-        self.follow = FollowPath(follower=self.pursuit)
-        self.avoid = AvoidObstacles()
-        self.arbiter = Arbiter(ArcSet.uniform(max_speed=c.cruise_speed, max_turn_rate=c.max_turn_rate),
-                               [self.follow, self.avoid, Stop(self.follow)])
-        self.map = self._load_map(cfg)
-        self._cost_row: dict[int, float] = {}
-        self._cost_at: tuple[float, float] | None = None
+        self.planner = RobotPlanner.from_config(cfg, radius)
+        self.estimator = TravelEstimator(self.planner, Profile(speed=c.cruise_speed, radius=radius), self.pose)
+        self.method = registry.method(cfg.allocation.method)
+        self.agent = self.method.make(AgentContext(self.id, tuple(p.id for p in cfg.comms.peers), self.estimator,
+                                                   cfg.allocation))
+        self.node = FleetNode(self.id, self.agent, armed=cfg.robot.armed)
+        self.executive = Executive(ExecContext(self.planner, Tunables(c.cruise_speed, c.lookahead, c.max_turn_rate,
+                                                                      c.goal_tolerance), self.log, radius))
+        self.ground = GroundServices(self)
         self.period = 1.0 / c.rate
         self._last_step: float | None = None
-        self._last_odom_t: float | None = None
         self._first_cycle: float | None = None
         self._heard: set[int] = set()            # peers heard at least once
         self._never_heard_reported = False
-        self._started = False
-        self._target: int | None = None
-        self._path: list[tuple[float, float]] = []
-        self._backing_up = False
 
-    # ------------------------------------------------------------------ costs and pose
+    # ------------------------------------------------------------------ pose
     def pose(self) -> tuple[float, float, float] | None:
         return self.ekf.pose() if self.ekf.initialised else None
 
-    @staticmethod
-    def _load_map(cfg: C.RobotConfig):
-        if cfg.planning.map is None:
-            return None
-        path = Path(cfg.planning.map)
-        if not path.is_absolute() and cfg.source:
-            path = Path(cfg.source).parent / path
-        return C.load_world(path)
-
     @property
-    def planner(self) -> str:
-        return self.cfg.planning.planner if self.map is not None else "euclid"
-
-    def _cost(self, task: int) -> float:
-        """Bid cost: planned path length from the current pose estimate to ``task`` (inf if unreachable).
-        One search fills the row for every known task; it is reused until the robot moves 0.25 m."""
-        from runtime.planning.costs import bid_costs
-
-        pose = self.pose()
-        if pose is None or task not in self.tasks:
-            return math.inf
-        if (self._cost_at is None or task not in self._cost_row
-                or math.hypot(pose[0] - self._cost_at[0], pose[1] - self._cost_at[1]) > 0.25):
-            ids = sorted(self.tasks)
-            row, missed = bid_costs(self.map, pose[:2], [self.tasks[i] for i in ids], planner=self.planner,
-                                    seed=self.id, inflate=self.cfg.planning.inflate,
-                                    rrt_iterations=self.cfg.planning.rrt_iterations)
-            self.stats.bid_fallbacks += missed
-            self._cost_row = {i: float(c) for i, c in zip(ids, row)}
-            self._cost_at = (pose[0], pose[1])
-        return self._cost_row[task]
-
-    def _plan(self, pose, goal) -> list[tuple[float, float]]:
-        """The path to drive to ``goal``: the configured planner's, A*'s when RRT misses (see
-        :func:`runtime.planning.costs.plan_route`), a straight line when the map has none at all."""
-        from runtime.planning.costs import plan_route
-
-        if self.map is None:
-            return [(pose[0], pose[1]), goal]
-        p = self.cfg.planning
-        route, used = plan_route(self.map, pose[:2], goal, planner=self.planner, seed=self.id, inflate=p.inflate,
-                                 rrt_iterations=p.rrt_iterations)
-        if route is None:
-            self.stats.plan_failures += 1
-            self.log.warning("no path to (%.2f, %.2f) on the map: heading straight for it", *goal)
-            return [(pose[0], pose[1]), goal]
-        if used != self.planner:
-            self.stats.plan_fallbacks += 1
-            self.log.warning("%s found no path to (%.2f, %.2f) in two trees: following the %s path", self.planner,
-                             *goal, used)
-        return route
+    def map(self):
+        return self.planner.world
 
     # ------------------------------------------------------------------ lifecycle
     def open(self, now: float) -> None:
         self.base.open(now)
-        if self.gps is not None:
-            self.gps.open(now) if hasattr(self.gps, "open") else None
-        self.log.info("open: base %s, gps %s, listening %s", self.cfg.base.port,
-                      self.cfg.gps.port if self.gps else "off", self.cfg.comms.listen)
+        if self.gps is not None and hasattr(self.gps, "open"):
+            self.gps.open(now)
+        self.log.info("open: base %s, gps %s, listening %s, allocation %s%s", self.cfg.base.type,
+                      self.cfg.gps.port if self.gps else "off", self.cfg.comms.listen, self.method.name,
+                      "" if self.node.armed else " (disarmed)")
 
     def close(self) -> None:
         try:
@@ -188,9 +129,13 @@ class Daemon:
         self._last_step = now
         self._sense(now, dt)
         self._allocate(now)
-        self._control(now)
-        self.telemetry.tick(now, self.pose(), self._velocity(), self.base.sensors,
-                            self.agent.assignment, self.agent.converged)
+        self._execute(now)
+        self._report(now)
+
+    def service(self, now: float) -> None:
+        """Messages only, no control cycle: peers' task tables and ground-station requests (a SITL operator
+        hands tasks in before the first cycle this way).  Peer messages for the agent wait for the next step."""
+        self._send(self._comms(now, tick=False), now)
 
     def _sense(self, now: float, dt: float) -> None:
         if dt > 0 and self.ekf.initialised:
@@ -216,30 +161,39 @@ class Daemon:
         v = self.ekf.x[3]
         return (float(v * math.cos(th)), float(v * math.sin(th)))
 
-    def _allocate(self, now: float) -> None:
+    def _comms(self, now: float, tick: bool = True) -> list:
+        pose = self.pose()
+        node = self.node
+        node.begin(None if pose is None else (pose[0], pose[1]))
         out = []
-        if not self._started and self.ekf.initialised:
-            self._started = True
-            if self.cfg.allocation.initiator and self.tasks:
-                out += self.agent.start(self.tasks, now)
-        for msg in self.link.poll(now):
+        held = getattr(self, "_held_back", [])
+        self._held_back = []
+        for msg in held + self.link.poll(now):
+            if not tick and _for_agent(msg):
+                self._held_back.append(msg)           # service(): the agent hears it at the next step
+                continue
             self.stats.agent_received += 1
-            if hasattr(msg, "x") and hasattr(msg, "task"):
-                self.tasks.setdefault(msg.task, (msg.x, msg.y))
-            if self._started:
-                out += self.agent.on_message(msg, now)
-        for lost in self.link.peers_lost(now):
-            self.stats.peers_lost.append(lost)
-            self.log.warning("peer %d lost (no heartbeat for %.1f s): re-auctioning its work",
-                             lost, self.cfg.comms.heartbeat_timeout)
-            out += self.agent.on_peer_lost(lost, now)
-        for lost in self._never_heard(now):
-            self.stats.peers_lost.append(lost)
-            self.log.warning("peer %d never heard in %.1f s (comms.startup_grace): treating it as lost",
-                             lost, self.cfg.comms.startup_grace)
-            out += self.agent.on_peer_lost(lost, now)
-        if self._started:
-            out += self.agent.on_tick(now)
+            out += node.on_message(msg, now)
+        if tick:
+            for lost in self.link.peers_lost(now):
+                self.stats.peers_lost.append(lost)
+                self.log.warning("peer %d lost (no heartbeat for %.1f s): re-auctioning its work",
+                                 lost, self.cfg.comms.heartbeat_timeout)
+                out += node.on_peer_lost(lost, now)
+            for lost in self._never_heard(now):
+                self.stats.peers_lost.append(lost)
+                self.log.warning("peer %d never heard in %.1f s (comms.startup_grace): treating it as lost",
+                                 lost, self.cfg.comms.startup_grace)
+                out += node.on_peer_lost(lost, now)
+        out += self.ground.serve(now)
+        if tick:
+            out += node.tick(now)
+        return out
+
+    def _allocate(self, now: float) -> None:
+        self._send(self._comms(now), now)
+
+    def _send(self, out: list, now: float) -> None:
         if out:
             self.stats.agent_sent += len(out)
             self.link.send_agent(out, now)
@@ -259,45 +213,32 @@ class Daemon:
         self._never_heard_reported = True
         return sorted(p.id for p in self.cfg.comms.peers if p.id not in self._heard)
 
-    def _control(self, now: float) -> None:
-        """Path to the held task, followed by pure pursuit under the DAMN-style arbiter (bumpers)."""
-        pose = self.pose()
-        task = self.agent.assignment
-        if pose is None or task is None or task not in self.tasks:
-            if self._target is not None:
-                self.follow.set_path(None)
-                self._target = None
-            self.base.set_velocity(0.0, 0.0, now)
-            return
-        goal = self.tasks[task]
-        tol = self.cfg.control.goal_tolerance
-        if task != self._target:
-            self._target = task
-            self.follow.set_path(self._plan(pose, goal))
-            self.log.info("driving to task %d at (%.2f, %.2f)", task, *goal)
-        elif self.follow.done and math.hypot(goal[0] - pose[0], goal[1] - pose[1]) > 3 * tol:
-            self.follow.set_path(self._plan(pose, goal))      # pushed off station: go back
-        s = self.base.sensors
-        self.avoid.on_bumpers(s.bump_left, s.bump_right, now)
-        backing = self.avoid.backing_up(now)
-        if self._backing_up and not backing:
-            self.follow.set_path(self._plan(pose, goal))      # re-plan from where the bump left us
-        self._backing_up = backing
-        self.follow.update(pose, now)
-        d = self.arbiter.decide(now)
-        cmd = self.follow.command
-        if cmd is not None and not backing and d.arc == self.arbiter.arcs.nearest(*cmd):
-            v, w = cmd           # the path follower won: pass its exact command, not the arc's grid value
-        else:
-            v, w = d.v, d.w
+    def _execute(self, now: float) -> None:
+        """Executors for the agent's commitments vote in the arbiter; the command goes to the base (zero when
+        disarmed); their progress goes back to the agent."""
+        ex = self.executive
+        ex.sync(self.agent.commitments if self.node.armed else (), now)
+        (v, w), progress = ex.step(self.pose(), self.base.sensors, now)
         self.base.set_velocity(v, w, now)
+        out = []
+        for p in progress:
+            out += self.node.on_progress(p, now)
+        self._send(out, now)
+
+    def _report(self, now: float) -> None:
+        commitments = self.agent.commitments
+        task = commitments[0].task_id if commitments else None
+        self.telemetry.tick(now, self.pose(), self._velocity(), self.base.sensors, task, self.agent.converged)
+        self.ground.report(now)
 
     def snapshot(self) -> dict:
         pose = self.pose()
         s = self.stats
+        p = self.planner.stats
         return {
-            "robot": self.id, "pose": pose, "task": self.agent.assignment,
-            "converged": bool(self.agent.converged), "arrived": bool(self.follow.done and self._target is not None),
+            "robot": self.id, "pose": pose, "state": self.node.state,
+            "tasks": [c.task_id for c in self.agent.commitments],
+            "converged": bool(self.agent.converged), "arrived": self.executive.arrived,
             "cycles": s.cycles, "missed_deadlines": s.missed_deadlines,
             "worst_lateness": s.worst_lateness, "agent_sent": s.agent_sent,
             "agent_received": s.agent_received, "peers_lost": s.peers_lost,
@@ -305,9 +246,23 @@ class Daemon:
             "base": vars(self.base.stats) if hasattr(self.base, "stats") else {},
             "link": self.link.counters.as_dict() if hasattr(self.link, "counters") else {},
             "gps_rejected": getattr(self.ekf, "gps_rejected", 0),
-            "plan_fallbacks": s.plan_fallbacks, "plan_failures": s.plan_failures, "bid_fallbacks": s.bid_fallbacks,
-            "idle_offers": getattr(self.agent, "idle_offers", 0),
+            "plan_fallbacks": p.plan_fallbacks, "plan_failures": p.plan_failures, "bid_fallbacks": p.bid_fallbacks,
+            "table": len(self.node.table.entries),
         }
+
+
+def _for_agent(msg) -> bool:
+    from runtime.fleet.messages import FLEET_MESSAGES
+    return not isinstance(msg, FLEET_MESSAGES)
+
+
+def _radius(base) -> float:
+    """The base's footprint radius (m): obstacle inflation and avoidance use it."""
+    fp = getattr(base, "footprint", None)
+    if fp is not None:
+        return float(fp.radius)
+    from runtime.planning.grid import CREATE2_RADIUS
+    return CREATE2_RADIUS
 
 
 # ---------------------------------------------------------------------- process main loop
@@ -398,7 +353,7 @@ def _wait_for_clock(path: str, robot_id: int, timeout: float = 120.0) -> None:
 def _main(args) -> int:
     cfg = C.load_robot(args.config)
     if args.check:
-        print(f"{args.config}: ok (robot {cfg.robot.id}, {cfg.base.model} on {cfg.base.port})")
+        print(f"{args.config}: ok (robot {cfg.robot.id}, base {cfg.base.type}, allocation {cfg.allocation.method})")
         return 0
     daemon = Daemon(cfg)
     if args.clock_file:
@@ -408,5 +363,8 @@ def _main(args) -> int:
         clock = ScaledClock(args.speedup or 1.0, args.epoch)
     else:
         clock = WallClock()
+    if cfg.comms.signing_key is None:
+        daemon.log.warning("MAVLink signing is off (comms.signing_key is not set): any host on the network can "
+                           "command this robot")
     run(daemon, clock, args.duration, args.stats)
     return 0

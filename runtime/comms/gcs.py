@@ -1,61 +1,117 @@
-"""A minimal ground station: listens on the GCS UDP port and keeps each robot's latest telemetry.
+"""A minimal ground station: one UDP socket that watches a fleet and hands it missions.
 
-Used by the SITL launcher to watch the fleet the way an operator's GCS would (it never reads daemon
-internals): HEARTBEAT, GLOBAL_POSITION_INT, LOCAL_POSITION_NED and the allocation MRTA_STATUS.
+The SITL launcher uses it to be the fleet's operator (it never reads daemon internals), and ``mrta mission
+status`` to ask a robot for the fleet's tasks.  It keeps per robot what the robot reports (HEARTBEAT,
+positions, :class:`~runtime.fleet.messages.RobotState`, MISSION_ITEM_REACHED, MISSION_CURRENT, STATUSTEXT)
+and a copy of the fleet's task table from the robots' answers to its table requests; it runs the mission
+protocol's ground side (:class:`~runtime.comms.mission.MissionClient`) for uploads, one per robot at a
+time.  Every message a robot sends it is checked once by the codec; what does not decode is counted.
 """
 from __future__ import annotations
 
+import math
 import socket
 from dataclasses import dataclass, field
 
 from runtime.comms import codec, dialect
 from runtime.comms.link import parse_address
-from runtime.comms.telemetry import NO_TASK
+from runtime.comms.mission import MissionClient
+from runtime.fleet.messages import RobotState, TableRequest, TaskRecord
 from runtime.log import get_logger
 
-
+GCS_SYSTEM, GCS_COMPONENT = 255, 190
 
 
 @dataclass
 class RobotView:
     heartbeats: int = 0
     mav_type: int | None = None
+    base_mode: int = 0
     lat: float | None = None
     lon: float | None = None
     north: float | None = None
     east: float | None = None
-    task: int | None = None
-    converged: bool = False
+    state: int | None = None           # RobotState.state
+    tasks: tuple[int, ...] = ()        # fleet task ids it holds
+    heard: float = -math.inf           # when its last RobotState came
     messages: int = 0
+    reached: list[int] = field(default_factory=list)
+    texts: list[tuple[float, str]] = field(default_factory=list)
+    current: int | None = None         # MISSION_CURRENT.seq
 
 
 @dataclass
-class GroundStation:
-    address: str
-    robots: dict[int, RobotView] = field(default_factory=dict)
-    bad_frames: int = 0
+class Upload:
+    robot: int
+    address: tuple
+    client: MissionClient
+    started: float
 
-    def __post_init__(self) -> None:
-        host, port = parse_address(self.address, "ground station address")
+
+class GroundStation:
+    def __init__(self, address: str, *, signing_key: bytes | None = None, reuse: bool = True):
+        host, port = parse_address(address, "ground station address")
+        self.address = address
         self.log = get_logger("gcs")
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        if reuse:
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         self.sock.bind((host, port))
         self.sock.setblocking(False)
-        mod = dialect.load()
-        self.mav = mod.MAVLink(None, srcSystem=255, srcComponent=190)
+        self.module = dialect.load()
+        self.mav = self.module.MAVLink(None, srcSystem=GCS_SYSTEM, srcComponent=GCS_COMPONENT)
         self.mav.robust_parsing = True
+        if signing_key is not None:
+            from runtime.comms.link import signing_timestamp
+            import time
+            s = self.mav.signing
+            s.secret_key, s.sign_outgoing, s.link_id = bytes(signing_key), True, 1
+            s.timestamp = signing_timestamp(time.time())
+        self.robots: dict[int, RobotView] = {}
+        self.table: dict[int, TaskRecord] = {}       # fleet task id -> the latest record heard
+        self.uploads: dict[int, Upload] = {}         # robot -> its upload in flight
+        self.finished: list[Upload] = []
+        self.bad_frames = 0
+        self.now = 0.0
 
-    def poll(self) -> int:
-        """Drain the socket; returns how many messages were decoded."""
+    # ------------------------------------------------------------------ sending
+    def send(self, msg, address: tuple) -> None:
+        if not hasattr(msg, "pack"):
+            msg = codec.to_mavlink(msg, self.module)
+        try:
+            self.sock.sendto(msg.pack(self.mav), address)
+        except OSError as e:
+            self.log.debug("send to %s failed: %s", address, e)
+        self.mav.seq = (self.mav.seq + 1) % 256
+
+    def upload(self, robot: int, address: tuple, items: list, now: float) -> Upload:
+        """Start uploading mission ``items`` to ``robot`` at ``address`` (it must have none in flight)."""
+        if robot in self.uploads:
+            raise RuntimeError(f"robot {robot} has an upload in flight")
+        client = MissionClient(self.mav, robot, 1)
+        up = Upload(robot, address, client, now)
+        self.uploads[robot] = up
+        for m in client.start_upload(items, now=now):
+            self.send(m, address)
+        return up
+
+    def request_table(self, robot: int, address: tuple) -> None:
+        """Ask ``robot`` for the fleet's task table (with holders); the answer updates :attr:`table`."""
+        self.send(TableRequest(GCS_SYSTEM, robot, 0), address)
+
+    # ------------------------------------------------------------------ receiving
+    def poll(self, now: float | None = None) -> int:
+        """Drain the socket, drive the uploads; returns how many messages were decoded."""
+        if now is not None:
+            self.now = now
         n = 0
         while True:
             try:
                 data, _ = self.sock.recvfrom(65535)
             except (BlockingIOError, InterruptedError):
-                return n
+                break
             except OSError:
-                return n
+                break
             try:
                 msgs = self.mav.parse_buffer(data) or []
             except Exception:        # pymavlink raises on some malformed frames: count, go on
@@ -66,28 +122,58 @@ class GroundStation:
                     self.bad_frames += 1
                     continue
                 n += 1
-                self._on(m)
+                try:
+                    self._on(m)
+                except (codec.InvalidMessage, ValueError, TypeError, AttributeError):
+                    self.bad_frames += 1
+        for up in list(self.uploads.values()):
+            for m in up.client.tick(self.now):
+                self.send(m, up.address)
+            self._settle(up)
+        return n
+
+    def _settle(self, up: Upload) -> None:
+        if up.client.done and self.uploads.get(up.robot) is up:
+            del self.uploads[up.robot]
+            self.finished.append(up)
 
     def _on(self, m) -> None:
-        view = self.robots.setdefault(m.get_srcSystem(), RobotView())
+        src = m.get_srcSystem()
+        view = self.robots.setdefault(src, RobotView())
         view.messages += 1
         kind = m.get_type()
         if kind == "HEARTBEAT":
             view.heartbeats += 1
-            view.mav_type = m.type
+            view.mav_type, view.base_mode = m.type, m.base_mode
         elif kind == "GLOBAL_POSITION_INT":
             view.lat, view.lon = m.lat / 1e7, m.lon / 1e7
         elif kind == "LOCAL_POSITION_NED":
             view.north, view.east = m.x, m.y
+        elif kind == "MISSION_ITEM_REACHED":
+            view.reached.append(int(m.seq))
+        elif kind == "MISSION_CURRENT":
+            view.current = int(m.seq)
+        elif kind == "STATUSTEXT":
+            view.texts.append((self.now, m.text if isinstance(m.text, str) else bytes(m.text).decode(errors="replace")))
+        elif kind.startswith("MISSION_") and src in self.uploads:
+            up = self.uploads[src]
+            for reply in up.client.handle(m, self.now):
+                self.send(reply, up.address)
+            self._settle(up)
         elif codec.is_agent(m):
             msg = codec.from_mavlink(m)
-            if type(msg).__name__ == "Status":
-                view.task = None if msg.task == NO_TASK else msg.task
-                view.converged = bool(msg.converged)
+            if isinstance(msg, RobotState):
+                view.state, view.tasks, view.heard = msg.state, tuple(msg.tasks), self.now
+            elif isinstance(msg, TaskRecord):
+                old = self.table.get(msg.task)
+                if old is None or msg.state >= old.state:
+                    self.table[msg.task] = msg
 
-    def status(self) -> dict[int, dict]:
-        return {rid: {"task": v.task, "converged": v.converged, "east": v.east, "north": v.north}
-                for rid, v in self.robots.items() if v.heartbeats}
+    # ------------------------------------------------------------------ views
+    def status(self, max_age: float = math.inf) -> dict[int, dict]:
+        """Robots heard (RobotState within ``max_age`` s): state, tasks, position."""
+        return {rid: {"state": v.state, "tasks": v.tasks, "east": v.east, "north": v.north, "heard": v.heard}
+                for rid, v in self.robots.items() if v.state is not None and self.now - v.heard <= max_age}
 
     def close(self) -> None:
         self.sock.close()

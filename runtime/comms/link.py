@@ -381,15 +381,16 @@ class MavlinkLink:
             return None
         c.received += 1
         agent = codec.from_mavlink(m)
-        if agent is None:
-            if addr is None or addr in self._peer_addrs:
+        from_gcs = addr is not None and addr not in self._peer_addrs
+        if agent is None or from_gcs:
+            if not from_gcs:
                 c.ignored += 1
             elif len(self.gcs_inbox) >= MAX_GCS_INBOX:
                 c.gcs_overflow += 1
-            else:
+            else:                         # a ground station's request (one of ours, e.g. a table request, or not)
                 c.gcs_requests += 1
                 self._gcs_seen[addr] = now
-                self.gcs_inbox.append((m, addr))
+                self.gcs_inbox.append((m if agent is None else agent, addr))
             return None
         if agent.sender == self.robot_id or agent.dest not in (0, self.robot_id):
             c.not_for_us += 1

@@ -36,6 +36,7 @@ class TaskRecord:
     param4: float
     x: float
     y: float
+    holders: tuple[int, ...] = ()      # the sender's belief, in answers to a ground station
 
     def invalid(self) -> str | None:
         if not 1 <= task_origin(self.task) <= 250:

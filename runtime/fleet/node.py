@@ -11,7 +11,7 @@ executor, on the in-memory bus in tests.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from runtime.allocation.agent import AWARDED, DONE, TaskEvent
 from runtime.fleet.messages import (ALLOCATING, BROADCAST, DISARMED, DONE as T_DONE, EXECUTING, IDLE, LOCALIZING,
@@ -40,6 +40,7 @@ class FleetNode:
         self.pose: tuple[float, float] | None = None
         self.notices: list[Notice] = []
         self.events: list[TaskEvent] = []          # every agent event, for the run's trace
+        self.holding: dict[int, tuple[int, ...]] = {}   # peer -> the tasks its last RobotState named
         self._last_state: tuple | None = None
         self._next_state = -math.inf
         self.log = get_logger("fleet", self.robot_id)
@@ -81,11 +82,22 @@ class FleetNode:
         if isinstance(msg, TableRequest):
             return [] if msg.digest == self.table.digest else self.table.records(msg.sender)
         if isinstance(msg, RobotState):
+            self.holding[msg.sender] = tuple(msg.tasks)
             return self.table.compare(msg.sender, msg.known, msg.digest, now) + self.agent.on_message(msg, now)
         return self.agent.on_message(msg, now)
 
     def on_peer_lost(self, robot_id: int, now: float) -> list:
+        self.holding.pop(robot_id, None)
         return self.agent.on_peer_lost(robot_id, now)
+
+    def holders(self, task_id: int) -> tuple[int, ...]:
+        """Robots holding ``task_id``, as far as I know (me, and peers by their last state)."""
+        who = [self.robot_id] if task_id in self.held() else []
+        return tuple(sorted(who + [r for r, tasks in self.holding.items() if task_id in tasks]))
+
+    def answer_table(self, dest: int) -> list[TaskRecord]:
+        """The table for a ground station: every task with the robots I believe hold it."""
+        return [replace(r, holders=self.holders(r.task)[:8]) for r in self.table.records(dest)]
 
     def on_progress(self, p: Progress, now: float) -> list:
         if p.event == "arrived":

@@ -3,6 +3,7 @@
 that stands on it."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal, Optional
 
@@ -21,3 +22,93 @@ class Config:
             raise ConfigError(file, "scenario.positions", "at least one position")
         if self.to is not None and self.to not in {r.id for r in fleet.robots}:
             raise ConfigError(file, "scenario.to", "the id of a robot of the fleet", self.to)
+
+
+class Scenario:
+    """Hands the positions in as one upload at t = 0; judges and summarises like paper 002's runs."""
+
+    def __init__(self, fleet, world):
+        self.cfg: Config = fleet.scenario
+        self.fleet = fleet
+        self.world = world
+        self.positions = [tuple(p) for p in self.cfg.positions]
+
+    def handovers(self) -> list:
+        from runtime.comms.mission import MissionItem
+        from runtime.tasks.goto import MAV_CMD_NAV_LOITER_UNLIM
+        from sitl.scenarios.base import Handover
+
+        to = self.cfg.to if self.cfg.to is not None else min(r.id for r in self.fleet.robots)
+        items = [MissionItem(i, 4, MAV_CMD_NAV_LOITER_UNLIM, 0.0, 0.0, 0.0, 0.0, x, y, 0.0)     # MAV_FRAME_LOCAL_ENU
+                 for i, (x, y) in enumerate(self.positions)]
+        return [Handover(0.0, to, items, [f"P{i}" for i in range(len(items))])]
+
+    def assignment(self, run) -> dict[int, int | None]:
+        """Formation index each live robot holds (None: none)."""
+        ids = run.handovers[0].task_ids
+        index = {tid: i for i, tid in enumerate(ids) if tid is not None}
+        out = {}
+        for rid in run.robot_ids:
+            held = [index[t] for t in run.held(rid) if t in index]
+            out[rid] = held[0] if held else None
+        return out
+
+    def goal(self, run) -> bool:
+        """Every position held by a distinct live robot that stands on it; nobody still allocating."""
+        if not run.handovers[0].done or None in run.handovers[0].task_ids:
+            return False
+        assignment = self.assignment(run)
+        held = [t for t in assignment.values() if t is not None]
+        if len(held) != len(set(held)) or len(held) < min(len(self.positions), len(run.live_robots())):
+            return False
+        for rid, t in assignment.items():
+            if not run.settled(rid):
+                return False
+            if t is None:
+                continue
+            x, y, _ = run.true_pose(rid)
+            vx, vy = run.velocity(rid)
+            if math.hypot(self.positions[t][0] - x, self.positions[t][1] - y) > self.cfg.tolerance or math.hypot(vx, vy) > 0.02:
+                return False
+        return True
+
+    def summary(self, run) -> dict:
+        """Assignment, its global cost (planned path lengths from the start poses) beside the Hungarian optimum,
+        final errors."""
+        from scipy.optimize import linear_sum_assignment
+
+        from runtime.planning.costs import cost_matrix
+
+        starts = {r.id: r.start for r in self.fleet.robots}
+        ids = sorted(starts)
+        cost = cost_matrix(self.world, [starts[i][:2] for i in ids], self.positions, planner="astar")
+        rows, cols = linear_sum_assignment(cost)
+        optimum = float(cost[rows, cols].sum())
+        assignment = self.assignment(run)
+        held = [assignment.get(i) for i in ids]
+        n = min(len(ids), len(self.positions))
+        taken = [t for t in held if t is not None]
+        valid = len(taken) == n and len(set(taken)) == len(taken)
+        total = float(sum(cost[k, t] for k, t in enumerate(held) if t is not None)) if valid else math.nan
+        errors = {}
+        for rid, t in zip(ids, held):
+            x, y, _ = run.true_pose(rid)
+            errors[rid] = math.hypot(self.positions[t][0] - x, self.positions[t][1] - y) if t is not None else math.nan
+        return {"assignment": dict(zip(ids, held)), "valid": valid, "tasks": self.positions,
+                "global_cost": total, "optimum": optimum,
+                "optimal_assignment": {ids[r]: int(c) for r, c in zip(rows, cols)},
+                "final_error": errors}
+
+    @staticmethod
+    def print_summary(res: dict, out) -> None:
+        print("\nrobot  task  position (m)      optimal task  final error (m)", file=out)
+        for rid, task in res["assignment"].items():
+            err = res["final_error"][rid]
+            pos = "-" if task is None else "({:5.2f}, {:5.2f})".format(*res["tasks"][task])
+            opt = res["optimal_assignment"].get(rid, "-")
+            print(f"{rid:5d}  {'-' if task is None else task:>4}  {pos:16}  {opt:>12}  "
+                  f"{'-' if math.isnan(err) else f'{err:.3f}':>15}", file=out)
+        gap = 100.0 * (res["global_cost"] - res["optimum"]) / res["optimum"] if res["optimum"] > 0 else 0.0
+        print(f"\nglobal cost (path lengths from the start poses) {res['global_cost']:.3f} m   "
+              f"Hungarian optimum {res['optimum']:.3f} m   "
+              f"gap {gap:+.2f} %", file=out)

@@ -12,6 +12,7 @@ from typing import Any, Literal, Optional
 
 from runtime import tasks as T
 from runtime.config.build import ConfigError, Tagged, rng
+from runtime.fleet.messages import DONE, STATE_NAMES
 
 
 @functools.lru_cache(maxsize=None)
@@ -56,3 +57,62 @@ class Config:
             raise ConfigError(file, "scenario.to", "the id of a robot of the fleet", self.to)
         if not self.tasks and not self.wait:
             raise ConfigError(file, "scenario.tasks", "at least one task (or wait: true for an operator)")
+
+
+class Scenario:
+    """Hands each group of tasks (same ``at`` and ``to``) in as one upload at its time; the goal is met when
+    every task handed in is done (never, with ``wait``: the fleet keeps serving an operator)."""
+
+    def __init__(self, fleet, world):
+        self.cfg: Config = fleet.scenario
+        self.fleet = fleet
+        self.world = world
+
+    def handovers(self) -> list:
+        from runtime.comms.mission import MissionItem
+        from sitl.scenarios.base import Handover
+
+        lowest = min(r.id for r in self.fleet.robots)
+        groups: dict[tuple[float, int], list] = {}
+        for i, t in enumerate(self.cfg.tasks):
+            to = t.to if t.to is not None else (self.cfg.to if self.cfg.to is not None else lowest)
+            groups.setdefault((t.at, to), []).append((i, t))
+        out = []
+        for (at, to), entries in sorted(groups.items()):
+            items, labels = [], []
+            for seq, (i, t) in enumerate(entries):
+                kind = T.kind(t.kind)
+                command, params = kind.to_item(t.spec())
+                items.append(MissionItem(seq, 4, command, *params, t.x, t.y, 0.0))    # MAV_FRAME_LOCAL_ENU
+                labels.append(f"T{i}")
+            out.append(Handover(at, to, items, labels))
+        return out
+
+    def goal(self, run) -> bool:
+        if self.cfg.wait:
+            return False
+        return all(h.done for h in run.handovers) and all(
+            tid is not None and run.task_state(tid) == DONE for h in run.handovers for tid in h.task_ids)
+
+    def summary(self, run) -> dict:
+        rows = []
+        for h in run.handovers:
+            for label, it, tid in zip(h.labels, h.items, h.task_ids or [None] * len(h.items)):
+                state = run.task_state(tid) if tid is not None else None
+                rows.append({"label": label, "task": tid, "x": it.x, "y": it.y, "at": h.at, "to": h.to,
+                             "state": STATE_NAMES.get(state, "not handed in" if not h.done else "refused"),
+                             "by": run.done_by.get(tid, ()), "done_at": run.done_at.get(tid)})
+        valid = all(r["state"] == "done" for r in rows) and bool(rows)
+        return {"tasks": rows, "valid": valid, "driven": dict(run.driven)}
+
+    @staticmethod
+    def print_summary(res: dict, out) -> None:
+        print("\ntask  fleet id  position (m)      handed in  state      done by  done at (s)", file=out)
+        for r in res["tasks"]:
+            tid = "-" if r["task"] is None else f"{r['task'] >> 16}.{r['task'] & 0xFFFF}"
+            by = "+".join(f"R{b}" for b in r["by"]) or "-"
+            at = "-" if r["done_at"] is None else f"{r['done_at']:.1f}"
+            print(f"{r['label']:>4}  {tid:>8}  ({r['x']:5.2f}, {r['y']:5.2f})  {r['at']:7.1f} s  {r['state']:9}  "
+                  f"{by:>7}  {at:>11}", file=out)
+        if res["driven"]:
+            print("driven (m): " + ", ".join(f"R{rid} {d:.1f}" for rid, d in sorted(res["driven"].items())), file=out)

@@ -1,0 +1,250 @@
+"""A daemon's ground-station side: the mission protocol over the fleet's tasks, parameters, commands, and
+what the robot reports (its state, what happened to tasks, the current mission item).
+
+Missions (:class:`~runtime.comms.mission.MissionServer`): an upload to any robot hands the fleet new tasks.
+Each MAV_CMD_NAV_WAYPOINT / NAV_LOITER_UNLIM item becomes a ``goto``, MAV_CMD_WAYPOINT_USER_1 a
+``rendezvous`` (the kinds say which commands they take); the robot enters them in the replicated task
+table, which tells every peer.  Uploads add tasks (a second upload while the fleet is busy adds more); an
+uploaded item identical to the task listed at the same ``seq`` is that task, so a ground station that
+downloads the mission, appends to it and uploads it again adds only the new items.  An upload of count 0
+(or MISSION_CLEAR_ALL) withdraws the tasks not yet done.  The whole upload is refused, with a MISSION_ACK
+error and a STATUSTEXT naming the item, if an item is not a task this fleet's method takes, has a frame
+that is not global or local (NED/ENU), or lies off the map, in an obstacle or out of reach; the tasks the
+fleet had stay as they were.  Downloads from any robot return the fleet's tasks (open and done, by id; an
+item's ``seq`` is its place there), in the frame each was uploaded in.
+
+Frames: global (lat, lon) through the datum with pymap3d; MAV_FRAME_LOCAL_ENU (x east, y north);
+MAV_FRAME_LOCAL_NED (x north, y east).  Positions are metres in the fleet frame from there on.
+
+Reports: the robot's :class:`~runtime.fleet.messages.RobotState` at 1 Hz (the fleet tasks it holds),
+MISSION_CURRENT at 1 Hz (the seq of the task it works on, or the task count when idle),
+MISSION_ITEM_REACHED when it arrives at a task, and one STATUSTEXT per task awarded, done or failed.
+"""
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import pymap3d
+
+from runtime import tasks as T
+from runtime.comms import mission as M
+from runtime.comms.gcs_services import GcsServices
+from runtime.comms.params import Param, ParamTable
+from runtime.fleet.messages import OPEN, TableRequest
+from runtime.log import get_logger
+
+if TYPE_CHECKING:
+    from runtime.daemon import Daemon
+
+FRAME_LOCAL_NED, FRAME_LOCAL_ENU = 1, 4
+MAV_CMD_COMPONENT_ARM_DISARM = 400
+MAV_RESULT_ACCEPTED, MAV_RESULT_DENIED = 0, 2
+REPORT_PERIOD = 1.0
+SAME_POSITION = 1e-3          # m: an uploaded item this close to a listed task (same seq, command, params) is it
+STATUSTEXT_LEN = 50
+
+
+class GroundServices:
+    def __init__(self, daemon: "Daemon"):
+        self.d = daemon
+        link = daemon.link
+        self.mav = link.mav
+        self.m = link.module
+        self.log = get_logger("comms.ground", daemon.id)
+        self.mission = M.MissionServer(self.mav, daemon.id, on_upload=self._on_upload, on_clear=self._on_clear,
+                                       items=self._items, plan_id=lambda mission_type: self._plan_id(),
+                                       validate=self._validate)
+        self.params = ParamTable(_params(daemon))
+        self.gcs = GcsServices(self.mav, daemon.id, 1, self.params)
+        self.gcs.register_command(MAV_CMD_COMPONENT_ARM_DISARM, self._arm_disarm)
+        self._out: list = []                   # messages to peers produced while serving (new tasks ...)
+        self._next_report = -math.inf
+        self.reached: list[int] = []           # seqs reported reached (for tests and the trace)
+
+    # ------------------------------------------------------------------ requests
+    def serve(self, now: float) -> list:
+        """Answer what ground stations sent since the last cycle; returns messages for the peers."""
+        link = self.d.link
+        inbox, link.gcs_inbox = link.gcs_inbox, []
+        replies = []
+        for msg, addr in inbox:
+            if isinstance(msg, TableRequest):
+                replies += [(r, addr) for r in self.d.node.answer_table(msg.sender)]
+            elif msg.get_type().startswith("MISSION_"):
+                replies += self.mission.handle(msg, now, addr)
+            else:
+                replies += self.gcs.handle(msg, now, addr)
+        replies += self.mission.tick(now)
+        replies += self.gcs.tick(now)
+        for msg, addr in replies:
+            link.send_to(msg, addr)
+        for ev in self.mission.pop_events():
+            if ev.kind == "refused":
+                self._text(4, ev.reason)                # MAV_SEVERITY_WARNING
+            elif ev.kind == "cancelled":
+                self._text(4, ev.reason or "mission upload cancelled")
+        out, self._out = self._out, []
+        return out
+
+    def _validate(self, items: list[M.MissionItem]) -> tuple[int, str] | None:
+        kinds = self.d.method.task_kinds
+        pose = self.d.pose()
+        for it in items:
+            what = f"item {it.seq}"
+            kind = T.kind_of_command(it.command)
+            if kind is None or kind.KIND not in kinds:
+                takes = sorted(c for k in kinds for c in T.kind(k).COMMANDS)
+                return M.UNSUPPORTED, (f"{what}: command {it.command} is not a task for allocation "
+                                       f"'{self.d.method.name}' (takes commands {takes})")
+            xy = self._to_fleet(it)
+            if xy is None:
+                return 2, f"{what}: frame {it.frame} not supported (global, LOCAL_NED or LOCAL_ENU)"
+            try:
+                kind.from_item(it.command, (it.param1, it.param2, it.param3, it.param4), *xy)
+            except ValueError as e:
+                return 6, f"{what}: {e}"                # MAV_MISSION_INVALID_PARAM1
+            why = self.d.planner.refuse(pose, *xy)
+            if why:
+                return 10, f"{what} refused: {why}"     # MAV_MISSION_INVALID_PARAM5_X
+        return None
+
+    def _on_upload(self, items: list[M.MissionItem]) -> int:
+        listing = self.d.node.table.listing()
+        new = []
+        for it in items:
+            x, y = self._to_fleet(it)
+            params = (it.param1, it.param2, it.param3, it.param4)
+            same = it.seq < len(listing) and _same(listing[it.seq], it.command, params, x, y)
+            if not same:
+                new.append((it.command, it.frame, params, x, y))
+        now = self.d._last_step or 0.0
+        if new:
+            self._out += self.d.node.add_items(new, now)
+        self._text(6, f"mission: {len(new)} task(s) added, {len(items) - len(new)} already known")
+        return self._plan_id()
+
+    def _on_clear(self, mission_type: int) -> None:
+        self._out += self.d.node.clear(self.d._last_step or 0.0)
+
+    def _items(self, mission_type: int) -> list[M.MissionItem]:
+        if mission_type != M.MISSION:
+            return []
+        out = []
+        for seq, e in enumerate(self.d.node.table.listing()):
+            x, y = self._from_fleet(e.frame, e.x, e.y)
+            out.append(M.MissionItem(seq, e.frame, e.command, *e.params, x, y, 0.0, True, M.MISSION))
+        return out
+
+    def _plan_id(self) -> int:
+        return self.d.node.table.digest
+
+    def _to_fleet(self, it: M.MissionItem) -> tuple[float, float] | None:
+        if it.frame in M.GLOBAL_FRAMES:
+            d = self.d.cfg.datum
+            e, n, _ = pymap3d.geodetic2enu(it.x, it.y, d.alt, d.lat, d.lon, d.alt)
+            return float(e), float(n)
+        if it.frame == FRAME_LOCAL_ENU:
+            return float(it.x), float(it.y)
+        if it.frame == FRAME_LOCAL_NED:
+            return float(it.y), float(it.x)
+        return None
+
+    def _from_fleet(self, frame: int, x: float, y: float) -> tuple[float, float]:
+        if frame in M.GLOBAL_FRAMES:
+            d = self.d.cfg.datum
+            lat, lon, _ = pymap3d.enu2geodetic(x, y, 0.0, d.lat, d.lon, d.alt)
+            return float(lat), float(lon)
+        if frame == FRAME_LOCAL_NED:
+            return y, x
+        return x, y
+
+    def _arm_disarm(self, msg, now: float) -> int:
+        p1 = float(msg.param1)
+        if p1 not in (0.0, 1.0):
+            return MAV_RESULT_DENIED
+        self._out += self.d.node.set_armed(p1 == 1.0, now)
+        return MAV_RESULT_ACCEPTED
+
+    # ------------------------------------------------------------------ reports
+    def report(self, now: float) -> None:
+        link, node = self.d.link, self.d.node
+        for n in node.pop_notices():
+            if n.reached_seq is not None:
+                self.reached.append(n.reached_seq)
+                link.send_gcs(self.mav.mission_item_reached_encode(n.reached_seq))
+            self._text(n.severity, n.text)
+        if now < self._next_report:
+            return
+        self._next_report = now + REPORT_PERIOD
+        link.send_gcs(node.robot_state())
+        listing = node.table.listing()
+        held = node.held()
+        seq = next((i for i, e in enumerate(listing) if held and e.id == held[0]), len(listing))
+        total = len(listing)
+        m = self.m
+        if held:
+            state = m.MISSION_STATE_ACTIVE
+        elif total and all(e.state != OPEN for e in listing):
+            state = m.MISSION_STATE_COMPLETE
+        elif total:
+            state = m.MISSION_STATE_NOT_STARTED
+        else:
+            state = m.MISSION_STATE_NO_MISSION
+        link.send_gcs(self.mav.mission_current_encode(seq, total, state, 0))
+
+    def _text(self, severity: int, text: str) -> None:
+        for i in range(0, max(len(text), 1), STATUSTEXT_LEN):
+            self.d.link.send_gcs(self.mav.statustext_encode(severity, text[i:i + STATUSTEXT_LEN].encode()))
+        self.log.info("%s", text)
+
+
+def _same(entry, command: int, params, x: float, y: float) -> bool:
+    return (entry.command == command and all(_eq(a, b) for a, b in zip(entry.params, params))
+            and math.hypot(entry.x - x, entry.y - y) <= SAME_POSITION)
+
+
+def _eq(a: float, b: float) -> bool:
+    return (math.isnan(a) and math.isnan(b)) or abs(a - b) <= 1e-6 * max(1.0, abs(a))
+
+
+def _params(d: "Daemon") -> list[Param]:
+    """The robot's tunables a ground station may read and set; each takes effect at once."""
+    ex = d.executive
+    t = ex.ctx.tunables
+    vmax = getattr(getattr(d.base, "footprint", None), "max_speed", 0.5)
+
+    def tune(name):
+        return lambda v: ex.tune(**{name: float(v)})
+
+    def set_speed(v):
+        ex.tune(cruise_speed=float(v))
+        d.estimator.profile = T.Profile(speed=float(v), radius=d.estimator.profile.radius)
+
+    return [
+        Param("CTL_CRUISE_SPD", float, 0.01, vmax, "cruise speed (m/s)", lambda: t.cruise_speed, set_speed),
+        Param("CTL_GOAL_TOL", float, 0.005, 5.0, "a goal is reached within this distance (m)",
+              lambda: t.goal_tolerance, tune("goal_tolerance")),
+        Param("CTL_LOOKAHEAD", float, 0.05, 10.0, "pure pursuit lookahead (m)", lambda: t.lookahead,
+              tune("lookahead")),
+        Param("CTL_MAX_TURN", float, 0.1, 10.0, "turn rate limit (rad/s)", lambda: t.max_turn_rate,
+              tune("max_turn_rate")),
+        Param("SYS_ARMED", int, 0, 1, "1: may drive and take tasks (MAV_CMD_COMPONENT_ARM_DISARM does the same)",
+              lambda: int(d.node.armed), lambda v: d.ground._out.extend(d.node.set_armed(bool(v), d._last_step or 0.0))),
+    ] + _option_params(d)
+
+
+def _option_params(d: "Daemon") -> list[Param]:
+    """The allocation method's numeric options, read-only here: the agent is built with them (ALLOC_*)."""
+    import dataclasses
+
+    out = []
+    opts = d.cfg.allocation
+    for f in dataclasses.fields(opts):
+        v = getattr(opts, f.name)
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            continue
+        name = ("ALC_" + f.name.upper())[:16]
+        out.append(Param(name, type(v), v, v, f"allocation option {f.name} (set it in the robot config)",
+                         lambda v=v: v, lambda _v: None))
+    return out

@@ -1,0 +1,185 @@
+"""The SITL's operator: hands the scenario's tasks to the fleet over MAVLink, as a person at a ground station
+would, and watches the run through what the robots report.
+
+It owns a :class:`~runtime.comms.gcs.GroundStation` on the fleet's ground-station port: each hand-over is one
+mission upload (the standard protocol, with its retries and timeouts) to the robot the scenario names, at
+its time.  It asks a live robot for the fleet's task table every second, learns which fleet ids the robots
+gave the handed-in items, and turns what it sees into the run's trace: tasks awarded (a robot's state
+starts naming it), arrived (MISSION_ITEM_REACHED), done (the table says so), robots lost (their state goes
+stale or their process dies).  Scenarios judge the run through :class:`RunView`.
+"""
+from __future__ import annotations
+
+import math
+
+from runtime.comms.gcs import GroundStation
+from runtime.comms.mission import ACCEPTED, result_name
+from runtime.fleet.messages import ALLOCATING, DONE, STATE_NAMES
+from runtime.log import get_logger
+from sitl.run_trace import RobotTrack, RunTrace, TaskMark
+from sitl.scenarios.base import match_tasks
+
+TABLE_PERIOD = 1.0          # s between table requests
+STALE = 3.0                 # s without a RobotState: the robot is not live
+
+
+class Operator:
+    def __init__(self, fleet, scenario, signing_key: bytes | None = None):
+        self.fleet = fleet
+        self.scenario = scenario
+        self.gcs = GroundStation(fleet.fleet.gcs, signing_key=signing_key)
+        self.handovers = scenario.handovers()
+        self.addresses = {rid: ("127.0.0.1", r.udp_port) for rid, r in fleet.robots.items()}
+        self.log = get_logger("sitl.operator")
+        self.trace = RunTrace(world=fleet.world_cfg, title=f"{fleet.fleet.source}")
+        for rid, r in fleet.robots.items():
+            self.trace.robots[rid] = RobotTrack(rid, base=r.base_type, radius=r.radius)
+        self.dead: set[int] = set()
+        self.done_by: dict[int, tuple[int, ...]] = {}
+        self.done_at: dict[int, float] = {}
+        self.driven: dict[int, float] = {rid: 0.0 for rid in fleet.robots}
+        self._started: set[int] = set()              # hand-overs whose upload began
+        self._held: dict[int, tuple[int, ...]] = {}
+        self._holders: dict[int, tuple[int, ...]] = {}
+        self._reached: dict[int, int] = {}
+        self._taken: set[int] = set()
+        self._next_table = 0.0
+        self._asker = 0
+        self._last_pose: dict[int, tuple[float, float]] = {}
+        self.now = 0.0
+
+    # ------------------------------------------------------------------ the loop
+    def due(self, now: float) -> bool:
+        """A hand-over is due at ``now`` and not finished."""
+        return any(h.at <= now and not h.done for h in self.handovers)
+
+    def poll(self, now: float) -> None:
+        self.now = now
+        gcs = self.gcs
+        gcs.poll(now)
+        for k, h in enumerate(self.handovers):
+            if k in self._started or h.at > now or h.to in gcs.uploads or h.to in self.dead:
+                continue
+            self._started.add(k)
+            up = gcs.upload(h.to, self.addresses[h.to], h.items, now)
+            up.handover = h
+            for label, it in zip(h.labels, h.items):
+                self.trace.tasks[len(self.trace.tasks) + 1] = TaskMark(len(self.trace.tasks) + 1, "?", it.x, it.y,
+                                                                       label, 1, now)
+        for up in gcs.finished:
+            h = up.handover
+            h.done, h.result, h.error = True, up.client.result, up.client.error
+            if h.result != ACCEPTED:
+                self.log.error("hand-over of %d task(s) to robot %d: %s", len(h.items), h.to,
+                               h.error or result_name(h.result))
+            self._next_table = now               # ask for the ids at once
+        gcs.finished.clear()
+        if now >= self._next_table:
+            self._next_table = now + TABLE_PERIOD
+            live = sorted(self.live_robots()) or sorted(self.fleet.robots)
+            rid = live[self._asker % len(live)]
+            self._asker += 1
+            gcs.request_table(rid, self.addresses[rid])
+        for h in self.handovers:
+            if h.done and h.result == ACCEPTED and (not h.task_ids or None in h.task_ids):
+                for tid in h.task_ids:
+                    self._taken.discard(tid)
+                match_tasks(h, gcs.table, self._taken)
+                self._relabel(h)
+        self._events(now)
+
+    def _relabel(self, h) -> None:
+        """Trace marks keyed by fleet id once the robots have named the tasks."""
+        from runtime import tasks as T
+        for label, it, tid in zip(h.labels, h.items, h.task_ids):
+            if tid is None or tid in self.trace.tasks:
+                continue
+            kind = T.kind_of_command(it.command)
+            need = int(it.param1) if kind is not None and kind.KIND == "rendezvous" else 1
+            old = next((k for k, m in self.trace.tasks.items() if m.label == label and k < 65536), None)
+            arrived = self.trace.tasks.pop(old).arrived_at if old is not None else h.at
+            self.trace.tasks[tid] = TaskMark(tid, kind.KIND if kind else "?", it.x, it.y, label, need, arrived)
+
+    def _events(self, now: float) -> None:
+        gcs = self.gcs
+        for rid, v in gcs.robots.items():
+            if rid not in self.fleet.robots:
+                continue
+            before = self._held.get(rid, ())
+            if v.tasks != before:
+                for t in v.tasks:
+                    if t not in before:
+                        self.trace.event(now, "awarded", t, (rid,))
+                        self._holders[t] = tuple(sorted(set(self._holders.get(t, ())) | {rid}))
+                self._held[rid] = v.tasks
+            for seq in v.reached[self._reached.get(rid, 0):]:
+                listing = [tid for tid, r in sorted(gcs.table.items()) if STATE_NAMES.get(r.state) in ("open", "done")]
+                tid = listing[seq] if seq < len(listing) else None
+                self.trace.event(now, "arrived", tid, (rid,))
+            self._reached[rid] = len(v.reached)
+        for tid, r in gcs.table.items():
+            if r.state == DONE and tid not in self.done_at:
+                self.done_at[tid] = now
+                by = tuple(r.holders) or self._holders.get(tid, ())
+                self.done_by[tid] = by
+                self.trace.event(now, "done", tid, by)
+
+    def robot_died(self, rid: int, now: float) -> None:
+        if rid in self.dead:
+            return
+        self.dead.add(rid)
+        self.trace.robots[rid].lost_at = now
+        self.trace.event(now, "lost", None, (rid,))
+
+    def record(self, now: float) -> None:
+        """True poses into the trace and the distance driven."""
+        for rid in self.fleet.robots:
+            x, y, yaw = self.fleet.true_pose(rid)
+            self.trace.robots[rid].add(now, x, y, yaw)
+            last = self._last_pose.get(rid)
+            if last is not None:
+                self.driven[rid] += math.hypot(x - last[0], y - last[1])
+            self._last_pose[rid] = (x, y)
+
+    def close(self) -> None:
+        self.gcs.close()
+
+    # ------------------------------------------------------------------ what scenarios read
+    def live_robots(self) -> list[int]:
+        return [rid for rid in self.fleet.robots if rid not in self.dead
+                and rid in self.gcs.robots and self.now - self.gcs.robots[rid].heard <= STALE]
+
+
+class RunView:
+    """The run as a scenario judges it: what the operator saw, and the simulator's ground truth."""
+
+    def __init__(self, op: Operator):
+        self.op = op
+        self.handovers = op.handovers
+        self.robot_ids = sorted(op.fleet.robots)
+        self.done_by = op.done_by
+        self.done_at = op.done_at
+        self.driven = op.driven
+
+    def live_robots(self) -> list[int]:
+        return self.op.live_robots()
+
+    def held(self, rid: int) -> tuple[int, ...]:
+        if rid not in self.op.live_robots():
+            return ()
+        return self.op.gcs.robots[rid].tasks
+
+    def settled(self, rid: int) -> bool:
+        """Reporting, and not allocating."""
+        v = self.op.gcs.robots.get(rid)
+        return v is not None and v.state is not None and v.state != ALLOCATING
+
+    def task_state(self, tid: int) -> int | None:
+        r = self.op.gcs.table.get(tid)
+        return None if r is None else r.state
+
+    def true_pose(self, rid: int):
+        return self.op.fleet.true_pose(rid)
+
+    def velocity(self, rid: int):
+        return self.op.fleet.robots[rid].body.velocity()

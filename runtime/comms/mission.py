@@ -502,6 +502,13 @@ class MissionClient:
     When :attr:`done`: :attr:`result` is the MAV_MISSION_RESULT (or :data:`TIMEOUT`), :attr:`error` one
     line or None, :attr:`items` the downloaded items, :attr:`plan_id` the vehicle's opaque id if sent.
     ``stats`` counts the messages dropped (other systems, wrong mission type, out of sequence, ...).
+
+    Retries: MISSION_COUNT, MISSION_REQUEST_LIST and MISSION_CLEAR_ALL are resent every ``timeout``
+    (1.5 s); a downloaded item is re-requested every ``item_timeout`` (0.25 s); during an upload a silent
+    vehicle gets the item it last requested again every 1.5 s (a duplicate it drops, answering with a
+    request for what it needs; a repeated last item gets the final MISSION_ACK again).  After
+    ``retries`` resends the operation ends with :data:`TIMEOUT`; a timed-out download sends
+    MISSION_ACK MAV_MISSION_OPERATION_CANCELLED so the vehicle is free for others at once.
     """
 
     def __init__(self, mav, target_system: int, target_component: int = 1, *,

@@ -508,3 +508,26 @@ def test_client_never_raises_on_random_vehicle_messages(mod, data):
         now += 100
         c.tick(now)
     assert c.done and (c.result == M.ACCEPTED) == (c.error is None)
+
+
+@settings(max_examples=150, deadline=None)
+@given(data=st.data())
+def test_truncated_and_bit_flipped_frames_are_counted_never_raised(mod, data):
+    """A whole upload's frames with flipped bits and cut ends, parsed robustly as the link does."""
+    server = make_server(mod, Store(OLD))
+    gcs = mod.MAVLink(None, srcSystem=GCS_ID, srcComponent=190)
+    frames = [bytes(gcs.mission_count_encode(VEHICLE, 1, len(NEW), 0).pack(gcs))]
+    frames += [bytes(it.to_mavlink_int(gcs, VEHICLE, 1).pack(gcs)) for it in NEW]
+    rx = mod.MAVLink(None)
+    rx.robust_parsing = True
+    n = 0
+    for i, frame in enumerate(frames):
+        raw = bytearray(frame)
+        for _ in range(data.draw(st.integers(0, 3), label=f"flips {i}")):
+            raw[data.draw(st.integers(0, len(raw) - 1))] ^= 1 << data.draw(st.integers(0, 7))
+        raw = raw[:data.draw(st.integers(0, len(raw)), label=f"cut {i}")]
+        for m in rx.parse_buffer(bytes(raw)) or []:
+            n += 1
+            server.handle(m, float(i), "gcs")
+    s = server.stats
+    assert s["received"] == n == s[M.HANDLED] + sum(s[k] for k in M.DROPS)

@@ -20,6 +20,7 @@ COMMANDS = (
     "runtime.allocation.formation.assign_cli",     # mrta assign PROBLEM.json
     "runtime.allocation.coalition.wdp_cli",        # mrta wdp BIDS.json
     "sitl.experiments.cli",              # mrta experiment NAME
+    "runtime.comms.mission_cli",         # mrta mission upload|download TARGET [FILE]
 )
 
 

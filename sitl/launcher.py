@@ -1,11 +1,16 @@
-"""`mrta sitl run FLEET`: the pybullet world, emulated devices, and one daemon per robot.
+"""`mrta sitl run FLEET`: the pybullet world, emulated devices, one daemon per robot, and an operator.
 
-Like ArduPilot SITL: the daemons are the same program a robot runs; only their configs differ.
-The launcher writes one robot config per robot (pty paths, UDP ports, start pose, formation) into a
-run directory, and a JSON manifest describing every robot's devices and ports so other software can
-attach.  It then steps the world on a clock ``speedup`` times real time (shared with the daemon
-processes through the system-wide monotonic clock), or, with ``--lockstep``, runs the daemons inside
-this process on a simulated clock, deterministic for a given seed.
+Like ArduPilot SITL: the daemons are the same program a robot runs; only their configs differ.  The
+launcher writes one robot config per robot (from the robot's template: pty paths, UDP ports, start pose)
+into a run directory, and a JSON manifest describing every robot's devices and ports so other software can
+attach.  The scenario's tasks reach the fleet the way an operator's do: mission uploads over MAVLink from
+the ground-station port (:mod:`sitl.operator`), so a daemon cannot tell SITL from a real fleet.
+
+Run modes: one daemon process per robot on a clock ``speedup`` times real time that the world publishes
+(:func:`run_processes`), or, with ``--lockstep``, the daemons inside this process on a simulated clock,
+deterministic for a given seed (:func:`run_lockstep`).  Either way the run ends when the scenario's goal is
+met, at the timeout, or on Ctrl-C; the summary, ``trace.json`` and ``run.png`` (paths, tasks, who did which
+and when) go into the run directory.
 """
 from __future__ import annotations
 
@@ -30,6 +35,8 @@ from runtime.log import get_logger
 
 log = get_logger("sitl")
 MAX_LAG = 0.25      # s of sim time the world may trail the speedup clock before the clock slips
+SETTLE = 1.0        # s the goal must hold before the run ends
+PREROLL_ROUNDS = 200
 
 
 @dataclass
@@ -40,7 +47,8 @@ class SimRobot:
     gps_dev: object
     udp_port: int
     config_path: Path
-    task_xy: tuple[float, float] | None = None
+    base_type: str = "create_oi"
+    radius: float = 0.17
     proc: subprocess.Popen | None = None
     daemon: object = None
     exit_reported: bool = False
@@ -55,6 +63,8 @@ class Fleet:
     world: object
     run_dir: Path
     manifest_path: Path
+    scenario: object = None
+    key: bytes | None = None
     device_period: float = 0.005
     events: list[str] = field(default_factory=list)
     device_hook: object = None          # called with the sim time after every device service
@@ -102,56 +112,72 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
           seed: int | None = None, signing: bool = False, method: str | None = None,
           speedup: float | None = None) -> Fleet:
     """Load the fleet, build the world and devices, write robot configs and the manifest."""
+    from sitl import scenarios
+
     fleet = C.load_fleet(fleet_path)
     world_cfg = C.load_world(fleet.world)
-    template = yaml.safe_load(Path(fleet.robot).read_text()) or {}
-    C.load_robot(fleet.robot)   # validate the template itself, naming its own file on error
+    templates = {}
+    for r in fleet.robots:
+        path = fleet.template(r.id)
+        if path not in templates:
+            C.load_robot(path)          # validate the template itself, naming its own file on error
+            templates[path] = yaml.safe_load(Path(path).read_text()) or {}
+    if method is not None:
+        from runtime.allocation import registry
+        if method not in registry.METHODS:
+            raise C.ConfigError("--method", "", f"one of {'|'.join(registry.METHODS)}", method)
 
-    from sitl.devices.create_oi import CreateOIDevice      # pybullet only once the configs are good
-    from sitl.devices.nmea_gps import NmeaGpsDevice
+    from sitl.devices.nmea_gps import NmeaGpsDevice      # pybullet only once the configs are good
+    from sitl.devices.registry import body_kind, make_device
     from sitl.world import World
     seed = fleet.seed if seed is None else seed
     run_dir = Path(run_dir or tempfile.mkdtemp(prefix="mrta-sitl-"))
     run_dir.mkdir(parents=True, exist_ok=True)
-    key_path = None
+    key_path, key = None, None
     if signing or fleet.signing_key:
         key_path = Path(fleet.signing_key) if fleet.signing_key else run_dir / "fleet.key"
         if not fleet.signing_key:
-            key_path.write_text(secrets.token_hex(32) + "\n")
-            os.chmod(key_path, 0o600)
+            fd = os.open(key_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+            with os.fdopen(fd, "w") as fh:
+                fh.write(secrets.token_hex(32) + "\n")
+        from runtime.comms.link import load_key
+        key = load_key(key_path)
 
     world = World(world_cfg, seed=seed)
     robots: dict[int, SimRobot] = {}
     ports = {r.id: fleet.base_port + r.id for r in fleet.robots}
-    initiator = min(ports)
-    model = template.get("base", {}).get("model", "create2")
     for r in fleet.robots:
-        body = world.add_create2(r.id, r.start)
-        base_dev = CreateOIDevice(body, model=model, robot_id=r.id)
+        template = templates[fleet.template(r.id)]
+        base_cfg = C.load_robot(fleet.template(r.id)).base
+        body = world.add_body(r.id, r.start, body_kind(base_cfg))
+        base_dev = make_device(base_cfg, body, r.id)
         gps_dev = NmeaGpsDevice(body, world_cfg.datum, noise_sigma=fleet.gps_noise, seed=seed * 1000 + r.id,
                                 robot_id=r.id)
         overrides = {
             "robot": {"id": r.id, "name": f"{template.get('robot', {}).get('name', 'robot')}-{r.id}"},
-            "base": {"port": base_dev.path},
+            "base": base_dev.endpoint(),
             "gps": {"port": gps_dev.path, "enabled": True},
             "localization": {"initial_pose": list(r.start)},
             "comms": {"listen": f"127.0.0.1:{ports[r.id]}", "gcs": fleet.gcs,
                       "peers": [{"id": o, "address": f"127.0.0.1:{p}"} for o, p in ports.items() if o != r.id],
                       "signing_key": str(key_path) if key_path else None},
-            "allocation": {"formation": [list(xy) for xy in fleet.formation], "initiator": r.id == initiator},
             "planning": {"map": str(Path(fleet.world).resolve())},
             "datum": C.to_dict(world_cfg.datum),
         }
         if method:
-            overrides["allocation"]["method"] = method
+            overrides["allocation"] = {"method": method}
         data = C.deep_merge(template, overrides)
+        if method and (template.get("allocation") or {}).get("method") not in (None, method):
+            data["allocation"] = {"method": method}        # the template's options belong to its own method
         cfg_path = run_dir / f"robot_{r.id}.yaml"
         cfg_path.write_text(yaml.safe_dump(data, sort_keys=False))
         C.load_robot(cfg_path)   # what we wrote must load
-        robots[r.id] = SimRobot(r.id, body, base_dev, gps_dev, ports[r.id], cfg_path)
+        robots[r.id] = SimRobot(r.id, body, base_dev, gps_dev, ports[r.id], cfg_path, base_cfg.type,
+                                float(getattr(body, "radius", 0.17)))
 
     manifest_path = Path(manifest) if manifest else run_dir / "manifest.json"
-    out = Fleet(fleet, world_cfg, robots, world, run_dir, manifest_path)
+    out = Fleet(fleet, world_cfg, robots, world, run_dir, manifest_path, key=key)
+    out.scenario = scenarios.module(fleet.scenario.type).Scenario(fleet, world_cfg)
     write_manifest(out, speedup if speedup is not None else fleet.speedup, seed, key_path)
     return out
 
@@ -168,7 +194,7 @@ def write_manifest(f: Fleet, speedup: float, seed: int, key_path: Path | None) -
         "robots": [
             {
                 "id": r.id, "system_id": r.id, "component_id": 1,
-                "base": {"protocol": "create_oi", "device": r.base_dev.path, "baudrate": 115200},
+                "base": {"type": r.base_type, **r.base_dev.endpoint()},
                 "gps": {"protocol": "nmea0183", "device": r.gps_dev.path, "baudrate": 9600},
                 "mavlink_udp": f"127.0.0.1:{r.udp_port}",
                 "config": str(r.config_path),
@@ -185,99 +211,93 @@ def write_manifest(f: Fleet, speedup: float, seed: int, key_path: Path | None) -
 
 # ---------------------------------------------------------------------- results
 
-def summarise(f: Fleet, assignment: dict[int, int | None]) -> dict:
-    """Assignment, its straight-line global cost beside the Hungarian optimum, final errors."""
-    from scipy.optimize import linear_sum_assignment
+def finish(f: Fleet, op, timed_out: bool) -> dict:
+    """The scenario's summary, the run's common lines, and the trace and its picture in the run directory."""
+    from sitl.operator import RunView
+    from sitl.run_plot import plot_run
 
-    starts = {r.id: r.start for r in f.fleet.robots}
-    ids = sorted(starts)
-    tasks = [tuple(t) for t in f.fleet.formation]
-    from runtime.planning.costs import cost_matrix
-    # the costs the daemons bid: planned path lengths on the world map from the start poses
-    cost = cost_matrix(f.world_cfg, [starts[i][:2] for i in ids], tasks, planner="astar")
-    rows, cols = linear_sum_assignment(cost)
-    optimum = float(cost[rows, cols].sum())
-    held = [assignment.get(i) for i in ids]
-    valid = all(t is not None for t in held) and len(set(held)) == len(held)
-    total = float(sum(cost[k, t] for k, t in enumerate(held) if t is not None)) if valid else math.nan
-    errors = {}
-    for k, rid in enumerate(ids):
-        x, y, _ = f.true_pose(rid)
-        t = held[k]
-        errors[rid] = math.hypot(tasks[t][0] - x, tasks[t][1] - y) if t is not None else math.nan
-    return {"assignment": {rid: held[k] for k, rid in enumerate(ids)}, "valid": valid, "tasks": tasks,
-            "global_cost": total, "optimum": optimum,
-            "optimal_assignment": {ids[r]: int(c) for r, c in zip(rows, cols)},
-            "final_error": errors, "sim_time": f.world.t, "events": list(f.events)}
+    view = RunView(op)
+    res = f.scenario.summary(view)
+    res["sim_time"] = f.world.t
+    res["goal_met"] = f.scenario.goal(view)
+    res["lost"] = sorted(op.dead)
+    if timed_out and not res["goal_met"]:
+        f.events.append(f"timeout after {f.world.t:.0f} s sim time without the scenario's goal")
+    res["events"] = list(f.events)
+    try:
+        op.trace.write(f.run_dir / "trace.json")
+        res["picture"] = str(plot_run(op.trace, f.run_dir / "run.png"))
+    except Exception as exc:          # a picture must never cost the run its summary
+        log.warning("run picture not drawn: %s", exc)
+        res["picture"] = None
+    return res
 
 
-def print_summary(res: dict, out=sys.stdout) -> None:
-    print("\nrobot  task  position (m)      optimal task  final error (m)", file=out)
-    for rid, task in res["assignment"].items():
-        err = res["final_error"][rid]
-        pos = "-" if task is None else "({:5.2f}, {:5.2f})".format(*res["tasks"][task])
-        print(f"{rid:5d}  {'-' if task is None else task:>4}  {pos:16}  {res['optimal_assignment'][rid]:>12}  "
-              f"{'-' if math.isnan(err) else f'{err:.3f}':>15}", file=out)
-    gap = 100.0 * (res["global_cost"] - res["optimum"]) / res["optimum"] if res["optimum"] > 0 else 0.0
-    print(f"\nglobal cost (path lengths from the start poses) {res['global_cost']:.3f} m   "
-          f"Hungarian optimum {res['optimum']:.3f} m   "
-          f"gap {gap:+.2f} %", file=out)
+def print_summary(f: Fleet, res: dict, out=sys.stdout) -> None:
+    f.scenario.print_summary(res, out)
     print(f"assignment valid: {res['valid']}   sim time {res['sim_time']:.1f} s", file=out)
     for e in res["events"]:
         print(f"event: {e}", file=out)
+    if res.get("picture"):
+        print(f"picture: {res['picture']}", file=out)
 
 
 # ---------------------------------------------------------------------- run modes
 
-def _done(f: Fleet, status: dict[int, dict], tol: float) -> bool:
-    if len(status) < len(f.robots):
-        return False
-    held = [s.get("task") for s in status.values()]
-    if None in held or len(set(held)) != len(held):
-        return False
-    for rid, s in status.items():
-        if not s.get("converged"):
-            return False
-        tx, ty = f.fleet.formation[s["task"]]
-        x, y, _ = f.true_pose(rid)
-        vx, vy = f.robots[rid].body.velocity()
-        if math.hypot(tx - x, ty - y) > tol or math.hypot(vx, vy) > 0.02:
-            return False
-    return True
+def _goal_held(f: Fleet, op, now: float, since: float | None) -> tuple[bool, float | None]:
+    from sitl.operator import RunView
+
+    if f.scenario.goal(RunView(op)):
+        since = now if since is None else since
+        return now - since > SETTLE, since
+    return False, None
 
 
-def run_lockstep(f: Fleet, timeout: float | None = None, tol: float = 0.2, progress=None, on_step=None) -> dict:
+def run_lockstep(f: Fleet, timeout: float | None = None, progress=None, on_step=None) -> dict:
     """Daemons in this process on a simulated clock: deterministic for a given seed.
     ``on_step(fleet)`` is called after every control cycle (tests attach observers there)."""
     from runtime.daemon import Daemon
+    from sitl.operator import Operator
 
     clock = SimClock(f.world.t)
     for r in f.robots.values():
         r.daemon = Daemon(C.load_robot(r.config_path))
         r.daemon.open(clock.now())
+    op = Operator(f, f.scenario, f.key)
     period = min(r.daemon.period for r in f.robots.values())
     timeout = timeout or f.fleet.timeout
-    settled_since = None
-    next_progress = 0.0
-    while f.world.t < timeout:
-        f.advance_to(f.world.t + period)
-        clock.sleep_until(f.world.t)
+    # hand-overs due at the start complete before the first cycle, as if the operator had uploaded while
+    # the robots were booting: the daemons only answer messages until then
+    for _ in range(PREROLL_ROUNDS):
+        if not op.due(f.world.t):
+            break
+        op.poll(f.world.t)
         for r in f.robots.values():
-            r.daemon.step(clock.now())
-        if on_step is not None:
-            on_step(f)
-        status = {r.id: {"task": r.daemon.agent.assignment, "converged": r.daemon.agent.converged}
-                  for r in f.robots.values()}
-        if _done(f, status, tol):
-            settled_since = settled_since if settled_since is not None else f.world.t
-            if f.world.t - settled_since > 1.0:
+            r.daemon.service(clock.now())
+    for _ in range(3):                 # the table copies spread to every robot
+        op.poll(f.world.t)
+        for r in f.robots.values():
+            r.daemon.service(clock.now())
+    since, next_progress, done = None, 0.0, False
+    try:
+        while f.world.t < timeout:
+            f.advance_to(f.world.t + period)
+            clock.sleep_until(f.world.t)
+            for r in f.robots.values():
+                r.daemon.step(clock.now())
+            op.poll(f.world.t)
+            op.record(f.world.t)
+            if on_step is not None:
+                on_step(f)
+            done, since = _goal_held(f, op, f.world.t, since)
+            if done:
                 break
-        else:
-            settled_since = None
-        if progress and f.world.t >= next_progress:
-            progress(f, status)
-            next_progress += 5.0
-    return summarise(f, {r.id: r.daemon.agent.assignment for r in f.robots.values()})
+            if progress and f.world.t >= next_progress:
+                progress(f, op)
+                next_progress += 5.0
+        return finish(f, op, timed_out=not done)
+    finally:
+        op.close()
 
 
 def daemon_stats(f: Fleet) -> dict[int, dict]:
@@ -291,15 +311,15 @@ def daemon_stats(f: Fleet) -> dict[int, dict]:
     return out
 
 
-def run_processes(f: Fleet, speedup: float, timeout: float | None = None, tol: float = 0.2,
-                  progress=None, stop_flag=None, linger: float = 0.0, on_step=None) -> dict:
+def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progress=None, stop_flag=None,
+                  linger: float = 0.0, on_step=None, wait: bool | None = None) -> dict:
     """One daemon process per robot on a clock ``speedup`` times real time.
 
-    ``linger``: wall seconds to keep everything running after the fleet settles; the result then
-    holds each daemon's CPU share over that idle window (``idle_cpu_share``, 1.0 = one core)."""
-    from runtime.comms.gcs import GroundStation
+    ``linger``: wall seconds to keep everything running after the goal is met; the result then holds each
+    daemon's CPU share over that idle window (``idle_cpu_share``, 1.0 = one core).  ``wait``: run until the
+    timeout or ``stop_flag()`` even when the goal is met (a fleet serving an operator)."""
+    from sitl.operator import Operator
 
-    gcs = GroundStation(f.fleet.gcs)
     clock_file = f.run_dir / "clock"
     for stale in f.run_dir.glob("clock*"):
         stale.unlink()
@@ -309,6 +329,7 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, tol: f
                "--stats", str(f.run_dir / f"robot_{r.id}.stats.json")]
         with open(f.run_dir / f"robot_{r.id}.log", "w") as log_fh:
             r.proc = subprocess.Popen(cmd, stdout=log_fh, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent)
+    op = Operator(f, f.scenario, f.key)
     # start barrier: the sim clock starts once every daemon is built (imports take seconds)
     deadline = time.monotonic() + 120
     while not all((f.run_dir / f"clock.ready.{rid}").exists() for rid in f.robots):
@@ -325,58 +346,58 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, tol: f
     publisher = ClockPublisher(str(clock_file), f.world.t)
     f.device_hook = publisher.publish
     timeout = timeout or f.fleet.timeout
-    settled_since = None
-    next_progress = 0.0
-    max_lag = 0.0
-    slips = 0
-    idle_from = None
-    while not (stop_flag and stop_flag()):
-        if f.world.t >= timeout:
-            f.events.append(f"timeout after {timeout:.0f} s sim time")
-            break
-        target = clock.now()
-        f.advance_to(min(target, f.world.t + 0.05))      # bounded chunks: keep watching the fleet
-        lag = target - f.world.t
-        max_lag = max(max_lag, lag)
-        if lag > MAX_LAG:            # the machine cannot hold this speedup: slip rather than sprint later
-            clock.epoch += (lag - MAX_LAG) / speedup
-            slips += 1
-        now = f.world.t
-        gcs.poll()
-        if on_step is not None:
-            on_step(f)
-        for r in f.robots.values():
-            code = r.proc.poll() if r.proc else None
-            if code is not None and not r.exit_reported:
-                r.exit_reported = True
-                msg = f"robot {r.id} daemon exited with code {code} (log: {f.run_dir / f'robot_{r.id}.log'})"
-                f.events.append(msg)
-                log.error(msg)
-        status = {rid: s for rid, s in gcs.status().items() if rid in f.robots}
-        if idle_from is not None:
-            if time.monotonic() - idle_from[0] >= linger:
+    wait = getattr(f.fleet.scenario, "wait", False) if wait is None else wait
+    since, next_progress, next_record = None, 0.0, 0.0
+    max_lag, slips, idle_from, done = 0.0, 0, None, False
+    try:
+        while not (stop_flag and stop_flag()):
+            if f.world.t >= timeout:
                 break
-        elif _done(f, status, tol):
-            settled_since = settled_since if settled_since is not None else now
-            if now - settled_since > 1.0:
-                if linger <= 0:
+            target = clock.now()
+            f.advance_to(min(target, f.world.t + 0.05))      # bounded chunks: keep watching the fleet
+            lag = target - f.world.t
+            max_lag = max(max_lag, lag)
+            if lag > MAX_LAG:            # the machine cannot hold this speedup: slip rather than sprint later
+                clock.epoch += (lag - MAX_LAG) / speedup
+                slips += 1
+            now = f.world.t
+            op.poll(now)
+            if now >= next_record:
+                op.record(now)
+                next_record = now + 0.05
+            if on_step is not None:
+                on_step(f)
+            for r in f.robots.values():
+                code = r.proc.poll() if r.proc else None
+                if code is not None and not r.exit_reported:
+                    r.exit_reported = True
+                    msg = f"robot {r.id} daemon exited with code {code} (log: {f.run_dir / f'robot_{r.id}.log'})"
+                    f.events.append(msg)
+                    log.error(msg)
+                    op.robot_died(r.id, now)
+            if idle_from is not None:
+                if time.monotonic() - idle_from[0] >= linger:
                     break
-                idle_from = (time.monotonic(), {r.id: _cpu_seconds(r.proc.pid) for r in f.robots.values()})
-        else:
-            settled_since = None
-        if progress and now >= next_progress:
-            progress(f, status)
-            next_progress += 5.0
-        time.sleep(0.002)
-    gcs.close()
-    f.device_hook = None
-    publisher.close()
-    res = summarise(f, {rid: s.get("task") for rid, s in gcs.status().items()})
+            elif not wait:
+                done, since = _goal_held(f, op, now, since)
+                if done:
+                    if linger <= 0:
+                        break
+                    idle_from = (time.monotonic(), {r.id: _cpu_seconds(r.proc.pid) for r in f.robots.values()})
+            if progress and now >= next_progress:
+                progress(f, op)
+                next_progress += 5.0
+            time.sleep(0.002)
+        f.device_hook = None
+        publisher.close()
+        res = finish(f, op, timed_out=f.world.t >= timeout)
+    finally:
+        op.close()
     res["world_max_lag"] = max_lag
     res["clock_slips"] = slips
     if slips:
-        f.events.append(f"the world fell more than {MAX_LAG} s behind the {speedup:g}x clock {slips} times "
-                        f"(the machine cannot hold this speedup)")
+        res["events"].append(f"the world fell more than {MAX_LAG} s behind the {speedup:g}x clock {slips} times "
+                             f"(the machine cannot hold this speedup)")
     if idle_from is not None:
         wall = time.monotonic() - idle_from[0]
         res["idle_cpu_share"] = {rid: (_cpu_seconds(f.robots[rid].proc.pid) - c0) / wall
@@ -402,30 +423,29 @@ def _cpu_seconds(pid: int) -> float:
         return math.nan
 
 
-def _progress(f: Fleet, status: dict) -> None:
-    arrived = 0
-    for rid, s in status.items():
-        if s.get("task") is not None:
-            tx, ty = f.fleet.formation[s["task"]]
-            x, y, _ = f.true_pose(rid)
-            arrived += math.hypot(tx - x, ty - y) < 0.2
-    print(f"[t={f.world.t:6.1f} s] robots reporting {len(status)}/{len(f.robots)}, "
-          f"at their positions {arrived}/{len(f.robots)}", flush=True)
+def _progress(f: Fleet, op) -> None:
+    live = op.live_robots()
+    busy = sum(1 for rid in live if op.gcs.robots[rid].tasks)
+    done = sum(1 for r in op.gcs.table.values() if r.state == 1)
+    print(f"[t={f.world.t:6.1f} s] robots reporting {len(live)}/{len(f.robots)}, holding a task {busy}, "
+          f"fleet tasks {len(op.gcs.table)} ({done} done)", flush=True)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from runtime.allocation import registry
+
     p = sub.add_parser("sitl", help="software-in-the-loop simulation")
     s = p.add_subparsers(dest="sitl_cmd", metavar="SUBCOMMAND", required=True)
-    r = s.add_parser("run", help="run a fleet: world, emulated devices, one daemon per robot")
+    r = s.add_parser("run", help="run a fleet: world, emulated devices, one daemon per robot, an operator")
     r.add_argument("fleet", help="fleet config YAML")
     r.add_argument("--manifest", default=None, help="write the ports manifest here (JSON)")
-    r.add_argument("--run-dir", default=None, help="where robot configs and logs go (default: a temp dir)")
+    r.add_argument("--run-dir", default=None, help="where robot configs, logs, trace and picture go (default: a temp dir)")
     r.add_argument("--seed", type=int, default=None, help="override the fleet's seed")
     r.add_argument("--speedup", type=float, default=None, help="sim seconds per wall second")
     r.add_argument("--lockstep", action="store_true", help="daemons in-process on a simulated clock")
     r.add_argument("--devices-only", action="store_true", help="world and devices only, no daemons")
     r.add_argument("--signing", action="store_true", help="sign MAVLink with a fresh fleet key")
-    r.add_argument("--method", choices=("bs", "rtma", "auction"), default=None, help="allocation method")
+    r.add_argument("--method", choices=registry.names(), default=None, help="allocation method")
     r.add_argument("--timeout", type=float, default=None, help="sim seconds before giving up")
     r.add_argument("--json", default=None, help="write the result here as JSON")
     r.set_defaults(func=_main)
@@ -450,13 +470,17 @@ def _main(args) -> int:
                 f.advance_to(clock.now())
                 time.sleep(0.002)
             return 0
+        if getattr(f.fleet.scenario, "wait", False):
+            print(f"waiting for an operator: upload missions to the robots' MAVLink ports in {f.manifest_path} "
+                  f"(mrta mission upload 127.0.0.1:{f.robots[min(f.robots)].udp_port} FILE); Ctrl-C to stop",
+                  flush=True)
         if args.lockstep:
             res = run_lockstep(f, args.timeout, progress=_progress)
         else:
             res = run_processes(f, speedup, args.timeout, progress=_progress, stop_flag=lambda: stop["flag"])
     finally:
         f.close()
-    print_summary(res)
+    print_summary(f, res)
     if args.json:
         Path(args.json).write_text(json.dumps(res, indent=2, default=str))
-    return 0 if res["valid"] and not stop["flag"] else 1
+    return 0 if res["goal_met"] and not stop["flag"] else 1

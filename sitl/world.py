@@ -82,6 +82,9 @@ class World:
         p.changeDynamics(body, -1, lateralFriction=OBSTACLE_FRICTION, restitution=0.0, **self._kw)
         return body
 
+    def add_body(self, robot_id: int, start: tuple[float, float, float], kind: str = "create2") -> SimCreate2:
+        return self.add_create2(robot_id, start)
+
     def add_create2(self, robot_id: int, start: tuple[float, float, float]) -> SimCreate2:
         """Put a Create 2 on the floor at ``start`` = (x, y, yaw) and return it."""
         if robot_id in self._bodies:

@@ -102,6 +102,14 @@ class CreateOIDevice:
         self._last_now: float | None = None
         self._values: dict | None = None
 
+    @classmethod
+    def from_config(cls, base_cfg, body, robot_id: int) -> "CreateOIDevice":
+        return cls(body, model=base_cfg.model, robot_id=robot_id)
+
+    def endpoint(self) -> dict:
+        """What the robot config's ``base:`` section needs to reach this device."""
+        return {"port": self.path, "baudrate": P.GEOMETRY[self.model].default_baud}
+
     @property
     def path(self) -> str:
         """Where a driver opens the robot (the pty slave)."""

@@ -295,8 +295,9 @@ def test_a_failing_or_wrong_handler_is_acked_failed(svc, gcs, handler):
 
 
 def test_built_in_commands_cannot_be_replaced(svc):
-    with pytest.raises(ValueError):
-        svc.register_command(mod.MAV_CMD_REQUEST_MESSAGE, lambda msg, now: 0)
+    for cmd in (mod.MAV_CMD_REQUEST_MESSAGE, mod.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, mod.MAV_CMD_GET_HOME_POSITION):
+        with pytest.raises(ValueError):
+            svc.register_command(cmd, lambda msg, now: 0)
     with pytest.raises(ValueError):
         svc.register_message(mod.MAVLINK_MSG_ID_AUTOPILOT_VERSION, lambda: None)
 
@@ -315,6 +316,15 @@ def test_request_message_goes_to_the_providers(svc, gcs):
                            (148.5, mod.MAV_RESULT_DENIED)):
         (ack,) = ask(svc, gcs, command(gcs, mod.MAV_CMD_REQUEST_MESSAGE, msg_id))
         assert ack.result == result, msg_id
+
+
+def test_mavproxys_get_home_position_uses_the_home_position_provider(svc, gcs):
+    (ack,) = ask(svc, gcs, command(gcs, mod.MAV_CMD_GET_HOME_POSITION))
+    assert (ack.command, ack.result) == (mod.MAV_CMD_GET_HOME_POSITION, mod.MAV_RESULT_UNSUPPORTED)
+    home = svc.mav.home_position_encode(7, 8, 9, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0)
+    svc.register_message(mod.MAVLINK_MSG_ID_HOME_POSITION, lambda: home)
+    ack, msg = ask(svc, gcs, command(gcs, mod.MAV_CMD_GET_HOME_POSITION))
+    assert ack.result == mod.MAV_RESULT_ACCEPTED and (msg.latitude, msg.longitude) == (7, 8)
 
 
 # ---------------------------------------------------------------------- mission (none held)

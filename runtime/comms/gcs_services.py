@@ -15,7 +15,9 @@ Answers here:
   MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: ACCEPTED, then AUTOPILOT_VERSION.  REQUEST_MESSAGE of any
   other id: the ``message_providers`` registry (ACCEPTED then the message; TEMPORARILY_REJECTED if the
   provider has nothing yet), else UNSUPPORTED, which ends QGC's wait at once (PROTOCOL_VERSION and
-  AVAILABLE_MODES are not in the project dialect, which includes common.xml only).  Other commands: the
+  AVAILABLE_MODES are not in the project dialect, which includes common.xml only).  The deprecated
+  MAV_CMD_GET_HOME_POSITION, which MAVProxy sends every 2 s, is served like REQUEST_MESSAGE
+  HOME_POSITION (the same provider).  Other commands: the
   ``commands`` registry (:meth:`register_command`), else UNSUPPORTED.  A bad param1 -> DENIED, a handler
   that raises -> FAILED.
 * AUTOPILOT_VERSION capabilities: MAVLINK2 | MISSION_INT | COMMAND_INT | PARAM_ENCODE_C_CAST (see
@@ -162,7 +164,8 @@ class GcsServices:
         self._streams: dict = {}              # source -> next param_index of its PARAM_REQUEST_LIST
         m = self.m
         self._builtin_commands = {m.MAV_CMD_REQUEST_MESSAGE: self._request_message,
-                                  m.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: self._request_capabilities}
+                                  m.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: self._request_capabilities,
+                                  m.MAV_CMD_GET_HOME_POSITION: self._get_home_position}
         self._results = frozenset(k for k, e in m.enums["MAV_RESULT"].items() if not e.name.endswith("ENUM_END"))
         self._handlers = {
             "COMMAND_LONG": self._command, "COMMAND_INT": self._command,
@@ -265,6 +268,9 @@ class GcsServices:
     def _request_capabilities(self, msg) -> tuple[int, list]:
         return self.m.MAV_RESULT_ACCEPTED, [self.autopilot_version()]
 
+    def _get_home_position(self, msg) -> tuple[int, list]:
+        return self._provide(self.m.MAVLINK_MSG_ID_HOME_POSITION)
+
     def _request_message(self, msg) -> tuple[int, list]:
         m = self.m
         msg_id = _whole(msg.param1)
@@ -272,6 +278,10 @@ class GcsServices:
             return m.MAV_RESULT_DENIED, []
         if msg_id == m.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
             return m.MAV_RESULT_ACCEPTED, [self.autopilot_version()]
+        return self._provide(msg_id)
+
+    def _provide(self, msg_id: int) -> tuple[int, list]:
+        m = self.m
         provider = self.message_providers.get(msg_id)
         if provider is None:
             return m.MAV_RESULT_UNSUPPORTED, []

@@ -10,8 +10,8 @@ import pytest
 from runtime.allocation.formation.messages import Status
 from runtime.comms import codec, dialect
 from runtime.comms.link import MavlinkLink
-from runtime.comms.telemetry import (CUSTOM_MODE_ALLOCATING, CUSTOM_MODE_CONVERGED,
-                                     CUSTOM_MODE_LOCALIZING, GcsTelemetry)
+from runtime.comms.telemetry import (CUSTOM_MODE_AUTO, CUSTOM_MODE_HOLD, CUSTOM_MODE_INITIALISING,
+                                     GcsTelemetry)
 from runtime.config import Datum
 from runtime.drivers.base import BaseSensors
 
@@ -147,17 +147,17 @@ def test_mode_and_state_follow_the_robot(make, gcs):
     first = gcs.receive(3)
     assert {m.get_type() for m in first} == {"HEARTBEAT", "SYS_STATUS", "MRTA_STATUS"}
     hb = next(m for m in first if m.get_type() == "HEARTBEAT")
-    assert hb.system_status == mod.MAV_STATE_CALIBRATING and hb.custom_mode == CUSTOM_MODE_LOCALIZING
-    assert not hb.base_mode & mod.MAV_MODE_FLAG_SAFETY_ARMED
+    assert hb.system_status == mod.MAV_STATE_CALIBRATING and hb.custom_mode == CUSTOM_MODE_INITIALISING
+    assert hb.base_mode & mod.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
 
     tel.tick(1.0, (0.0, 0.0, 0.0), (0.0, 0.0), BATTERY, None, False)
     hb = next(m for m in gcs.receive(5) if m.get_type() == "HEARTBEAT")
-    assert hb.system_status == mod.MAV_STATE_STANDBY and hb.custom_mode == CUSTOM_MODE_ALLOCATING
+    assert hb.system_status == mod.MAV_STATE_STANDBY and hb.custom_mode == CUSTOM_MODE_HOLD
 
     tel.tick(2.0, (0.0, 0.0, 0.0), (0.0, 0.0), BATTERY, Status(3, 7, 12, 6, True))   # an agent's ack
     got = gcs.receive(5)
     hb = next(m for m in got if m.get_type() == "HEARTBEAT")
-    assert hb.system_status == mod.MAV_STATE_ACTIVE and hb.custom_mode == CUSTOM_MODE_CONVERGED
+    assert hb.system_status == mod.MAV_STATE_ACTIVE and hb.custom_mode == CUSTOM_MODE_AUTO
     assert hb.base_mode & mod.MAV_MODE_FLAG_SAFETY_ARMED and hb.base_mode & mod.MAV_MODE_FLAG_AUTO_ENABLED
     # telemetry broadcasts the state only: to every peer, answering no auction
     assert codec.from_mavlink(next(m for m in got if m.get_type() == "MRTA_STATUS")) == Status(3, 0, 0, 6, True)
@@ -170,6 +170,126 @@ def test_mode_and_state_follow_the_robot(make, gcs):
     got = {m.get_type(): m for m in gcs.receive(5)}
     assert got["HEARTBEAT"].system_status == mod.MAV_STATE_CRITICAL
     assert not got["SYS_STATUS"].onboard_control_sensors_health & mod.MAV_SYS_STATUS_SENSOR_BATTERY
+    tel.tick(4.0, None, (0.0, 0.0), low, None, False)              # critical outranks localizing
+    got = {m.get_type(): m for m in gcs.receive(5)}
+    assert got["HEARTBEAT"].system_status == mod.MAV_STATE_CRITICAL
+    assert got["HEARTBEAT"].custom_mode == CUSTOM_MODE_INITIALISING
+
+
+def test_the_link_heartbeat_is_right_before_the_first_tick(make):
+    link, tel = make()
+    mod = link.module
+    assert link.custom_mode == CUSTOM_MODE_INITIALISING and link.system_status == mod.MAV_STATE_CALIBRATING
+    assert link.base_mode & mod.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+
+
+def _heartbeat(gcs, tel, now, pose, status, battery=BATTERY):
+    tel.tick(now, pose, (0.0, 0.0), battery, status, False)
+    got = {m.get_type(): m for m in gcs.receive(5)}
+    return got["HEARTBEAT"], got["SYS_STATUS"]
+
+
+POSE = (1.0, 2.0, 0.0)
+
+
+@pytest.mark.parametrize("armed, pose, task, mode, state", [
+    (True, None, None, "INITIALISING", "CALIBRATING"),        # localizing
+    (True, POSE, None, "HOLD", "STANDBY"),                    # idle: may drive, nothing to do
+    (True, POSE, 4, "AUTO", "ACTIVE"),                        # executing (allocating or converged)
+    (False, POSE, 4, "HOLD", "STANDBY"),                      # stopped by the operator, task kept
+    (False, POSE, None, "HOLD", "STANDBY"),
+    (False, None, None, "INITIALISING", "CALIBRATING"),
+])
+def test_what_mavproxy_prints_for_each_robot_state(make, gcs, armed, pose, task, mode, state):
+    """pymavlink's mode_string_v10 and motors_armed logic are what MAVProxy prints and announces."""
+    from pymavlink import mavutil
+
+    link, tel = make()
+    tel.armed = armed
+    hb, sys_status = _heartbeat(gcs, tel, 0.0, pose, task)
+    assert mavutil.mode_string_v10(hb) == mode
+    assert bool(hb.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED) == armed
+    assert hb.system_status == getattr(link.module, "MAV_STATE_" + state)
+    motors = link.module.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+    assert bool(sys_status.onboard_control_sensors_enabled & motors) == armed      # MAVProxy "safety off"
+    assert sys_status.onboard_control_sensors_present & motors
+
+
+def test_disarm_takes_effect_on_the_next_tick(make, gcs):
+    from pymavlink import mavutil
+
+    link, tel = make()
+    hb, _ = _heartbeat(gcs, tel, 0.0, POSE, 4)
+    assert mavutil.mode_string_v10(hb) == "AUTO" and hb.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+    tel.armed = False
+    hb, _ = _heartbeat(gcs, tel, 1.0, POSE, 4)
+    assert mavutil.mode_string_v10(hb) == "HOLD" and not hb.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+    assert (link.base_mode, link.custom_mode) == (hb.base_mode, hb.custom_mode)
+
+
+def _mavproxy_fence_says(sys_statuses) -> list[str]:
+    """MAVProxy's fence module (mavproxy_fence.handle_sys_status): what it announces for a sequence of
+    SYS_STATUS messages, starting from its initial present=False, enabled=False, healthy=True."""
+    from pymavlink import mavutil
+
+    bits = mavutil.mavlink.MAV_SYS_STATUS_GEOFENCE
+    present, enabled, healthy, said = False, False, True, []
+    for m in sys_statuses:
+        now = (m.onboard_control_sensors_present & bits) == bits
+        said += ["fence present"] if now and not present else ["fence removed"] if present and not now else []
+        present = now
+        now = (m.onboard_control_sensors_enabled & bits) == bits
+        said += ["fence enabled"] if now and not enabled else ["fence disabled"] if enabled and not now else []
+        enabled = now
+        now = (m.onboard_control_sensors_health & bits) == bits
+        said += ["fence OK"] if now and not healthy else ["fence breach"] if healthy and not now else []
+        healthy = now
+    return said
+
+
+def _mavproxy_warning_status(m) -> list[str]:
+    """MAVProxy's warning module check_status: the SYS_STATUS health groups it flags."""
+    from pymavlink import mavutil
+
+    L = mavutil.mavlink
+    groups = {"AS": L.MAV_SYS_STATUS_SENSOR_DIFFERENTIAL_PRESSURE, "MAG": L.MAV_SYS_STATUS_SENSOR_3D_MAG,
+              "INS": L.MAV_SYS_STATUS_SENSOR_3D_ACCEL | L.MAV_SYS_STATUS_SENSOR_3D_GYRO,
+              "AHRS": L.MAV_SYS_STATUS_AHRS, "TERR": L.MAV_SYS_STATUS_TERRAIN, "LOG": L.MAV_SYS_STATUS_LOGGING,
+              "FEN": L.MAV_SYS_STATUS_GEOFENCE}
+    return [name for name, bits in groups.items() if m.onboard_control_sensors_health & bits != bits]
+
+
+def test_sys_status_raises_no_false_alarm_in_mavproxy(make, gcs):
+    link, tel = make()
+    low = BaseSensors(voltage=12.0, current=-0.5, battery_charge=0.2, battery_capacity=2.7)
+    seen = []
+    for i, (pose, task, battery, armed) in enumerate([(None, None, BATTERY, True), (POSE, None, BATTERY, True),
+                                                      (POSE, 3, BATTERY, True), (POSE, 3, BATTERY, False),
+                                                      (POSE, 3, low, True), (POSE, None, BaseSensors(), True)]):
+        tel.armed = armed
+        seen.append(_heartbeat(gcs, tel, float(i), pose, task, battery)[1])
+    assert _mavproxy_fence_says(seen) == []                      # was: "fence breach" on the first one
+    assert _mavproxy_warning_status(seen[0]) == ["AHRS"]         # true: no pose estimate yet
+    assert [_mavproxy_warning_status(s) for s in seen[1:]] == [[]] * 5
+    mod = link.module
+    for s in seen:
+        assert not s.onboard_control_sensors_present & mod.MAV_SYS_STATUS_GEOFENCE     # no fence claimed
+        assert s.onboard_control_sensors_enabled & ~s.onboard_control_sensors_present == 0
+        assert 0 <= s.onboard_control_sensors_health < 2 ** 32
+
+
+def test_a_stock_console_sees_unhealthy_only_what_fails(make, gcs):
+    """QGC and MAVProxy's console colour a sensor red when present, enabled and unhealthy."""
+    link, tel = make()
+    mod = link.module
+    low = BaseSensors(voltage=12.0, current=-0.5, battery_charge=0.2, battery_capacity=2.7)
+
+    def red(s):
+        return s.onboard_control_sensors_present & s.onboard_control_sensors_enabled & ~s.onboard_control_sensors_health
+
+    assert red(_heartbeat(gcs, tel, 0.0, None, None)[1]) == mod.MAV_SYS_STATUS_AHRS
+    assert red(_heartbeat(gcs, tel, 1.0, POSE, 2)[1]) == 0
+    assert red(_heartbeat(gcs, tel, 2.0, POSE, 2, low)[1]) == mod.MAV_SYS_STATUS_SENSOR_BATTERY
 
 
 def test_sys_status_battery_units(make, gcs):

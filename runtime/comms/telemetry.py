@@ -7,11 +7,36 @@ Sent by :meth:`GcsTelemetry.tick` (system id = robot id, component 1):
 * 5 Hz, once a pose exists: GLOBAL_POSITION_INT (pymap3d ENU -> geodetic around the datum) and
   LOCAL_POSITION_NED (ENU -> NED: x north, y east, z down).
 
-HEARTBEAT meaning: base_mode always has AUTO (tasks come from auctions) and CUSTOM_MODE; SAFETY_ARMED
-while the robot holds a task (it may drive).  custom_mode is the allocation phase (CUSTOM_MODE_*).
-system_status: CALIBRATING without a pose estimate, CRITICAL below 15 % battery, ACTIVE while holding a
-task, STANDBY otherwise.  time_boot_ms is ``now`` in milliseconds (clock seconds: monotonic time since
-boot on a robot, simulated seconds in SITL).
+HEARTBEAT, chosen so a stock MAVProxy and QGroundControl show something true:
+
+* custom_mode uses ArduPilot Rover's mode numbers, because that is how they are read: pymavlink's
+  ``mode_string_v10`` (MAVProxy's prompt and "Mode X" announcements) looks custom_mode up in
+  ``mode_mapping_rover`` for *any* non-PX4 autopilot whose type is GROUND_ROVER, whenever base_mode has
+  CUSTOM_MODE_ENABLED.  (The custom modes 0/1/2 sent before read as MANUAL/ACRO/LEARNING.)  Three of
+  its names say what our robot does: INITIALISING (16) while localizing (no pose yet), AUTO (10) while
+  it is armed and holds a task (it drives to it), HOLD (4) otherwise (no task, or disarmed: it stands).
+  Rover has no name for an auction phase: allocating vs converged stays in MRTA_STATUS.converged.
+  QGroundControl's generic firmware plugin shows "Custom:0xa"-style names for these until it learns
+  names from AVAILABLE_MODES, which the project dialect (common.xml only) cannot send.
+* base_mode: CUSTOM_MODE_ENABLED (so the above is read), AUTO_ENABLED always (the robot finds its own
+  goals: tasks come from auctions, there is no manual mode), SAFETY_ARMED iff :attr:`GcsTelemetry.armed`
+  (the operator allows it to drive; independent of holding a task).  MAVProxy prints ARMED/DISARMED
+  from that bit alone (mavutil ``motors_armed``).
+* system_status: CRITICAL below 15 % battery (whatever else holds), CALIBRATING without a pose
+  estimate, ACTIVE while armed with a task (motors engaged), STANDBY otherwise.
+
+SYS_STATUS sensor bits: present = MOTOR_OUTPUTS, AHRS (the pose estimate) and BATTERY (when the base
+reports a voltage); enabled = AHRS, BATTERY, and MOTOR_OUTPUTS only while armed (MAVProxy's console
+and ``arm safetystatus`` read enabled motor outputs as "safety off, vehicle dangerous").  health = every
+bit of MAV_SYS_STATUS_SENSOR except what is actually failing -- AHRS without a pose, BATTERY when
+critical -- since MAVLink's health bit means "no error" and MAVProxy alarms on missing health bits
+of sensors that are not even present: its fence module starts ``healthy=True`` and says "fence breach"
+on the first SYS_STATUS without the GEOFENCE health bit (the false breach seen before), and its
+warning module flags any of AS/MAG/INS/AHRS/TERR/LOG/FEN unhealthy.  ArduPilot sets GEOFENCE health
+the same way whenever its fence has not failed, present or not.
+
+time_boot_ms is ``now`` in milliseconds (clock seconds: monotonic time since boot on a robot,
+simulated seconds in SITL).
 """
 from __future__ import annotations
 
@@ -22,9 +47,10 @@ import pymap3d
 from runtime.allocation.formation.messages import BROADCAST, Status
 from runtime.comms import codec
 
-CUSTOM_MODE_LOCALIZING = 0      # no pose estimate yet
-CUSTOM_MODE_ALLOCATING = 1      # taking part in auctions, allocation not converged
-CUSTOM_MODE_CONVERGED = 2       # the robot believes the allocation has converged
+# custom_mode: ArduPilot Rover numbers (pymavlink mavutil.mode_mapping_rover), see the module docstring
+CUSTOM_MODE_HOLD = 4            # standing: no task, or disarmed
+CUSTOM_MODE_AUTO = 10           # armed and holding a task: driving to it / at it
+CUSTOM_MODE_INITIALISING = 16   # localizing: no pose estimate yet
 NO_TASK = 0xFFFF
 LOW_BATTERY = 15.0              # % remaining below which the state is MAV_STATE_CRITICAL
 SLOW_PERIOD = 1.0               # s: HEARTBEAT, SYS_STATUS, MRTA_STATUS
@@ -50,6 +76,19 @@ def _datum(d) -> tuple[float, float, float]:
     return float(d.lat), float(d.lon), float(getattr(d, "alt", 0.0))
 
 
+def _critical(remaining: float) -> bool:
+    return _finite(remaining) and remaining < LOW_BATTERY
+
+
+def _all_sensor_bits(m) -> int:
+    """Every MAV_SYS_STATUS_SENSOR bit the dialect defines (the 32-bit fields' enum)."""
+    bits = 0
+    for value, entry in m.enums["MAV_SYS_STATUS_SENSOR"].items():
+        if not entry.name.endswith("ENUM_END") and 0 < value < 2 ** 32:
+            bits |= value
+    return bits
+
+
 class _Every:
     """Due once per ``period`` of the injected clock, without bursts after a pause."""
 
@@ -66,7 +105,7 @@ class _Every:
 
 
 class GcsTelemetry:
-    def __init__(self, link, robot_id: int, datum):
+    def __init__(self, link, robot_id: int, datum, *, armed: bool = True):
         self.link = link
         self.robot_id = int(robot_id)
         self.lat0, self.lon0, self.alt0 = _datum(datum)
@@ -75,6 +114,10 @@ class GcsTelemetry:
         self._slow = _Every(SLOW_PERIOD)
         self._fast = _Every(FAST_PERIOD)
         self.sent: dict[str, int] = {}
+        # allowed to drive (HEARTBEAT SAFETY_ARMED); the daemon sets it, e.g. False on an operator stop.
+        # True by default: nothing but holding a task gates driving in this runtime today.
+        self.armed = bool(armed)
+        self._update_mode(None, NO_TASK, math.nan)
 
     # ------------------------------------------------------------------ public
     def tick(self, now: float, pose, velocity, battery, status, converged: bool | None = None) -> None:
@@ -89,10 +132,10 @@ class GcsTelemetry:
         """
         task, conv = self._allocation(status, converged)
         remaining = self._remaining(battery)
-        self._update_mode(pose, task, conv, remaining)
+        self._update_mode(pose, task, remaining)
         if self._slow.due(now):
             self._send(self.link.heartbeat())
-            self._send(self._sys_status(battery, remaining))
+            self._send(self._sys_status(battery, remaining, pose is not None))
             self._send(codec.to_mavlink(Status(self.robot_id, BROADCAST, 0, task, conv), self.m))
         if pose is not None and self._fast.due(now):
             self._send_position(now, pose, velocity)
@@ -113,36 +156,43 @@ class GcsTelemetry:
             return min(max(100.0 * charge / cap, 0.0), 100.0)
         return math.nan
 
-    def _update_mode(self, pose, task: int, conv: bool, remaining: float) -> None:
+    def _update_mode(self, pose, task: int, remaining: float) -> None:
+        """HEARTBEAT base_mode, custom_mode and system_status for the state now (kept on the link, which
+        also heartbeats the peers with them)."""
         m, link = self.m, self.link
-        holding = task != NO_TASK
+        armed = bool(self.armed)
+        driving = armed and task != NO_TASK
         base = m.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | m.MAV_MODE_FLAG_AUTO_ENABLED
-        if holding:
+        if armed:
             base |= m.MAV_MODE_FLAG_SAFETY_ARMED
         link.base_mode = base
         if pose is None:
-            link.custom_mode, link.system_status = CUSTOM_MODE_LOCALIZING, m.MAV_STATE_CALIBRATING
-            return
-        link.custom_mode = CUSTOM_MODE_CONVERGED if conv else CUSTOM_MODE_ALLOCATING
-        if _finite(remaining) and remaining < LOW_BATTERY:
-            link.system_status = m.MAV_STATE_CRITICAL
+            link.custom_mode, status = CUSTOM_MODE_INITIALISING, m.MAV_STATE_CALIBRATING
+        elif driving:
+            link.custom_mode, status = CUSTOM_MODE_AUTO, m.MAV_STATE_ACTIVE
         else:
-            link.system_status = m.MAV_STATE_ACTIVE if holding else m.MAV_STATE_STANDBY
+            link.custom_mode, status = CUSTOM_MODE_HOLD, m.MAV_STATE_STANDBY
+        link.system_status = m.MAV_STATE_CRITICAL if _critical(remaining) else status
 
-    def _sys_status(self, battery, remaining: float):
+    def _sys_status(self, battery, remaining: float, localized: bool):
         m, c = self.m, self.link.counters
         voltage = getattr(battery, "voltage", math.nan)
         current = getattr(battery, "current", math.nan)
-        sensors = m.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
-        health = sensors
+        present = m.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | m.MAV_SYS_STATUS_AHRS
+        enabled = m.MAV_SYS_STATUS_AHRS
+        failing = 0 if localized else m.MAV_SYS_STATUS_AHRS
+        if self.armed:
+            enabled |= m.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
         if _finite(voltage):
-            sensors |= m.MAV_SYS_STATUS_SENSOR_BATTERY
-            if not (_finite(remaining) and remaining < LOW_BATTERY):
-                health |= m.MAV_SYS_STATUS_SENSOR_BATTERY
+            present |= m.MAV_SYS_STATUS_SENSOR_BATTERY
+            enabled |= m.MAV_SYS_STATUS_SENSOR_BATTERY
+            if _critical(remaining):
+                failing |= m.MAV_SYS_STATUS_SENSOR_BATTERY
+        health = _all_sensor_bits(m) & ~failing
         dropped = c.bad_crc + c.parse_errors + c.unsigned_dropped + c.bad_signature_dropped
         total = dropped + c.received
         return self.mav.sys_status_encode(
-            sensors, sensors, health,
+            present, enabled, health,
             0,                                                        # load: not measured
             _clip(voltage * 1000, 0, 65534) if _finite(voltage) else 65535,            # mV
             _clip(-current * 100, -32768, 32767) if _finite(current) else -1,          # cA, + = drawn

@@ -76,7 +76,7 @@ class Daemon:
                                cfg.comms.gcs, signing_key=key,
                                heartbeat_timeout=cfg.comms.heartbeat_timeout)
         self.link = link
-        self.telemetry = GcsTelemetry(link, self.id, cfg.datum)
+        self.telemetry = GcsTelemetry(link, self.id, cfg.datum, armed=cfg.robot.armed)
         self.ekf = PoseEKF(cfg.localization)
         if cfg.localization.initial_pose is not None:
             self.ekf.initialise(*cfg.localization.initial_pose)
@@ -227,8 +227,9 @@ class Daemon:
 
     def _report(self, now: float) -> None:
         commitments = self.agent.commitments
-        task = commitments[0].task_id if commitments else None
-        self.telemetry.tick(now, self.pose(), self._velocity(), self.base.sensors, task, self.agent.converged)
+        self.telemetry.armed = self.node.armed
+        self.telemetry.tick(now, self.pose(), self._velocity(), self.base.sensors,
+                            commitments[0].task_id if commitments else None)
         self.ground.report(now)
 
     def snapshot(self) -> dict:

@@ -107,6 +107,9 @@ class Operator:
                 continue
             before = self._held.get(rid, ())
             if v.tasks != before:
+                for t in before:
+                    if t not in v.tasks and t not in self.done_at:
+                        self.trace.event(now, "released", t, (rid,))
                 for t in v.tasks:
                     if t not in before:
                         self.trace.event(now, "awarded", t, (rid,))

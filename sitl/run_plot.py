@@ -19,9 +19,9 @@ from sitl.run_trace import RunTrace, TaskMark
 
 TASK_MARKERS = {"goto": ("D", 7), "rendezvous": ("*", 13)}      # kind -> (marker, size); others below
 OTHER_MARKER = ("h", 9)
-ENDS = ("done", "failed", "withdrawn")                           # events that close a task bar
+ENDS = ("done", "failed", "withdrawn", "released")               # events that close a task bar
 BAR_STYLE = {                                                    # how a bar ended -> face alpha, hatch
-    "done": (0.85, None), "failed": (0.35, "xxx"), "withdrawn": (0.25, "///"),
+    "done": (0.85, None), "failed": (0.35, "xxx"), "withdrawn": (0.25, "///"), "released": (0.15, None),
     "lost": (0.35, "..."), "open": (0.25, None),
 }
 
@@ -33,7 +33,7 @@ class Bar:
     task: int | None
     t0: float
     t1: float
-    how: str                    # "done" | "failed" | "withdrawn" | "lost" | "open" (still held at the end)
+    how: str                    # "done" | "failed" | "withdrawn" | "released" | "lost" | "open" (held at the end)
     lane: int = 0
     lanes: int = 1
 
@@ -88,14 +88,16 @@ def _assign_lanes(bars: list[Bar]) -> None:
 
 
 def task_outcome(trace: RunTrace, task: TaskMark) -> tuple[str, tuple[int, ...], float | None]:
-    """("done" | "failed" | "open", the robots that did it (or were on it), when)."""
+    """("done" | "failed" | "arrived" | "open", the robots that did it (or got there), when).  "arrived": a
+    task that is never done (station keeping) with a robot on it."""
     mine = sorted((e for e in trace.events if e.task == task.id), key=lambda e: e.t)
     ends = [e for e in mine if e.what in ("done", "failed")]
     if ends:
         last = ends[-1]
         return last.what, last.robots or _arrived(mine), last.t
-    if task.arrived_at is not None:
-        return "done", _arrived(mine), task.arrived_at
+    arrivals = [e for e in mine if e.what == "arrived"]
+    if arrivals:
+        return "arrived", _arrived(mine), arrivals[0].t
     return "open", (), None
 
 

@@ -19,7 +19,7 @@ from runtime.jsonfile import read_json
 
 FORMAT = "mrta-run-trace"
 VERSION = 1
-EVENT_KINDS = ("awarded", "arrived", "done", "failed", "withdrawn", "lost", "disarmed", "armed")
+EVENT_KINDS = ("awarded", "arrived", "done", "failed", "withdrawn", "released", "lost", "disarmed", "armed")
 
 # A track keeps a sample when the robot moved, turned or time passed this much since the last kept one.
 KEEP_MOVE = 0.02                    # m

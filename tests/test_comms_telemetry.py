@@ -7,7 +7,6 @@ import socket
 import pymap3d
 import pytest
 
-from runtime.allocation.formation.messages import Status
 from runtime.comms import codec, dialect
 from runtime.comms.link import MavlinkLink
 from runtime.comms.telemetry import (CUSTOM_MODE_AUTO, CUSTOM_MODE_HOLD, CUSTOM_MODE_INITIALISING,
@@ -82,14 +81,14 @@ def test_stock_pymavlink_client_sees_a_ground_rover_that_moves(key):
     link = MavlinkLink(7, "127.0.0.1:0", [], f"127.0.0.1:{port}", signing_key=key)
     try:
         tel = GcsTelemetry(link, 7, DATUM)
-        tel.tick(0.0, (0.0, 0.0, 0.0), (0.0, 0.0), BATTERY, None, False)
+        tel.tick(0.0, (0.0, 0.0, 0.0), (0.0, 0.0), BATTERY, None)
         hb = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=5)
         assert hb is not None
         assert hb.type == mavutil.mavlink.MAV_TYPE_GROUND_ROVER
         assert hb.autopilot == mavutil.mavlink.MAV_AUTOPILOT_GENERIC
         assert hb.get_srcSystem() == 7 and hb.get_srcComponent() == 1
         p1 = conn.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=5)
-        tel.tick(0.2, (25.0, -40.0, 0.0), (0.0, 0.0), BATTERY, None, False)
+        tel.tick(0.2, (25.0, -40.0, 0.0), (0.0, 0.0), BATTERY, None)
         p2 = conn.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=5)
         assert p1 is not None and p2 is not None and p2.get_srcSystem() == 7
         assert (p1.lat, p1.lon) == (round(DATUM.lat * 1e7), round(DATUM.lon * 1e7))
@@ -103,21 +102,18 @@ def test_stock_pymavlink_client_sees_a_ground_rover_that_moves(key):
 def test_rates_over_ten_seconds_of_injected_time(make, gcs):
     link, tel = make()
     for i in range(200):                                          # 20 Hz for 10 s
-        tel.tick(i * 0.05, (1.0, 2.0, 0.5), (0.1, 0.0), BATTERY, 4, True)
-    got = gcs.receive(10 * 3 + 50 * 2)
+        tel.tick(i * 0.05, (1.0, 2.0, 0.5), (0.1, 0.0), BATTERY, 4)
+    got = gcs.receive(10 * 2 + 50 * 2)
     counts: dict[str, int] = {}
     for m in got:
         counts[m.get_type()] = counts.get(m.get_type(), 0) + 1
-    assert counts == {"HEARTBEAT": 10, "SYS_STATUS": 10, "MRTA_STATUS": 10,
-                      "GLOBAL_POSITION_INT": 50, "LOCAL_POSITION_NED": 50}
-    status = [codec.from_mavlink(m) for m in got if m.get_type() == "MRTA_STATUS"]
-    assert status[0] == Status(3, 0, 0, 4, True)
+    assert counts == {"HEARTBEAT": 10, "SYS_STATUS": 10, "GLOBAL_POSITION_INT": 50, "LOCAL_POSITION_NED": 50}
 
 
 def test_positions_are_geodetic_and_ned(make, gcs):
     link, tel = make()
     pose, vel = (12.5, -7.25, math.radians(30)), (0.3, -0.4)        # ENU
-    tel.tick(12.345, pose, vel, BATTERY, None, False)
+    tel.tick(12.345, pose, vel, BATTERY, None)
     msgs = {m.get_type(): m for m in gcs.receive(5)}
     g, n = msgs["GLOBAL_POSITION_INT"], msgs["LOCAL_POSITION_NED"]
     e, nn, u = pymap3d.geodetic2enu(g.lat / 1e7, g.lon / 1e7, g.alt / 1000, DATUM.lat, DATUM.lon, DATUM.alt)
@@ -135,7 +131,7 @@ def test_positions_are_geodetic_and_ned(make, gcs):
                                         (float("nan"), 65535)])
 def test_heading_from_enu_yaw(make, gcs, theta, hdg):
     link, tel = make()
-    tel.tick(0.0, (0.0, 0.0, theta), (0.0, 0.0), BATTERY, None, False)
+    tel.tick(0.0, (0.0, 0.0, theta), (0.0, 0.0), BATTERY, None)
     g = next(m for m in gcs.receive(5) if m.get_type() == "GLOBAL_POSITION_INT")
     assert g.hdg == hdg
 
@@ -143,34 +139,32 @@ def test_heading_from_enu_yaw(make, gcs, theta, hdg):
 def test_mode_and_state_follow_the_robot(make, gcs):
     link, tel = make()
     mod = link.module
-    tel.tick(0.0, None, (0.0, 0.0), BATTERY, None, False)        # no pose yet
-    first = gcs.receive(3)
-    assert {m.get_type() for m in first} == {"HEARTBEAT", "SYS_STATUS", "MRTA_STATUS"}
+    tel.tick(0.0, None, (0.0, 0.0), BATTERY, None)        # no pose yet
+    first = gcs.receive(2)
+    assert {m.get_type() for m in first} == {"HEARTBEAT", "SYS_STATUS"}
     hb = next(m for m in first if m.get_type() == "HEARTBEAT")
     assert hb.system_status == mod.MAV_STATE_CALIBRATING and hb.custom_mode == CUSTOM_MODE_INITIALISING
     assert hb.base_mode & mod.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
 
-    tel.tick(1.0, (0.0, 0.0, 0.0), (0.0, 0.0), BATTERY, None, False)
+    tel.tick(1.0, (0.0, 0.0, 0.0), (0.0, 0.0), BATTERY, None)
     hb = next(m for m in gcs.receive(5) if m.get_type() == "HEARTBEAT")
     assert hb.system_status == mod.MAV_STATE_STANDBY and hb.custom_mode == CUSTOM_MODE_HOLD
 
-    tel.tick(2.0, (0.0, 0.0, 0.0), (0.0, 0.0), BATTERY, Status(3, 7, 12, 6, True))   # an agent's ack
+    tel.tick(2.0, (0.0, 0.0, 0.0), (0.0, 0.0), BATTERY, Status(3, 7, 12, 6))   # an agent's ack
     got = gcs.receive(5)
     hb = next(m for m in got if m.get_type() == "HEARTBEAT")
     assert hb.system_status == mod.MAV_STATE_ACTIVE and hb.custom_mode == CUSTOM_MODE_AUTO
     assert hb.base_mode & mod.MAV_MODE_FLAG_SAFETY_ARMED and hb.base_mode & mod.MAV_MODE_FLAG_AUTO_ENABLED
-    # telemetry broadcasts the state only: to every peer, answering no auction
-    assert codec.from_mavlink(next(m for m in got if m.get_type() == "MRTA_STATUS")) == Status(3, 0, 0, 6, True)
     # the peer HEARTBEAT the link sends carries the same mode
     assert (link.base_mode, link.custom_mode, link.system_status) == (hb.base_mode, hb.custom_mode,
                                                                       hb.system_status)
 
     low = BaseSensors(voltage=12.0, current=-0.5, battery_charge=0.2, battery_capacity=2.7)
-    tel.tick(3.0, (0.0, 0.0, 0.0), (0.0, 0.0), low, 6, True)
+    tel.tick(3.0, (0.0, 0.0, 0.0), (0.0, 0.0), low, 6)
     got = {m.get_type(): m for m in gcs.receive(5)}
     assert got["HEARTBEAT"].system_status == mod.MAV_STATE_CRITICAL
     assert not got["SYS_STATUS"].onboard_control_sensors_health & mod.MAV_SYS_STATUS_SENSOR_BATTERY
-    tel.tick(4.0, None, (0.0, 0.0), low, None, False)              # critical outranks localizing
+    tel.tick(4.0, None, (0.0, 0.0), low, None)              # critical outranks localizing
     got = {m.get_type(): m for m in gcs.receive(5)}
     assert got["HEARTBEAT"].system_status == mod.MAV_STATE_CRITICAL
     assert got["HEARTBEAT"].custom_mode == CUSTOM_MODE_INITIALISING
@@ -184,7 +178,7 @@ def test_the_link_heartbeat_is_right_before_the_first_tick(make):
 
 
 def _heartbeat(gcs, tel, now, pose, status, battery=BATTERY):
-    tel.tick(now, pose, (0.0, 0.0), battery, status, False)
+    tel.tick(now, pose, (0.0, 0.0), battery, status)
     got = {m.get_type(): m for m in gcs.receive(5)}
     return got["HEARTBEAT"], got["SYS_STATUS"]
 
@@ -295,11 +289,11 @@ def test_a_stock_console_sees_unhealthy_only_what_fails(make, gcs):
 def test_sys_status_battery_units(make, gcs):
     link, tel = make()
     mod = link.module
-    tel.tick(0.0, None, None, BATTERY, None, False)
+    tel.tick(0.0, None, None, BATTERY, None)
     s = next(m for m in gcs.receive(3) if m.get_type() == "SYS_STATUS")
     assert (s.voltage_battery, s.current_battery, s.battery_remaining) == (14200, 80, 74)
     assert s.onboard_control_sensors_present & mod.MAV_SYS_STATUS_SENSOR_BATTERY
-    tel.tick(1.0, None, None, BaseSensors(), None, False)         # a base that reports nothing
+    tel.tick(1.0, None, None, BaseSensors(), None)         # a base that reports nothing
     s = next(m for m in gcs.receive(3) if m.get_type() == "SYS_STATUS")
     assert (s.voltage_battery, s.current_battery, s.battery_remaining) == (65535, -1, -1)
 
@@ -308,7 +302,7 @@ def test_sys_status_reports_comm_errors(make, gcs):
     link, tel = make()
     link.feed(b"\x01\x02garbage", 0.0)
     link.feed(b"\x03more", 0.0)
-    tel.tick(0.0, None, None, BATTERY, None, False)
+    tel.tick(0.0, None, None, BATTERY, None)
     s = next(m for m in gcs.receive(3) if m.get_type() == "SYS_STATUS")
     assert s.errors_comm == 2 and s.drop_rate_comm == 10000
 
@@ -317,7 +311,7 @@ def test_no_gcs_means_nothing_sent():
     link = MavlinkLink(2, "127.0.0.1:0", [], None)
     try:
         tel = GcsTelemetry(link, 2, (33.0, -84.0, 10.0))
-        tel.tick(0.0, (0.0, 0.0, 0.0), (0.0, 0.0), BATTERY, None, False)
+        tel.tick(0.0, (0.0, 0.0, 0.0), (0.0, 0.0), BATTERY, None)
         assert tel.sent == {} and link.counters.sent == 0
     finally:
         link.close()

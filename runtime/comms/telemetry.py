@@ -2,8 +2,8 @@
 
 Sent by :meth:`GcsTelemetry.tick` (system id = robot id, component 1):
 
-* 1 Hz: HEARTBEAT (MAV_TYPE_GROUND_ROVER, MAV_AUTOPILOT_GENERIC), SYS_STATUS (battery, comm errors)
-  and the robot's allocation state as MRTA_STATUS (so a ground station sees the assignment);
+* 1 Hz: HEARTBEAT (MAV_TYPE_GROUND_ROVER, MAV_AUTOPILOT_GENERIC) and SYS_STATUS (battery, comm errors);
+  (the robot's tasks go to the ground station as MRTA_ROBOT_STATE, from :mod:`runtime.comms.ground`);
 * 5 Hz, once a pose exists: GLOBAL_POSITION_INT (pymap3d ENU -> geodetic around the datum) and
   LOCAL_POSITION_NED (ENU -> NED: x north, y east, z down).
 
@@ -15,7 +15,7 @@ HEARTBEAT, chosen so a stock MAVProxy and QGroundControl show something true:
   CUSTOM_MODE_ENABLED.  (The custom modes 0/1/2 sent before read as MANUAL/ACRO/LEARNING.)  Three of
   its names say what our robot does: INITIALISING (16) while localizing (no pose yet), AUTO (10) while
   it is armed and holds a task (it drives to it), HOLD (4) otherwise (no task, or disarmed: it stands).
-  Rover has no name for an auction phase: allocating vs converged stays in MRTA_STATUS.converged.
+  Rover has no name for an auction phase: allocating vs executing is in MRTA_ROBOT_STATE.state.
   QGroundControl's generic firmware plugin shows "Custom:0xa"-style names for these until it learns
   names from AVAILABLE_MODES, which the project dialect (common.xml only) cannot send.
 * base_mode: CUSTOM_MODE_ENABLED (so the above is read), AUTO_ENABLED always (the robot finds its own
@@ -44,16 +44,13 @@ import math
 
 import pymap3d
 
-from runtime.allocation.formation.messages import BROADCAST, Status
-from runtime.comms import codec
-
 # custom_mode: ArduPilot Rover numbers (pymavlink mavutil.mode_mapping_rover), see the module docstring
 CUSTOM_MODE_HOLD = 4            # standing: no task, or disarmed
 CUSTOM_MODE_AUTO = 10           # armed and holding a task: driving to it / at it
 CUSTOM_MODE_INITIALISING = 16   # localizing: no pose estimate yet
 NO_TASK = 0xFFFF
 LOW_BATTERY = 15.0              # % remaining below which the state is MAV_STATE_CRITICAL
-SLOW_PERIOD = 1.0               # s: HEARTBEAT, SYS_STATUS, MRTA_STATUS
+SLOW_PERIOD = 1.0               # s: HEARTBEAT, SYS_STATUS
 FAST_PERIOD = 0.2               # s: GLOBAL_POSITION_INT, LOCAL_POSITION_NED
 
 
@@ -120,34 +117,25 @@ class GcsTelemetry:
         self._update_mode(None, NO_TASK, math.nan)
 
     # ------------------------------------------------------------------ public
-    def tick(self, now: float, pose, velocity, battery, status, converged: bool | None = None) -> None:
+    def tick(self, now: float, pose, velocity, battery, task: int | None) -> None:
         """Send whatever is due at ``now``.
 
         ``pose``: (x east, y north, heading rad CCW from east) in the fleet frame, or None.
         ``velocity``: (v east, v north) m/s.  ``battery``: an object with ``voltage`` (V),
         ``current`` (A, negative = discharging), ``battery_charge`` and ``battery_capacity``
-        (e.g. :class:`~runtime.drivers.base.BaseSensors`), or None.  ``status``: a
-        :class:`~runtime.allocation.formation.messages.Status`, or the task held (None = none) with
-        ``converged`` beside it.
+        (e.g. :class:`~runtime.drivers.base.BaseSensors`), or None.  ``task``: the task the robot works
+        on (None: none).
         """
-        task, conv = self._allocation(status, converged)
+        task = NO_TASK if task is None else int(task)
         remaining = self._remaining(battery)
         self._update_mode(pose, task, remaining)
         if self._slow.due(now):
             self._send(self.link.heartbeat())
             self._send(self._sys_status(battery, remaining, pose is not None))
-            self._send(codec.to_mavlink(Status(self.robot_id, BROADCAST, 0, task, conv), self.m))
         if pose is not None and self._fast.due(now):
             self._send_position(now, pose, velocity)
 
     # ------------------------------------------------------------------ pieces
-    @staticmethod
-    def _allocation(status, converged) -> tuple[int, bool]:
-        if isinstance(status, Status):
-            return int(status.task), bool(status.converged)
-        task = NO_TASK if status is None else int(status)
-        return task, bool(converged)
-
     @staticmethod
     def _remaining(battery) -> float:
         charge = getattr(battery, "battery_charge", math.nan)

@@ -18,9 +18,9 @@ this module serves the rest and ignores (counts) MISSION_* messages:
   provider has nothing yet), else UNSUPPORTED, which ends QGC's wait at once (PROTOCOL_VERSION and
   AVAILABLE_MODES are not in the project dialect, which includes common.xml only).  The deprecated
   MAV_CMD_GET_HOME_POSITION, which MAVProxy sends every 2 s, is served like REQUEST_MESSAGE
-  HOME_POSITION (the same provider).  Other commands: the
-  ``commands`` registry (:meth:`register_command`), else UNSUPPORTED.  A bad param1 -> DENIED, a handler
-  that raises -> FAILED.
+  HOME_POSITION (the same provider).  Other commands: the ``commands`` registry
+  (:meth:`register_command`), else UNSUPPORTED.  A bad param1 -> DENIED, a handler that raises -> FAILED.
+  A command broadcast to system 0 (e.g. a fleet-wide disarm) is served by every robot.
 * AUTOPILOT_VERSION capabilities: MAVLINK2 | MISSION_INT | COMMAND_INT | PARAM_ENCODE_C_CAST (see
   :mod:`runtime.comms.params` for the encoding); no FENCE/RALLY bits, so QGC skips those two steps.
   flight_sw_version = the package version (major, minor, patch, FIRMWARE_VERSION_TYPE bytes), uid =

@@ -118,14 +118,7 @@ def test_qgc_connection_sequence_is_answered_step_by_step(svc, gcs):
     values = drain(svc, gcs)
     assert [(v.param_id, v.param_index, v.param_count) for v in values] == [("CTL_CRUISE_SPD", 0, 2),
                                                                              ("ALLOC_RETRIES", 1, 2)]
-    # 6. mission: none held -> an empty list at once
-    (count,) = ask(svc, gcs, gcs.tx.mission_request_list_encode(ROBOT, COMP, L.MAV_MISSION_TYPE_MISSION))
-    assert count.get_type() == "MISSION_COUNT" and count.count == 0
-    assert (count.target_system, count.target_component, count.mission_type) == (GCS_SYS, GCS_COMP, 0)
-    # 7-8. fence and rally are skipped by QGC for want of capability bits (asserted above); if asked anyway:
-    for kind in (L.MAV_MISSION_TYPE_FENCE, L.MAV_MISSION_TYPE_RALLY):
-        (count,) = ask(svc, gcs, gcs.tx.mission_request_list_encode(ROBOT, COMP, kind))
-        assert (count.count, count.mission_type) == (0, kind)
+    # 6-8. mission, fence, rally: runtime.comms.mission's (QGC skips fence and rally for want of the bits)
     assert svc.stats.errors == 0 and svc.stats.not_for_us == 0
 
 
@@ -327,16 +320,13 @@ def test_mavproxys_get_home_position_uses_the_home_position_provider(svc, gcs):
     assert ack.result == mod.MAV_RESULT_ACCEPTED and (msg.latitude, msg.longitude) == (7, 8)
 
 
-# ---------------------------------------------------------------------- mission (none held)
+# ---------------------------------------------------------------------- mission: not ours
 
-def test_mission_upload_is_refused_and_clear_accepted(svc, gcs):
-    (ack,) = ask(svc, gcs, gcs.tx.mission_count_encode(ROBOT, COMP, 3, 0))
-    assert ack.get_type() == "MISSION_ACK" and ack.type == mod.MAV_MISSION_UNSUPPORTED
-    assert (ack.target_system, ack.target_component) == (GCS_SYS, GCS_COMP)
-    (ack,) = ask(svc, gcs, gcs.tx.mission_count_encode(ROBOT, COMP, 0, 0))
-    assert ack.type == mod.MAV_MISSION_ACCEPTED
-    (ack,) = ask(svc, gcs, gcs.tx.mission_clear_all_encode(ROBOT, COMP, 0))
-    assert ack.type == mod.MAV_MISSION_ACCEPTED
+def test_mission_messages_are_left_to_the_mission_server(svc, gcs):
+    for msg in (gcs.tx.mission_request_list_encode(ROBOT, COMP, 0), gcs.tx.mission_count_encode(ROBOT, COMP, 3, 0),
+                gcs.tx.mission_clear_all_encode(ROBOT, COMP, 0)):
+        assert ask(svc, gcs, msg) == []
+    assert svc.stats.ignored == 3 and svc.stats.served == 0
 
 
 # ---------------------------------------------------------------------- FTP
@@ -403,8 +393,7 @@ def test_messages_for_another_system_or_component_are_ignored_and_counted(svc, g
               command(gcs, mod.MAV_CMD_REQUEST_MESSAGE, 148, comp=50),
               gcs.tx.param_request_list_encode(7, 0),
               gcs.tx.param_set_encode(0, 0, b"CTL_CRUISE_SPD", 1.0, 9),     # a SET must name the robot
-              gcs.tx.file_transfer_protocol_encode(0, 0, COMP, mavproxy_ftp_request(1, 0, 4, b"x")),
-              gcs.tx.mission_count_encode(0, COMP, 2, 0)]
+              gcs.tx.file_transfer_protocol_encode(0, 0, COMP, mavproxy_ftp_request(1, 0, 4, b"x"))]
     for msg in others:
         assert ask(svc, gcs, msg) == []
     assert svc.stats.not_for_us == len(others) and svc.stats.served == 0
@@ -418,7 +407,6 @@ def test_broadcast_requests_are_served(svc, gcs):
     assert ack.result == mod.MAV_RESULT_ACCEPTED
     (v,) = ask(svc, gcs, gcs.tx.param_request_read_encode(0, 0, b"ALLOC_RETRIES", -1))
     assert v.param_id == "ALLOC_RETRIES"
-    assert ask(svc, gcs, gcs.tx.mission_request_list_encode(0, 0, 0))[0].count == 0
     assert "PARAM_SET" not in BROADCAST_OK and "FILE_TRANSFER_PROTOCOL" not in BROADCAST_OK
 
 
@@ -426,7 +414,7 @@ def test_broadcast_requests_are_served(svc, gcs):
 
 FUZZ = settings(max_examples=300, deadline=None)
 SERVED = ["COMMAND_LONG", "COMMAND_INT", "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET",
-          "MISSION_REQUEST_LIST", "MISSION_COUNT", "MISSION_CLEAR_ALL", "FILE_TRANSFER_PROTOCOL"]
+          "FILE_TRANSFER_PROTOCOL"]
 IDS = [getattr(mod, "MAVLINK_MSG_ID_" + name) for name in SERVED]
 
 
@@ -488,7 +476,6 @@ def real_frames(gcs):
             tx.command_int_encode(ROBOT, COMP, 0, 512, 0, 0, 148, 0, 0, 0, 0, 0, 0.0),
             tx.param_request_list_encode(ROBOT, 0), tx.param_request_read_encode(ROBOT, 0, b"ALLOC_RETRIES", -1),
             tx.param_set_encode(ROBOT, COMP, b"CTL_CRUISE_SPD", 1.0, 9),
-            tx.mission_request_list_encode(ROBOT, COMP, 0), tx.mission_count_encode(ROBOT, COMP, 1, 0),
             tx.file_transfer_protocol_encode(0, ROBOT, COMP, mavproxy_ftp_request(3, 0, 4, b"@PARAM/param.pck"))]
     return [m.pack(tx) for m in msgs]
 
@@ -550,9 +537,6 @@ BUILD = {
     "PARAM_SET": lambda tx, d: tx.param_set_encode(
         ROBOT, d.draw(COMPONENT), d.draw(NAME | st.sampled_from([b"ALLOC_RETRIES", b"CTL_CRUISE_SPD"])),
         d.draw(F32), d.draw(U8)),
-    "MISSION_REQUEST_LIST": lambda tx, d: tx.mission_request_list_encode(d.draw(TARGET), d.draw(COMPONENT), d.draw(U8)),
-    "MISSION_COUNT": lambda tx, d: tx.mission_count_encode(ROBOT, d.draw(COMPONENT), d.draw(U16), d.draw(U8)),
-    "MISSION_CLEAR_ALL": lambda tx, d: tx.mission_clear_all_encode(ROBOT, d.draw(COMPONENT), d.draw(U8)),
     "FILE_TRANSFER_PROTOCOL": lambda tx, d: tx.file_transfer_protocol_encode(
         d.draw(U8), ROBOT, d.draw(COMPONENT), list(d.draw(st.binary(min_size=251, max_size=251)))),
 }

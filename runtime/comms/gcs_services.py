@@ -8,8 +8,9 @@ and sends them.  Nothing here raises out of ``handle``/``tick``; what is dropped
 
 QGroundControl's connect (src/Vehicle/InitialConnectStateMachine): REQUEST_MESSAGE AUTOPILOT_VERSION ->
 [PROTOCOL_VERSION, older QGC] -> AVAILABLE_MODES -> component information -> PARAM_REQUEST_LIST ->
-mission -> fence -> rally, each step moving on when answered or after its timeouts and retries.
-Answers here:
+mission -> fence -> rally, each step moving on when answered or after its timeouts and retries.  The
+mission protocol (all MISSION_* messages, fence and rally included) is :mod:`runtime.comms.mission`'s;
+this module serves the rest and ignores (counts) MISSION_* messages:
 
 * COMMAND_LONG / COMMAND_INT: always a COMMAND_ACK to the sender.  MAV_CMD_REQUEST_MESSAGE(148) and
   MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: ACCEPTED, then AUTOPILOT_VERSION.  REQUEST_MESSAGE of any
@@ -17,9 +18,9 @@ Answers here:
   provider has nothing yet), else UNSUPPORTED, which ends QGC's wait at once (PROTOCOL_VERSION and
   AVAILABLE_MODES are not in the project dialect, which includes common.xml only).  The deprecated
   MAV_CMD_GET_HOME_POSITION, which MAVProxy sends every 2 s, is served like REQUEST_MESSAGE
-  HOME_POSITION (the same provider).  Other commands: the
-  ``commands`` registry (:meth:`register_command`), else UNSUPPORTED.  A bad param1 -> DENIED, a handler
-  that raises -> FAILED.
+  HOME_POSITION (the same provider).  Other commands: the ``commands`` registry
+  (:meth:`register_command`), else UNSUPPORTED.  A bad param1 -> DENIED, a handler that raises -> FAILED.
+  A command broadcast to system 0 (e.g. a fleet-wide disarm) is served by every robot.
 * AUTOPILOT_VERSION capabilities: MAVLINK2 | MISSION_INT | COMMAND_INT | PARAM_ENCODE_C_CAST (see
   :mod:`runtime.comms.params` for the encoding); no FENCE/RALLY bits, so QGC skips those two steps.
   flight_sw_version = the package version (major, minor, patch, FIRMWARE_VERSION_TYPE bytes), uid =
@@ -29,15 +30,12 @@ Answers here:
   PARAM_REQUEST_READ: the PARAM_VALUE by index (>= 0) or name; an unknown one gets no PARAM_VALUE but
   a STATUSTEXT, as the parameter protocol recommends.  PARAM_SET: applied if acceptable, and always a
   PARAM_VALUE with the value now in force (plus a STATUSTEXT saying why when refused).
-* Mission: the robot takes its tasks from auctions and holds no MAVLink mission, fence or rally list:
-  MISSION_REQUEST_LIST -> MISSION_COUNT 0 (QGC's mission step completes at once), an upload
-  (MISSION_COUNT > 0) -> MISSION_ACK UNSUPPORTED, MISSION_CLEAR_ALL or an empty upload -> ACCEPTED.
 * FILE_TRANSFER_PROTOCOL: answered by :mod:`runtime.comms.ftp_nack` (MAVProxy's parameter download
   over FTP gets FileNotFound and falls back to PARAM_REQUEST_LIST at once).
 
 Addressing: a message is served when its target_system is this robot, or 0 (broadcast) for the
-requests MAVLink lets a GCS broadcast (:data:`BROADCAST_OK`: parameter reads, commands, mission list);
-its target_component must be 0 or ours.  PARAM_SET, mission uploads and FTP sessions need our id.
+requests MAVLink lets a GCS broadcast (:data:`BROADCAST_OK`: parameter reads and commands); its
+target_component must be 0 or ours.  PARAM_SET and FTP sessions need our id.
 """
 from __future__ import annotations
 
@@ -52,8 +50,7 @@ from runtime.comms.params import ENCODING_CAPABILITY, MAV_PARAM_TYPE_REAL32, Par
 from runtime.errors import InputError
 from runtime.log import get_logger
 
-BROADCAST_OK = frozenset({"PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "COMMAND_LONG", "COMMAND_INT",
-                          "MISSION_REQUEST_LIST"})
+BROADCAST_OK = frozenset({"PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "COMMAND_LONG", "COMMAND_INT"})
 MAX_LIST_STREAMS = 8              # sources with a parameter list in flight; the oldest is dropped beyond
 STATUSTEXT_LEN = 50
 PACKAGE = "mrta-runtime"
@@ -64,7 +61,7 @@ class GcsServiceStats:
     received: int = 0             # messages given to handle()
     served: int = 0               # messages for us that were answered (or deliberately not, e.g. 0 params)
     not_for_us: int = 0           # target_system / target_component not this robot (or broadcast not allowed)
-    ignored: int = 0              # message types this module does not serve
+    ignored: int = 0              # message types this module does not serve (MISSION_* included)
     errors: int = 0               # messages whose fields could not be used (logged at debug)
     command_acks: int = 0
     commands_unsupported: int = 0
@@ -171,8 +168,6 @@ class GcsServices:
             "COMMAND_LONG": self._command, "COMMAND_INT": self._command,
             "PARAM_REQUEST_LIST": self._param_list, "PARAM_REQUEST_READ": self._param_read,
             "PARAM_SET": self._param_set,
-            "MISSION_REQUEST_LIST": self._mission_list, "MISSION_COUNT": self._mission_upload,
-            "MISSION_CLEAR_ALL": self._mission_clear,
             "FILE_TRANSFER_PROTOCOL": self._ftp,
         }
 
@@ -357,21 +352,6 @@ class GcsServices:
             self.log.warning("parameter set refused: %s", reason)
             out.append(self._status(self.m.MAV_SEVERITY_WARNING, reason))
         return out
-
-    # ------------------------------------------------------------------ mission (none held)
-    def _mission_list(self, msg, now: float, source) -> list:
-        return [self.mav.mission_count_encode(msg.get_srcSystem(), msg.get_srcComponent(), 0,
-                                              int(getattr(msg, "mission_type", 0)))]
-
-    def _mission_upload(self, msg, now: float, source) -> list:
-        m = self.m
-        result = m.MAV_MISSION_ACCEPTED if int(msg.count) == 0 else m.MAV_MISSION_UNSUPPORTED
-        return [self.mav.mission_ack_encode(msg.get_srcSystem(), msg.get_srcComponent(), result,
-                                            int(getattr(msg, "mission_type", 0)))]
-
-    def _mission_clear(self, msg, now: float, source) -> list:
-        return [self.mav.mission_ack_encode(msg.get_srcSystem(), msg.get_srcComponent(), self.m.MAV_MISSION_ACCEPTED,
-                                            int(getattr(msg, "mission_type", 0)))]
 
     # ------------------------------------------------------------------ FTP (no files)
     def _ftp(self, msg, now: float, source) -> list:

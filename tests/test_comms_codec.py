@@ -141,7 +141,7 @@ def test_a_new_message_needs_only_xml_a_dataclass_and_register(tmp_path):
     mod2 = dialect.load(xml)
     codec.register(CoalitionBid)
     try:
-        codec.check(mod2)
+        codec.check(mod2, [CoalitionBid])
         msg = CoalitionBid(5, 0, 9, 0b1011, 4.5)
         tx = mod2.MAVLink(None, srcSystem=5, srcComponent=1)
         rx = mod2.MAVLink(None, srcSystem=6, srcComponent=1)

@@ -13,11 +13,13 @@ from pathlib import Path
 
 import pytest
 
-from runtime.allocation.formation.messages import AGENT_MESSAGES
+from runtime.allocation.formation.messages import AGENT_MESSAGES, ROUND_MESSAGES
 from runtime.comms import codec, dialect
+from runtime.fleet.messages import FLEET_MESSAGES
 
 ROOT = Path(__file__).resolve().parents[1]
-OUR_BLOCK = range(44000, 44100)
+OUR_BLOCK = range(44000, 44200)
+FORMATION_XML = ROOT / "runtime" / "allocation" / "formation" / "formation.xml"
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -39,17 +41,24 @@ def _ids(path: str) -> dict[int, str]:
 def test_block_is_free_in_every_shipped_dialect():
     import pymavlink
     shipped = glob.glob(os.path.join(os.path.dirname(pymavlink.__file__), "**", "*.xml"), recursive=True)
-    shipped = [p for p in shipped if Path(p).name != "mrta.xml"]
+    shipped = [p for p in shipped if Path(p).name not in ("mrta.xml", "formation.xml")]
     assert any(Path(p).name == "ardupilotmega.xml" for p in shipped)
     for path in shipped:
         clash = sorted(i for i in _ids(path) if i in OUR_BLOCK)
         assert not clash, f"{path} uses {clash}"
 
 
-def test_one_message_per_agent_class_in_the_lower_half():
-    ours = _ids(str(dialect.XML_PATH))
-    assert sorted(ours.values()) == sorted(codec.wire_name(c) for c in AGENT_MESSAGES)
-    assert all(44000 <= i < 44050 for i in ours)       # 44050-44099 reserved for issue 3
+def test_one_message_per_class_each_in_its_block():
+    """The runtime's own messages in mrta.xml (44100-44149), the formation family's beside its code (44000-44049),
+    and the fleet dialect composed from the registry names both."""
+    core = _ids(str(dialect.XML_PATH))
+    assert sorted(core.values()) == sorted(codec.wire_name(c) for c in FLEET_MESSAGES)
+    assert all(44100 <= i < 44150 for i in core)
+    formation = _ids(str(FORMATION_XML))
+    assert sorted(formation.values()) == sorted(codec.wire_name(c) for c in AGENT_MESSAGES + ROUND_MESSAGES)
+    assert all(44000 <= i < 44050 for i in formation)
+    top = dialect.fleet_xml().read_text()
+    assert "<include>mrta.xml</include>" in top and "<include>formation.xml</include>" in top
 
 
 def test_generated_module_matches_the_dataclasses(cache_dir):
@@ -72,7 +81,7 @@ def test_cache_is_keyed_by_xml_contents(tmp_path):
     xml.write_text(text)
     k1 = dialect.cache_key(xml)
     assert k1 == dialect.cache_key(dialect.XML_PATH)
-    xml.write_text(text.replace("Task id.", "Task number."))
+    xml.write_text(text.replace("East in the fleet frame.", "Easting in the fleet frame."))
     assert dialect.cache_key(xml) != k1
     path = dialect.ensure(xml, root=tmp_path / "cache")
     assert path.parent.name == f"mavlink-{dialect.cache_key(xml)}"
@@ -110,7 +119,9 @@ def test_concurrent_first_loads_in_separate_processes(tmp_path):
     assert len(lines) == 1
     path, msgid = lines.pop().split()
     assert msgid == "44002" and Path(path).parent.parent == cache
-    assert [p.name for p in cache.iterdir()] == [Path(path).parent.name]   # no temp dirs left
+    # no temp dirs left: the generated module and the composed top file of the fleet dialect
+    assert sorted(p.name for p in cache.iterdir() if not p.name.startswith("fleet-")) == [Path(path).parent.name]
+    assert len([p for p in cache.iterdir() if p.name.startswith("fleet-")]) == 1
 
 
 def test_concurrent_ensure_in_threads(tmp_path):
@@ -121,7 +132,8 @@ def test_concurrent_ensure_in_threads(tmp_path):
         paths = list(ex.map(lambda _: dialect.ensure(root=root), range(4)))
     assert len(set(paths)) == 1 and paths[0].is_file()
     assert sys.stdout is stdout                        # mavgen's chatter redirect was undone
-    assert len(list(root.iterdir())) == 1
+    assert len([p for p in root.iterdir() if p.name.startswith("mavlink-")]) == 1
+    assert len(list(root.iterdir())) == 2                # and the composed fleet top file
 
 
 def test_includes_resolve_beside_the_dialect_then_in_pymavlink(tmp_path):
@@ -142,7 +154,7 @@ def test_includes_resolve_beside_the_dialect_then_in_pymavlink(tmp_path):
     names = [n for n, _ in dialect.sources(xml)]
     assert names[:3] == ["mrta.xml", "common.xml", "extra.xml"] and "minimal.xml" in names
     mod = dialect.load(xml)
-    assert mod.MAVLINK_MSG_ID_MRTA_EXTRA == 44050 and mod.MAVLINK_MSG_ID_MRTA_BID == 44002
+    assert mod.MAVLINK_MSG_ID_MRTA_EXTRA == 44050 and mod.MAVLINK_MSG_ID_MRTA_TASK_RECORD == 44100
     xml.write_text(xml.read_text().replace("extra.xml", "missing.xml"))
     with pytest.raises(dialect.DialectError, match="missing.xml"):
         dialect.cache_key(xml)

@@ -150,7 +150,7 @@ def test_mode_and_state_follow_the_robot(make, gcs):
     hb = next(m for m in gcs.receive(5) if m.get_type() == "HEARTBEAT")
     assert hb.system_status == mod.MAV_STATE_STANDBY and hb.custom_mode == CUSTOM_MODE_HOLD
 
-    tel.tick(2.0, (0.0, 0.0, 0.0), (0.0, 0.0), BATTERY, Status(3, 7, 12, 6))   # an agent's ack
+    tel.tick(2.0, (0.0, 0.0, 0.0), (0.0, 0.0), BATTERY, 6)            # working on a task
     got = gcs.receive(5)
     hb = next(m for m in got if m.get_type() == "HEARTBEAT")
     assert hb.system_status == mod.MAV_STATE_ACTIVE and hb.custom_mode == CUSTOM_MODE_AUTO

@@ -31,8 +31,10 @@ def test_shipped_world_configs_load(path):
 def test_shipped_fleet_configs_load(path):
     fleet = C.load_fleet(path)
     C.load_world(fleet.world)
-    C.load_robot(fleet.robot)
-    assert len(fleet.robots) == len(fleet.formation)
+    for r in fleet.robots:
+        C.load_robot(fleet.template(r.id))
+    if fleet.scenario.type == "formation":
+        assert len(fleet.robots) == len(fleet.scenario.positions)
 
 
 def test_every_shipped_config_is_covered():

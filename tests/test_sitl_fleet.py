@@ -54,7 +54,7 @@ def test_manifest_lists_every_robot(tmp_path):
         data = json.loads(manifest.read_text())
         assert [r["id"] for r in data["robots"]] == [1, 2, 3, 4]
         for r in data["robots"]:
-            assert Path(r["base"]["device"]).exists() and Path(r["gps"]["device"]).exists()
+            assert Path(r["base"]["port"]).exists() and Path(r["gps"]["device"]).exists()
             assert r["system_id"] == r["id"] and r["mavlink_udp"].startswith("127.0.0.1:")
             assert Path(r["config"]).is_file()
         assert data["ground_station"].startswith("127.0.0.1:")

@@ -103,10 +103,11 @@ def mappings() -> tuple[WireMapping, ...]:
     return tuple(_by_class.values())
 
 
-def check(module: ModuleType) -> None:
-    """Raise ``ValueError`` unless every registered class has a matching message in ``module``."""
+def check(module: ModuleType, classes=None) -> None:
+    """Raise ``ValueError`` unless every registered class (or each of ``classes``) has a matching message in
+    ``module``."""
     register_fleet()
-    for m in _by_class.values():
+    for m in (_by_class.values() if classes is None else [_by_class[c] for c in classes]):
         msgid = getattr(module, f"MAVLINK_MSG_ID_{m.name}", None)
         if msgid is None:
             raise ValueError(f"dialect has no message {m.name} for {m.cls.__name__}")

@@ -6,7 +6,8 @@ parsed with the generated pymavlink parser (robust mode), one datagram at a time
 truncated frames and refused signatures are counted in :class:`LinkCounters`, never raised.
 
 Ground stations: frames that are not ours (MISSION_*, PARAM_*, COMMAND_*, FILE_TRANSFER_PROTOCOL ...) and
-not HEARTBEATs are queued in :attr:`MavlinkLink.gcs_inbox` with the UDP address they came from, for the
+not HEARTBEATs, and ours from a system id above 250 (no robot's: a ground station asking for the task
+table), are queued in :attr:`MavlinkLink.gcs_inbox` with the UDP address they came from, for the
 daemon's ground-station services, which answer with :meth:`MavlinkLink.send_to`.  Telemetry goes to the
 configured ground station and to every address a GCS HEARTBEAT or request came from in the last
 ``GCS_TIMEOUT`` seconds (a ground station that is not the configured one sees the robot once it talks).
@@ -38,6 +39,7 @@ from runtime.log import get_logger
 COMPONENT_ID = 1                       # MAV_COMP_ID_AUTOPILOT1
 SIGNING_EPOCH = 1420070400             # 2015-01-01T00:00:00Z as a Unix time
 MAX_DATAGRAMS_PER_POLL = 1024          # bounds one poll's work under a flood
+MAX_ROBOT_ID = 250                     # system ids above are ground stations (QGC, MAVProxy use 255)
 MAX_GCS_INBOX = 256                    # ground-station requests kept between two daemon cycles
 GCS_TIMEOUT = 10.0                     # s a ground station that talked to us keeps getting telemetry
 _IFLAG_SIGNED = 0x01
@@ -206,7 +208,6 @@ class MavlinkLink:
         self.gcs_last_heartbeat: float | None = None
         self.gcs_inbox: list[tuple[object, tuple]] = []       # (pymavlink message, source address)
         self._gcs_seen: dict[tuple, float] = {}               # ground-station addresses -> last heard
-        self._peer_addrs = set(self._peers)
 
     # ------------------------------------------------------------------ addresses
     @property
@@ -376,18 +377,18 @@ class MavlinkLink:
             c.unknown += 1
             return None
         if kind == "HEARTBEAT":
-            if self._on_heartbeat(m, now) and addr is not None and addr not in self._peer_addrs:
+            if self._on_heartbeat(m, now) and addr is not None:
                 self._gcs_seen[addr] = now
             return None
         c.received += 1
         agent = codec.from_mavlink(m)
-        from_gcs = addr is not None and addr not in self._peer_addrs
-        if agent is None or from_gcs:
-            if not from_gcs:
+        if agent is None or agent.sender > MAX_ROBOT_ID:
+            # a ground station's request: a standard message, or one of ours from a system id that is no robot's
+            if addr is None:
                 c.ignored += 1
             elif len(self.gcs_inbox) >= MAX_GCS_INBOX:
                 c.gcs_overflow += 1
-            else:                         # a ground station's request (one of ours, e.g. a table request, or not)
+            else:
                 c.gcs_requests += 1
                 self._gcs_seen[addr] = now
                 self.gcs_inbox.append((m if agent is None else agent, addr))

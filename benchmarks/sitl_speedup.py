@@ -49,7 +49,7 @@ def world_rate(n: int, seconds: float = 20.0) -> dict:
     world = World(C.load_world(fleet.world), seed=1)
     try:
         for r in fleet.robots:
-            world.add_create2(r.id, r.start).set_wheel_speeds(0.2, 0.15)
+            world.add_body(r.id, r.start, "create2").set_wheel_speeds(0.2, 0.15)
         steps = int(seconds / world.dt)
         t0 = time.process_time()
         for _ in range(steps):

@@ -30,7 +30,7 @@ def run(n_robots: int, sim_seconds: float, dt: float, defaults: bool = False) ->
             p.setPhysicsEngineParameter(numSolverIterations=50, physicsClientId=w.client_id)
         for k in range(n_robots):
             ang = 2 * math.pi * k / n_robots
-            bot = w.add_create2(k + 1, (2.5 * math.cos(ang), 2.5 * math.sin(ang), ang + math.pi / 2))
+            bot = w.add_body(k + 1, (2.5 * math.cos(ang), 2.5 * math.sin(ang), ang + math.pi / 2), "create2")
             bot.set_wheel_speeds(0.25, 0.3)
             if defaults:
                 for link in range(-1, p.getNumJoints(bot.body_id, physicsClientId=w.client_id)):

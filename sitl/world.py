@@ -1,4 +1,4 @@
-"""The pybullet SITL world: floor, arena walls, static box obstacles and Create 2 bodies.
+"""The pybullet SITL world: floor, arena walls, static box obstacles and robot bodies (:mod:`sitl.bodies`).
 
 Each :class:`World` owns its own pybullet DIRECT (or GUI) client, so several worlds can live in one
 process.  Time only moves in :meth:`World.step`; with the same seed and the same call sequence a run
@@ -14,9 +14,9 @@ import pybullet as p
 from runtime.config import WorldConfig
 from runtime.errors import InputError
 from runtime.log import get_logger
-from sitl.create2_model import SHELL_RADIUS, SimCreate2
+from sitl.bodies.registry import body_class
 
-__all__ = ["World", "SimCreate2"]
+__all__ = ["World"]
 
 GRAVITY = 9.81
 WALL_THICKNESS = 0.1
@@ -43,7 +43,7 @@ class World:
         self._steps = 0
         self._unsampled = 0
         self._sample_every = max(1, int(round(MOTOR_SAMPLE_PERIOD / self.dt)))
-        self._bodies: dict[int, SimCreate2] = {}
+        self._bodies: dict = {}                # robot id -> body (a class of sitl.bodies)
         self._log = get_logger("sitl.world")
         self._client = p.connect(p.GUI if gui else p.DIRECT)
         if self._client < 0:
@@ -82,23 +82,22 @@ class World:
         p.changeDynamics(body, -1, lateralFriction=OBSTACLE_FRICTION, restitution=0.0, **self._kw)
         return body
 
-    def add_body(self, robot_id: int, start: tuple[float, float, float], kind: str = "create2") -> SimCreate2:
-        return self.add_create2(robot_id, start)
-
-    def add_create2(self, robot_id: int, start: tuple[float, float, float]) -> SimCreate2:
-        """Put a Create 2 on the floor at ``start`` = (x, y, yaw) and return it."""
+    def add_body(self, robot_id: int, start: tuple[float, float, float], kind: str):
+        """Put a body of ``kind`` (:data:`sitl.bodies.registry.BODIES`) on the floor at ``start`` = (x, y, yaw)
+        and return it."""
+        cls = body_class(kind)
         if robot_id in self._bodies:
             raise InputError(f"robot {robot_id}: expected a unique robot id, it is already in the world")
         if len(start) != 3 or not all(math.isfinite(v) for v in start):
             raise InputError(f"robot {robot_id} start: expected (x, y, yaw) finite numbers, got {start!r}")
         x, y, yaw = (float(v) for v in start)
         sx, sy = self.cfg.size
-        if self.cfg.walls and (abs(x) > sx / 2 - SHELL_RADIUS or abs(y) > sy / 2 - SHELL_RADIUS):
+        r = cls.radius
+        if self.cfg.walls and (abs(x) > sx / 2 - r or abs(y) > sy / 2 - r):
             raise InputError(f"robot {robot_id} start ({x}, {y}): expected inside the {sx:g} x {sy:g} m arena "
-                             f"by at least the robot radius {SHELL_RADIUS} m")
+                             f"by at least the robot radius {r} m")
         rng = np.random.default_rng([self.seed, int(robot_id)])
-        body = SimCreate2(self._client, robot_id, (x, y, yaw), rng, gui=self.gui,
-                          wheel_radius_sigma=self.wheel_radius_sigma)
+        body = cls(self._client, robot_id, (x, y, yaw), rng, gui=self.gui, wheel_radius_sigma=self.wheel_radius_sigma)
         self._bodies[robot_id] = body
         return body
 
@@ -109,7 +108,7 @@ class World:
         return self._steps * self.dt
 
     @property
-    def bodies(self) -> dict[int, SimCreate2]:
+    def bodies(self) -> dict:
         return self._bodies
 
     @property

@@ -5,6 +5,7 @@ import math
 import time
 
 import pytest
+from hypothesis import given, settings, strategies as st
 
 from runtime.drivers import create_oi_protocol as P
 from runtime.drivers.create_oi import CreateOI
@@ -69,6 +70,36 @@ def test_set_velocity_sends_drive_direct_right_wheel_first(v, w, right, left):
     assert drain(drv) == bytes([145]) + right.to_bytes(2, "big", signed=True) + left.to_bytes(2, "big", signed=True)
 
 
+def _reference_wheels(v, w, max_speed, track_mm=235.0):
+    """The Drive Direct wheel speeds (right, left) in mm/s as the driver computed them before the policy
+    moved into MobileBase: each wheel v -+ w*track/2, both scaled alike to the fastest at max_speed."""
+    half = track_mm / 2000.0
+    left, right = v - w * half, v + w * half
+    peak = max(abs(left), abs(right))
+    if peak > max_speed:
+        left, right = left * max_speed / peak, right * max_speed / peak
+    return round(right * 1000.0), round(left * 1000.0)
+
+
+@settings(max_examples=300, deadline=None)
+@given(v=st.floats(-3.0, 3.0) | st.integers(-3000, 3000).map(lambda n: n / 1000.0),
+       w=st.floats(-30.0, 30.0) | st.integers(-30000, 30000).map(lambda n: n / 1000.0),
+       max_speed=st.sampled_from([0.5, 0.3, 0.123, 0.01]), model=st.sampled_from(P.MODELS))
+def test_drive_direct_bytes_are_unchanged_by_the_shared_policy(v, w, max_speed, model):
+    drv = loop_driver(model=model, max_speed=max_speed)
+    drain(drv)
+    drv.set_velocity(v, w, 0.0)
+    right, left = _reference_wheels(v, w, max_speed, P.GEOMETRY[model].track_mm)
+    assert drain(drv) == bytes([145]) + right.to_bytes(2, "big", signed=True) + left.to_bytes(2, "big", signed=True)
+
+
+@pytest.mark.parametrize("model, track", [("create2", 0.235), ("create1", 0.258)])
+def test_footprint_from_the_geometry_table(model, track):
+    fp = CreateOI("loop://", model=model, max_speed=0.4).footprint
+    assert (fp.radius, fp.track, fp.max_speed) == (0.17, track, 0.4)
+    assert fp.max_turn_rate == pytest.approx(2 * 0.4 / track)
+
+
 def test_clipping_keeps_the_curvature():
     drv = loop_driver(max_speed=0.3)
     drain(drv)
@@ -84,7 +115,7 @@ def test_non_finite_commands_stop_the_wheels():
     drv = loop_driver()
     drain(drv)
     drv.set_velocity(float("nan"), 0.0, 0.0)
-    assert drain(drv) == bytes([145, 0, 0, 0, 0]) and drv.stats.extra["nonfinite_commands"] == 1
+    assert drain(drv) == bytes([145, 0, 0, 0, 0]) and drv.stats.nonfinite_commands == 1
 
 
 def test_close_bytes():

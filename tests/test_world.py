@@ -11,8 +11,9 @@ from hypothesis import strategies as st
 
 from runtime.config import Box, WorldConfig, load_world
 from runtime.errors import InputError
-from sitl import create2_model as M
-from sitl.world import SimCreate2, World
+from sitl.bodies import create2 as M
+from sitl.bodies.create2 import SimCreate2
+from sitl.world import World
 
 ROOT = Path(__file__).resolve().parents[1]
 WORLD_FILES = sorted((ROOT / "configs" / "worlds").glob("*.yaml"))
@@ -41,7 +42,7 @@ def _step_until_bump(w: World, bot: SimCreate2, limit_s: float) -> tuple[bool, b
 # ------------------------------------------------------------------ kinematics
 
 def test_straight_at_commanded_speed_and_wheel_travel_matches_ground_truth(world):
-    bot = world.add_create2(1, (-2.0, 1.0, 0.5))
+    bot = world.add_body(1, (-2.0, 1.0, 0.5), "create2")
     bot.set_wheel_speeds(0.2, 0.2)
     world.step(100)                      # settle the acceleration
     x0, y0, yaw0 = bot.pose()
@@ -62,7 +63,7 @@ def test_straight_at_commanded_speed_and_wheel_travel_matches_ground_truth(world
 
 
 def test_reverse_wheel_travel_is_negative(world):
-    bot = world.add_create2(1, (0.0, 0.0, 0.0))
+    bot = world.add_body(1, (0.0, 0.0, 0.0), "create2")
     bot.set_wheel_speeds(-0.1, -0.1)
     world.step(400)
     left, right = bot.wheel_travel()
@@ -72,7 +73,7 @@ def test_reverse_wheel_travel_is_negative(world):
 
 
 def test_spin_in_place_at_the_rate_the_track_predicts(world):
-    bot = world.add_create2(1, (1.0, -1.0, 0.0))
+    bot = world.add_body(1, (1.0, -1.0, 0.0), "create2")
     v = 0.15
     bot.set_wheel_speeds(-v, v)
     world.step(100)
@@ -91,7 +92,7 @@ def test_spin_in_place_at_the_rate_the_track_predicts(world):
 
 
 def test_wheel_speed_is_clipped_to_half_a_metre_per_second(world):
-    bot = world.add_create2(1, (-3.0, 0.0, 0.0))
+    bot = world.add_body(1, (-3.0, 0.0, 0.0), "create2")
     bot.set_wheel_speeds(2.0, 9.0)
     assert bot.wheel_targets() == (0.5, 0.5)
     world.step(100)
@@ -103,7 +104,7 @@ def test_wheel_speed_is_clipped_to_half_a_metre_per_second(world):
 # ------------------------------------------------------------------ contacts
 
 def test_driving_into_a_wall_bumps_both_and_stops(world):
-    bot = world.add_create2(1, (4.0, 0.0, 0.0))
+    bot = world.add_body(1, (4.0, 0.0, 0.0), "create2")
     bot.set_wheel_speeds(0.3, 0.3)
     assert bot.bumps() == (False, False)
     assert _step_until_bump(world, bot, 5.0) == (True, True)
@@ -119,14 +120,14 @@ def test_driving_into_a_wall_bumps_both_and_stops(world):
                                           (math.radians(5), (True, True))])
 def test_bump_side_follows_the_angle_of_approach(world, yaw, expected):
     # The east wall is at x = +5; heading +35 deg it lies 35 deg to the right of the heading.
-    bot = world.add_create2(1, (4.2, 0.0, yaw))
+    bot = world.add_body(1, (4.2, 0.0, yaw), "create2")
     bot.set_wheel_speeds(0.2, 0.2)
     assert _step_until_bump(world, bot, 5.0) == expected
 
 
 def test_rear_contact_is_not_a_bump(world):
-    front = world.add_create2(1, (0.0, 0.0, 0.0))
-    back = world.add_create2(2, (-1.0, 0.0, 0.0))
+    front = world.add_body(1, (0.0, 0.0, 0.0), "create2")
+    back = world.add_body(2, (-1.0, 0.0, 0.0), "create2")
     back.set_wheel_speeds(0.3, 0.3)
     front.set_wheel_speeds(0.1, 0.1)
     assert _step_until_bump(world, back, 6.0) == (True, True)
@@ -134,8 +135,8 @@ def test_rear_contact_is_not_a_bump(world):
 
 
 def test_robot_pushes_a_slower_robot_through_contact(world):
-    front = world.add_create2(1, (0.0, 0.0, 0.0))
-    back = world.add_create2(2, (-0.6, 0.0, 0.0))
+    front = world.add_body(1, (0.0, 0.0, 0.0), "create2")
+    back = world.add_body(2, (-0.6, 0.0, 0.0), "create2")
     front.set_wheel_speeds(0.1, 0.1)
     back.set_wheel_speeds(0.3, 0.3)
     world.step(800)                                      # contact after ~1.3 s
@@ -146,8 +147,8 @@ def test_robot_pushes_a_slower_robot_through_contact(world):
 
 
 def test_head_on_robots_both_bump_and_stop(world):
-    a = world.add_create2(1, (-1.0, 0.0, 0.0))
-    b = world.add_create2(2, (1.0, 0.0, math.pi))
+    a = world.add_body(1, (-1.0, 0.0, 0.0), "create2")
+    b = world.add_body(2, (1.0, 0.0, math.pi), "create2")
     a.set_wheel_speeds(0.2, 0.2)
     b.set_wheel_speeds(0.2, 0.2)
     world.step(1200)
@@ -162,7 +163,7 @@ def test_box_obstacle_stops_the_robot():
     w = World(WorldConfig(size=(10.0, 10.0), obstacles=(Box(center=(2.0, 0.0), size=(1.0, 1.0), height=0.3,
                                                              yaw=0.0),)))
     try:
-        bot = w.add_create2(1, (0.0, 0.0, 0.0))
+        bot = w.add_body(1, (0.0, 0.0, 0.0), "create2")
         bot.set_wheel_speeds(0.4, 0.4)
         assert _step_until_bump(w, bot, 6.0) == (True, True)
         w.step(400)
@@ -172,7 +173,7 @@ def test_box_obstacle_stops_the_robot():
 
 
 def test_wheel_drop_only_when_lifted(world):
-    bot = world.add_create2(1, (0.0, 0.0, 0.0))
+    bot = world.add_body(1, (0.0, 0.0, 0.0), "create2")
     world.step(20)
     assert bot.wheel_drop() == (False, False)
     bot.place(0.0, 0.0, 0.0, z=0.5)
@@ -192,7 +193,7 @@ def test_contacts_are_fetched_once_per_step_and_match_per_link_queries(world, mo
     """Bumpers and wheel drop share one contact query per physics step.  Each step, the shared list
     split by link equals what pybullet answers when asked per link (shell and both wheels), through a
     drive into the wall, a lift and a fall."""
-    bot = world.add_create2(1, (4.0, 0.0, math.radians(20)))
+    bot = world.add_body(1, (4.0, 0.0, math.radians(20)), "create2")
     bot.set_wheel_speeds(0.3, 0.3)
     calls = {"n": 0}
     real = M.p.getContactPoints
@@ -221,7 +222,7 @@ def test_contacts_are_fetched_once_per_step_and_match_per_link_queries(world, mo
 # ------------------------------------------------------------------ battery
 
 def test_battery_discharges_and_a_stall_draws_more_than_cruising(world):
-    bot = world.add_create2(1, (3.0, 0.0, 0.0))
+    bot = world.add_body(1, (3.0, 0.0, 0.0), "create2")
     b0 = bot.battery()
     assert b0["capacity_mah"] == 2696
     assert 0 < b0["charge_mah"] <= b0["capacity_mah"]
@@ -246,7 +247,7 @@ def _scripted_run(seed: int, steps: int = 1500) -> list[tuple[float, ...]]:
     w = World(load_world(ROOT / "configs" / "worlds" / "boxes_10m.yaml"), seed=seed)
     try:
         starts = [(-1.5, -1.5, 0.78), (1.5, 1.5, -2.36), (-1.5, 1.5, -0.78), (1.5, -1.5, 2.36)]
-        bots = [w.add_create2(i + 1, s) for i, s in enumerate(starts)]
+        bots = [w.add_body(i + 1, s, "create2") for i, s in enumerate(starts)]
         rng = np.random.default_rng(seed)
         for k in range(steps // 100):
             for b in bots:
@@ -266,7 +267,7 @@ def test_same_seed_same_commands_identical_states():
 def test_worlds_in_one_process_are_independent():
     a, b = World(ARENA, seed=1), World(ARENA, seed=1)
     try:
-        ra, rb = a.add_create2(1, (0.0, 0.0, 0.0)), b.add_create2(1, (0.0, 0.0, 0.0))
+        ra, rb = a.add_body(1, (0.0, 0.0, 0.0), "create2"), b.add_body(1, (0.0, 0.0, 0.0), "create2")
         ra.set_wheel_speeds(0.3, 0.3)
         a.step(200)
         b.step(200)
@@ -285,7 +286,7 @@ def test_every_world_config_loads_and_builds(path):
     try:
         assert len(w.obstacle_ids) == len(cfg.obstacles)
         assert len(w.wall_ids) == (4 if cfg.walls else 0)
-        bot = w.add_create2(1, (cfg.size[0] / 2 - 0.5, cfg.size[1] / 2 - 0.5, 0.0))
+        bot = w.add_body(1, (cfg.size[0] / 2 - 0.5, cfg.size[1] / 2 - 0.5, 0.0), "create2")
         w.step(50)
         assert bot.wheel_drop() == (False, False) and bot.bumps() == (False, False)
     finally:
@@ -298,16 +299,29 @@ def test_shipped_world_configs_exist():
 
 
 def test_bad_inputs_raise_one_line_input_errors(world):
-    world.add_create2(4, (0.0, 0.0, 0.0))
-    cases = [lambda: world.add_create2(4, (1.0, 1.0, 0.0)),
-             lambda: world.add_create2(5, (4.95, 0.0, 0.0)),
-             lambda: world.add_create2(6, (0.0, float("nan"), 0.0)),
+    world.add_body(4, (0.0, 0.0, 0.0), "create2")
+    cases = [lambda: world.add_body(4, (1.0, 1.0, 0.0), "create2"),
+             lambda: world.add_body(5, (4.95, 0.0, 0.0), "create2"),
+             lambda: world.add_body(6, (0.0, float("nan"), 0.0), "create2"),
              lambda: world.bodies[4].set_wheel_speeds(float("inf"), 0.0),
              lambda: World(ARENA, dt=0.0)]
     for case in cases:
         with pytest.raises(InputError) as info:
             case()
         assert "\n" not in str(info.value) and ("robot" in str(info.value) or "dt" in str(info.value))
+
+
+def test_an_unknown_body_kind_names_the_known_ones(world):
+    with pytest.raises(InputError, match=r"body kind 'tank': expected one of create2"):
+        world.add_body(1, (0.0, 0.0, 0.0), "tank")
+    assert world.bodies == {}
+
+
+def test_the_body_radius_is_the_drivers_and_the_planners():
+    from runtime.drivers.create_oi import create_footprint
+    from runtime.planning.grid import CREATE2_RADIUS
+    assert SimCreate2.radius == M.SHELL_RADIUS == CREATE2_RADIUS == create_footprint("create2").radius
+    assert M.WHEEL_TRACK == create_footprint("create2").track
 
 
 def test_close_is_idempotent():
@@ -318,7 +332,7 @@ def test_close_is_idempotent():
 
 def test_body_has_create2_dimensions_and_mass(world):
     import pybullet as p
-    bot = world.add_create2(1, (0.0, 0.0, 0.0))
+    bot = world.add_body(1, (0.0, 0.0, 0.0), "create2")
     kw = {"physicsClientId": world.client_id}
     mass = sum(p.getDynamicsInfo(bot.body_id, link, **kw)[0] for link in range(-1, p.getNumJoints(bot.body_id, **kw)))
     assert mass == pytest.approx(3.6, abs=0.01)
@@ -334,7 +348,7 @@ def test_body_has_create2_dimensions_and_mass(world):
 @pytest.fixture(scope="module")
 def shared():
     w = World(ARENA, seed=5, wheel_radius_sigma=0.0)
-    bot = w.add_create2(1, (0.0, 0.0, 0.0))
+    bot = w.add_body(1, (0.0, 0.0, 0.0), "create2")
     yield w, bot
     w.close()
 
@@ -362,7 +376,7 @@ def test_tyre_tolerance_makes_encoder_odometry_drift():
     by each wheel's radius error: odometry error comes from the physics, not a formula."""
     w = World(ARENA, seed=11, wheel_radius_sigma=0.004)
     try:
-        r = w.add_create2(1, (0.0, 0.0, 0.0))
+        r = w.add_body(1, (0.0, 0.0, 0.0), "create2")
         assert r.wheel_radii[0] != r.wheel_radii[1]
         r.set_wheel_speeds(0.2, 0.2)
         w.step(1000)

@@ -1,14 +1,78 @@
-"""The one interface every mobile base driver implements.
+"""The one interface every mobile base driver implements, and the policy all of them share.
 
 A driver owns one link (serial via ``serial.serial_for_url`` or a CAN bus), speaks the base's real
 protocol, and turns it into odometry and a few sensor flags.  It is polled, never threaded: the
-daemon calls :meth:`poll` every control cycle with the current time; ``poll`` reads whatever bytes
-are waiting (non-blocking), decodes them, and enforces the command watchdog.
+daemon calls :meth:`MobileBase.poll` every control cycle with the current time; ``poll`` reads
+whatever bytes are waiting (non-blocking), decodes them, and enforces the command watchdog.
+
+:class:`MobileBase` holds what is the same for every base (as python-can's ``BusABC`` does for
+buses): the finite-value check, clipping to the base's :class:`Footprint` with the curvature kept,
+the command watchdog, the lifecycle state and the policy counters in :class:`LinkStats`.  A driver
+subclasses it, calls ``super().__init__(footprint, watchdog, log)`` and implements four hooks:
+
+* ``_open(now)``: open the link, wake the base, start its sensor stream (raise ``InputError`` if the
+  link cannot be opened);
+* ``_close()``: stop the motors, stop streaming, close the link;
+* ``_read(now) -> bool``: decode what has arrived into :attr:`odometry` / :attr:`sensors`; True if
+  the odometry is new;
+* ``_command(v, w, now) -> bool``: send a velocity that is already finite and within the footprint;
+  True if the base was told to move (False when the command is a stop, including one that rounds to
+  zero on every actuator), so the watchdog knows whether there is anything to stop.
 """
 from __future__ import annotations
 
 import abc
+import math
 from dataclasses import dataclass, field
+
+from runtime.errors import InputError
+
+
+@dataclass(frozen=True)
+class Footprint:
+    """A differential-drive base's size and limits, in metres, m/s and rad/s.
+
+    ``radius``: the circle about the base's centre (the point odometry and the pose refer to) that
+    holds the whole body; planning inflates obstacles by it and avoidance keeps it clear.
+    ``track``: the distance between the wheels' contact points.  ``max_speed``: the fastest either
+    wheel is driven (the limit the driver enforces, at most what the hardware does).
+    ``max_turn_rate``: the fastest turn in place the driver commands; at most ``2 * max_speed / track``
+    (a tighter value limits turning on its own, keeping the curvature).
+    """
+    radius: float
+    track: float
+    max_speed: float
+    max_turn_rate: float
+
+    def __post_init__(self):
+        for name in ("radius", "track", "max_speed", "max_turn_rate"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise InputError(f"base footprint {name}: expected a finite number > 0, got {value!r}")
+        if self.max_turn_rate > self.wheel_turn_rate * (1 + 1e-9):
+            raise InputError(f"base footprint max_turn_rate {self.max_turn_rate!r}: expected at most "
+                             f"2 * max_speed / track = {self.wheel_turn_rate:.4g} rad/s")
+
+    @property
+    def wheel_turn_rate(self) -> float:
+        """The turn rate in place with both wheels at ``max_speed`` (rad/s)."""
+        return 2.0 * self.max_speed / self.track
+
+    def scale(self, v: float, w: float) -> float:
+        """The factor in (0, 1] that brings finite ``(v, w)`` within the limits; both are scaled by it,
+        so both wheels are scaled alike and the curvature ``w / v`` is kept."""
+        k = 1.0
+        half = self.track / 2.0
+        peak = abs(v) + abs(w) * half                        # the faster wheel's speed
+        if peak > self.max_speed:
+            if math.isfinite(peak):
+                k = self.max_speed / peak
+            else:                                            # finite v, w near 1e308: peak overflowed
+                s = max(abs(v), abs(w))
+                k = (self.max_speed / s) / (abs(v) / s + abs(w) / s * half)
+        if self.max_turn_rate < self.wheel_turn_rate and abs(w) * k > self.max_turn_rate:
+            k = self.max_turn_rate / abs(w)
+        return k
 
 
 @dataclass
@@ -25,6 +89,14 @@ class Odometry:
 
 @dataclass
 class BaseSensors:
+    """What the base senses besides odometry; fields a base does not have keep their defaults.
+
+    ``ranges``: distance readings as ``(bearing, distance)`` pairs, bearing in radians in the robot
+    frame (0 ahead, positive to the left, counter-clockwise), distance in metres from the robot's
+    centre (not from the sensor), one pair per reading of the latest scan; empty on a base without
+    range sensors (a Create).  ``faults``: short names of the faults the base reports now (e.g.
+    ``"left_motor_overcurrent"``), empty when it is healthy or reports none.
+    """
     bump_left: bool = False
     bump_right: bool = False
     wheel_drop: bool = False
@@ -33,40 +105,114 @@ class BaseSensors:
     voltage: float = float("nan")            # V
     current: float = float("nan")            # A (negative = discharging)
     mode: str = "unknown"
+    ranges: tuple[tuple[float, float], ...] = ()
+    faults: tuple[str, ...] = ()
 
 
 @dataclass
 class LinkStats:
-    frames: int = 0            # good frames decoded
-    bad_checksum: int = 0      # frames dropped for a checksum mismatch
-    dropped_bytes: int = 0     # bytes skipped while resynchronising
-    commands: int = 0          # commands written
-    watchdog_stops: int = 0    # times the watchdog sent zero velocity
-    extra: dict = field(default_factory=dict)
+    """Counters of one base: the policy's (kept by :class:`MobileBase`) and the link's (by the driver)."""
+    commands: int = 0            # velocity commands taken by set_velocity (stops included)
+    nonfinite_commands: int = 0  # of them with a nan/inf, sent as a stop
+    clipped_commands: int = 0    # of them scaled down to the footprint's limits
+    watchdog_stops: int = 0      # times the watchdog stopped a base left moving without commands
+    frames: int = 0              # good frames decoded
+    bad_checksum: int = 0        # frames dropped for a checksum mismatch
+    dropped_bytes: int = 0       # bytes skipped while resynchronising
+    extra: dict = field(default_factory=dict)    # the driver's own counters
 
 
 class MobileBase(abc.ABC):
-    """Differential-drive base.  All methods are non-blocking."""
+    """Differential-drive base.  All methods are non-blocking and take the current time ``now`` (s)."""
 
     odometry: Odometry
     sensors: BaseSensors
     stats: LinkStats
 
-    @abc.abstractmethod
+    def __init__(self, footprint: Footprint, watchdog: float, log):
+        if not (isinstance(watchdog, (int, float)) and math.isfinite(watchdog) and watchdog > 0):
+            raise InputError(f"{type(self).__name__} watchdog {watchdog!r}: expected seconds > 0")
+        self._footprint = footprint
+        self.watchdog = float(watchdog)
+        self.log = log
+        self.odometry = Odometry()
+        self.sensors = BaseSensors()
+        self.stats = LinkStats()
+        self.is_open = False
+        self._last_cmd_t: float | None = None
+        self._moving = False               # the last command sent told the base to move
+
+    @property
+    def footprint(self) -> Footprint:
+        """Size and limits of this base (radius for obstacle inflation and avoidance)."""
+        return self._footprint
+
+    # ------------------------------------------------------------------ lifecycle
     def open(self, now: float) -> None:
-        """Open the link, wake the base, start its sensor stream."""
+        """Open the link, wake the base, start its sensor stream; the watchdog counts from ``now``."""
+        if self.is_open:
+            self.close()
+        self._open(now)
+        self.is_open = True
+        self._last_cmd_t = now
+        self._moving = False
 
-    @abc.abstractmethod
     def close(self) -> None:
-        """Stop the motors, stop streaming, close the link."""
+        """Stop the motors, stop streaming, close the link.  Closing a closed base does nothing."""
+        if not self.is_open:
+            return
+        self.is_open = False
+        self._moving = False
+        self._close()
 
-    @abc.abstractmethod
+    # ------------------------------------------------------------------ cycle
     def poll(self, now: float) -> bool:
-        """Read and decode what has arrived; enforce the watchdog.  True if new odometry."""
+        """Read and decode what has arrived, then enforce the watchdog.  True if new odometry."""
+        if not self.is_open:
+            return False
+        fresh = self._read(now)
+        if self._moving and now - self._last_cmd_t >= self.watchdog:
+            self._moving = self._command(0.0, 0.0, now)
+            self.stats.watchdog_stops += 1
+            self.log.warning("watchdog: no command for %.2f s, base stopped", now - self._last_cmd_t)
+        return fresh
 
-    @abc.abstractmethod
     def set_velocity(self, v: float, w: float, now: float) -> None:
-        """Command forward speed ``v`` (m/s) and turn rate ``w`` (rad/s); clipped to the base."""
+        """Command forward speed ``v`` (m/s) and turn rate ``w`` (rad/s).  A nan or inf stops the base;
+        a command beyond the footprint's limits is scaled down, both wheels alike."""
+        if not self.is_open:
+            raise RuntimeError(f"{type(self).__name__}.set_velocity before open()")
+        nonfinite = not (math.isfinite(v) and math.isfinite(w))
+        k = 1.0
+        if nonfinite:
+            self.log.warning("non-finite velocity command (%r, %r): stopping", v, w)
+            v = w = 0.0
+        else:
+            k = self._footprint.scale(v, w)
+            if k < 1.0:
+                v, w = v * k, w * k
+        self._moving = self._command(v, w, now)
+        self._last_cmd_t = now
+        self.stats.commands += 1
+        self.stats.nonfinite_commands += nonfinite
+        self.stats.clipped_commands += k < 1.0
 
     def stop(self, now: float) -> None:
         self.set_velocity(0.0, 0.0, now)
+
+    # ------------------------------------------------------------------ driver hooks
+    @abc.abstractmethod
+    def _open(self, now: float) -> None:
+        """Open the link, wake the base, start its sensor stream."""
+
+    @abc.abstractmethod
+    def _close(self) -> None:
+        """Stop the motors, stop streaming, close the link."""
+
+    @abc.abstractmethod
+    def _read(self, now: float) -> bool:
+        """Decode what has arrived into odometry and sensors.  True if new odometry."""
+
+    @abc.abstractmethod
+    def _command(self, v: float, w: float, now: float) -> bool:
+        """Send finite, in-limit ``(v, w)``.  True if the base was told to move."""

@@ -4,8 +4,8 @@ A thin shell around :mod:`runtime.drivers.create_oi_protocol`: it opens the link
 ``serial.serial_for_url`` (a device path, a pty, ``socket://host:port`` and ``loop://`` all work),
 starts the OI, streams bumps and wheel drops (7), OI mode (35), battery (group 3 = 21-26) and the
 encoder counts (43, 44) on a Create 2 or distance (19) and angle (20) on a Create 1, and turns them
-into :class:`Odometry` and :class:`BaseSensors`.  Velocity goes out as Drive Direct (145).  A watchdog
-stops the wheels when no command came for ``watchdog`` seconds.
+into :class:`Odometry` and :class:`BaseSensors`.  Velocity goes out as Drive Direct (145).  The
+finite check, the clipping to the footprint and the watchdog are :class:`MobileBase`'s.
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ import serial
 
 from runtime.config.build import rng
 from runtime.drivers import create_oi_protocol as P
-from runtime.drivers.base import BaseSensors, LinkStats, MobileBase, Odometry
+from runtime.drivers.base import Footprint, MobileBase
 from runtime.errors import InputError
 from runtime.log import get_logger
 
@@ -57,38 +57,29 @@ class CreateOI(MobileBase):
         geometry = P.GEOMETRY[model]
         baudrate = geometry.default_baud if baudrate is None else baudrate
         P.baud_code(baudrate)                                  # must be an OI rate
-        if not (isinstance(watchdog, (int, float)) and watchdog > 0):
-            raise InputError(f"Create OI watchdog {watchdog!r}: expected seconds > 0")
-        if not (isinstance(max_speed, (int, float)) and 0 < max_speed <= P.MAX_WHEEL_MM_S / 1000.0):
-            raise InputError(f"Create OI max_speed {max_speed!r}: expected 0 < m/s <= 0.5")
+        top = geometry.max_wheel_mm_s / 1000.0
+        if not (isinstance(max_speed, (int, float)) and 0 < max_speed <= top):
+            raise InputError(f"Create OI max_speed {max_speed!r}: expected 0 < m/s <= {top:g}")
+        super().__init__(create_footprint(model, max_speed), watchdog, get_logger("create_oi", robot_id))
         self.port = port
         self.model = model
         self.geometry = geometry
         self.baudrate = baudrate
         self.mode = mode
-        self.watchdog = float(watchdog)
-        self.max_speed = float(max_speed)
-        self.log = get_logger("create_oi", robot_id)
-        self.odometry = Odometry()
-        self.sensors = BaseSensors()
-        self.stats = LinkStats(extra={"bytes_in": 0, "bytes_out": 0, "malformed": 0, "write_errors": 0,
-                                      "read_errors": 0, "nonfinite_commands": 0, "mode_recoveries": 0})
+        self.stats.extra.update({"bytes_in": 0, "bytes_out": 0, "writes": 0, "malformed": 0, "write_errors": 0,
+                                 "read_errors": 0, "mode_recoveries": 0})
         self.parser = P.StreamParser(model)
         self.values: dict = {}               # latest named values from the stream
         self.ser = None
         self._counts: tuple[int, int] | None = None
-        self._last_cmd_t: float | None = None
-        self._moving = False                 # last commanded wheel speeds non-zero
         self._reached_mode = False           # the base has reported self.mode since open()
         self._passive_since: float | None = None  # in an unwanted Passive with the wheels down, since
         self._mode_since: float | None = None     # in self.mode since
         self._backoff = RECOVER_AFTER
 
     # ------------------------------------------------------------------ lifecycle
-    def open(self, now: float) -> None:
+    def _open(self, now: float) -> None:
         """Open the link; Start, Safe or Full, then Stream the packets odometry needs."""
-        if self.ser is not None:
-            self.close()
         self._counts = None
         try:
             self.ser = serial.serial_for_url(self.port, self.baudrate, timeout=0)
@@ -101,14 +92,11 @@ class CreateOI(MobileBase):
         self._reached_mode = False
         self._passive_since = self._mode_since = None
         self._backoff = RECOVER_AFTER
-        self._last_cmd_t = now
         self.odometry.t = now
         self.log.info("opened %s (%s, %d bit/s, %s mode)", self.port, self.model, self.baudrate, self.mode)
 
-    def close(self) -> None:
+    def _close(self) -> None:
         """Zero velocity, pause the stream, Stop (Create 1 has no Stop: Start returns it to Passive)."""
-        if self.ser is None:
-            return
         self._write(P.drive_direct(0, 0))
         self._write(P.pause_resume_stream(False))
         self._write(P.stop() if self.model == "create2" else P.start())
@@ -118,13 +106,10 @@ class CreateOI(MobileBase):
         except (serial.SerialException, OSError) as exc:
             self.log.warning("close %s: %s", self.port, exc)
         self.ser = None
-        self._moving = False
 
     # ------------------------------------------------------------------ polling
-    def poll(self, now: float) -> bool:
-        """Decode waiting frames into odometry and sensors; enforce the watchdog.  True if new odometry."""
-        if self.ser is None:
-            return False
+    def _read(self, now: float) -> bool:
+        """Decode waiting frames into odometry and sensors; ask for Safe/Full again if due."""
         data = self._read_all()
         moved = False
         if data:
@@ -143,10 +128,6 @@ class CreateOI(MobileBase):
                 moved = True
             self._sync_stats()
         self._recover_mode(now)
-        if self._moving and self._last_cmd_t is not None and now - self._last_cmd_t >= self.watchdog:
-            self._send_wheels(0, 0)
-            self.stats.watchdog_stops += 1
-            self.log.warning("watchdog: no command for %.2f s, wheels stopped", now - self._last_cmd_t)
         return moved
 
     def _recover_mode(self, now: float) -> None:
@@ -251,28 +232,17 @@ class CreateOI(MobileBase):
         self.stats.extra["malformed"] = p.malformed
 
     # ------------------------------------------------------------------ commands
-    def set_velocity(self, v: float, w: float, now: float) -> None:
-        """Forward speed ``v`` (m/s) and turn rate ``w`` (rad/s) -> Drive Direct; each wheel clipped to
-        +-max_speed with both scaled alike, so the curvature is kept."""
-        if self.ser is None:
-            raise RuntimeError("CreateOI.set_velocity before open()")
-        if not (math.isfinite(v) and math.isfinite(w)):
-            self.stats.extra["nonfinite_commands"] += 1
-            self.log.warning("non-finite velocity command (%r, %r): stopping", v, w)
-            v = w = 0.0
-        half = self.geometry.track_mm / 2000.0
+    def _command(self, v: float, w: float, now: float) -> bool:
+        """``(v, w)``, already within the footprint, as Drive Direct: wheel speeds rounded to mm/s."""
+        half = self._footprint.track / 2.0
         left, right = v - w * half, v + w * half
-        peak = max(abs(left), abs(right))
-        if peak > self.max_speed:
-            left, right = left * self.max_speed / peak, right * self.max_speed / peak
-        self._send_wheels(round(right * 1000.0), round(left * 1000.0))
-        self._last_cmd_t = now
+        return self._send_wheels(round(right * 1000.0), round(left * 1000.0))
 
-    def _send_wheels(self, right_mm_s: int, left_mm_s: int) -> None:
-        lim = P.MAX_WHEEL_MM_S
+    def _send_wheels(self, right_mm_s: int, left_mm_s: int) -> bool:
+        lim = self.geometry.max_wheel_mm_s
         right_mm_s, left_mm_s = max(-lim, min(lim, right_mm_s)), max(-lim, min(lim, left_mm_s))
         self._write(P.drive_direct(right_mm_s, left_mm_s))
-        self._moving = (right_mm_s, left_mm_s) != (0, 0)
+        return (right_mm_s, left_mm_s) != (0, 0)
 
     def _write(self, data: bytes) -> None:
         try:
@@ -282,8 +252,17 @@ class CreateOI(MobileBase):
             if self.stats.extra["write_errors"] in (1, 10, 100) or self.stats.extra["write_errors"] % 1000 == 0:
                 self.log.warning("write %s: %s", self.port, exc)
             return
-        self.stats.commands += 1
+        self.stats.extra["writes"] += 1
         self.stats.extra["bytes_out"] += len(data)
+
+
+def create_footprint(model: str, max_speed: float | None = None) -> Footprint:
+    """The footprint of a Create ``model`` from its geometry table; ``max_speed`` (m/s per wheel, default
+    the hardware's 0.5) caps both wheels and with them the turn rate in place."""
+    g = P.GEOMETRY[P.check_model(model)]
+    track = g.track_mm / 1000.0
+    speed = g.max_wheel_mm_s / 1000.0 if max_speed is None else float(max_speed)
+    return Footprint(radius=g.radius_mm / 1000.0, track=track, max_speed=speed, max_turn_rate=2.0 * speed / track)
 
 
 def _delta16(new: int, old: int) -> int:

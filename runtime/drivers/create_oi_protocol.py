@@ -101,12 +101,15 @@ MODE_NAMES = {MODE_OFF: "off", MODE_PASSIVE: "passive", MODE_SAFE: "safe", MODE_
 
 @dataclass(frozen=True)
 class Geometry:
-    """Drive geometry and serial default of one model."""
+    """Size, drive geometry and serial default of one model: the one table of these numbers, which the
+    driver's footprint, the planner's default inflation and the SITL body all read."""
     model: str
-    track_mm: float                    # distance between the wheels
+    track_mm: float                    # distance between the wheels' contact points
+    radius_mm: float                   # the round shell about the centre between the wheels
     default_baud: int
     wheel_diameter_mm: float | None = None
     counts_per_rev: float | None = None   # None: no encoder packets (Create 1)
+    max_wheel_mm_s: int = MAX_WHEEL_MM_S  # Drive / Drive Direct take -500..500 mm/s per wheel
 
     @property
     def mm_per_count(self) -> float | None:
@@ -115,10 +118,16 @@ class Geometry:
         return math.pi * self.wheel_diameter_mm / self.counts_per_rev
 
 
+# Track and wheels: the Create 2 OI spec (235 mm between the wheels, 72 mm wheels, 508.8 counts per
+# revolution) and libcreate's model table (Create 1: 258 mm).  Neither OI spec gives the shell diameter.
+# 340 mm (radius 170) is within the 338-353 mm of Roomba shells (the Create 2 is a Roomba 600 without
+# the cleaning parts); the ROS create_description draws the Create 2 at 348.5 mm and the Create 1 at
+# 330.2 mm.  The Create 1 uses 170 mm too: slightly over-inflated (safe), and the SITL runs either
+# model on the same Create 2 body.
 GEOMETRY = {
-    "create2": Geometry("create2", track_mm=235.0, default_baud=115200, wheel_diameter_mm=72.0,
-                        counts_per_rev=508.8),
-    "create1": Geometry("create1", track_mm=258.0, default_baud=57600),
+    "create2": Geometry("create2", track_mm=235.0, radius_mm=170.0, default_baud=115200,
+                        wheel_diameter_mm=72.0, counts_per_rev=508.8),
+    "create1": Geometry("create1", track_mm=258.0, radius_mm=170.0, default_baud=57600),
 }
 
 

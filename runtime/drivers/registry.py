@@ -1,14 +1,29 @@
 """Base drivers by ``base.type``: the only list of them.
 
 Each entry names ``module:Class``; the module is imported only when that type is used (as python-can's
-``BACKENDS`` does), so a robot that drives a Create never imports the CAN stack.  The class is a
-:class:`runtime.drivers.base.MobileBase` with a ``Config`` attribute: the frozen dataclass that is the
-schema of the robot config's ``base:`` section for that type (its ``type`` field is a one-value Literal),
-and a ``from_config(cfg, robot_id)`` constructor.  A new base is one driver module plus one line here.
+``BACKENDS`` does), so a robot that drives a Create never imports the CAN stack.  The robot config's
+``base:`` section is a union chosen by ``base.type`` over :func:`config_classes`; a wrong type names
+these keys.
+
+A new base is one driver module plus one line in :data:`BASES` (and, for the SITL, one device module
+plus one line in :mod:`sitl.devices.registry`).  The driver module provides one class that
+
+* subclasses :class:`runtime.drivers.base.MobileBase` and calls
+  ``super().__init__(footprint, watchdog, log)`` with its :class:`~runtime.drivers.base.Footprint`
+  (radius, track, max_speed, max_turn_rate), the command watchdog in seconds and
+  ``runtime.log.get_logger(<name>, robot_id)``;
+* has ``Config``: a frozen dataclass, the schema of the ``base:`` section, whose first field is
+  ``type: Literal["<its key here>"] = "<its key here>"`` and whose other fields all have defaults
+  (ranges in ``field(metadata=rng(lo, hi))``), e.g. ``port``, ``watchdog``, ``max_speed``;
+* has the classmethod ``from_config(cfg, robot_id)`` returning an unopened driver;
+* implements ``_open(now)``, ``_close()``, ``_read(now) -> bool`` and ``_command(v, w, now) -> bool``
+  (see :mod:`runtime.drivers.base`), filling ``odometry``, ``sensors`` (``ranges`` and ``faults`` if it
+  has them) and the link counters of ``stats`` (``frames``, ``bad_checksum``, ``dropped_bytes``; its
+  own in ``stats.extra``).
 """
 from __future__ import annotations
 
-import importlib
+from runtime.lazy import resolve
 
 BASES: dict[str, str] = {
     "create_oi": "runtime.drivers.create_oi:CreateOI",      # iRobot Create 2 / Create 1, Open Interface
@@ -16,8 +31,8 @@ BASES: dict[str, str] = {
 
 
 def driver_class(type_name: str) -> type:
-    module, _, cls = BASES[type_name].partition(":")
-    return getattr(importlib.import_module(module), cls)
+    """The driver class of ``base.type`` ``type_name`` (a key of :data:`BASES`)."""
+    return resolve(BASES[type_name])
 
 
 def config_classes() -> dict[str, type]:

@@ -12,9 +12,11 @@ import numpy as np
 from scipy import ndimage
 
 from runtime.config import Box, WorldConfig
+from runtime.drivers.create_oi_protocol import GEOMETRY
 from runtime.errors import InputError
 
-CREATE2_RADIUS = 0.17   # metres, iRobot Create 2 footprint radius
+# metres: the default inflation, an iRobot Create 2 (a robot's own base gives base.footprint.radius)
+CREATE2_RADIUS = GEOMETRY["create2"].radius_mm / 1000.0
 
 
 class OccupancyGrid:

@@ -11,6 +11,10 @@ right_m)``, ``bumps() -> (left, right)`` and ``wheel_drop() -> (left, right)``. 
 used when present: ``battery() -> dict`` (charge_mah, capacity_mah, voltage_mv, current_ma,
 temperature_c), ``motor_currents_ma() -> (left, right)``, ``cliffs() -> (left, front_left,
 front_right, right)``.  Without ``battery()`` the device drains its own simulated pack.
+
+In a SITL fleet it is built by :func:`sitl.devices.registry.make_device` for ``base.type: create_oi``
+on a ``"create2"`` body (for either model: :mod:`sitl.bodies.registry`), and :meth:`endpoint` is what
+goes into the generated robot config's ``base:`` section.
 """
 from __future__ import annotations
 
@@ -69,7 +73,19 @@ class _Battery:
 class CreateOIDevice:
     """One emulated Create on a link (a pty by default); call :meth:`service` with the sim time."""
 
-    def __init__(self, body, model: str = "create2", robot_id=None, link=None):
+    @classmethod
+    def from_config(cls, body, cfg, robot_id=None) -> "CreateOIDevice":
+        """The device a robot with ``base:`` config ``cfg`` (a ``CreateOIConfig``) talks to, on a new pty."""
+        return cls(body, model=cfg.model, robot_id=robot_id, baudrate=cfg.baudrate)
+
+    @staticmethod
+    def body_kind(cfg) -> str:
+        """The body this device drives: a Create 2 for either model.  A Create 1 is the same size but its
+        wheels are 258 mm apart, not 235 mm: on this body it turns 10 % faster than commanded and the
+        angle it reports (packet 20, from its own 258 mm) is 9 % short of the body's turn."""
+        return "create2"
+
+    def __init__(self, body, model: str = "create2", robot_id=None, link=None, baudrate: int | None = None):
         self.model = P.check_model(model)
         self.body = body
         self.geometry = P.GEOMETRY[model]
@@ -82,7 +98,7 @@ class CreateOIDevice:
         self.stats = CreateDeviceStats()
         self._ids = set(P.packet_ids(model))
         self.mode = P.MODE_OFF
-        self.baud_code = P.BAUD_RATES.index(self.geometry.default_baud)
+        self.baud_code = P.baud_code(self.geometry.default_baud if baudrate is None else baudrate)
         self.wheels_mm_s = (0.0, 0.0)           # (left, right) the motors are driving
         self.requested = {"requested_velocity": 0, "requested_radius": 0,
                           "requested_right_velocity": 0, "requested_left_velocity": 0}
@@ -102,18 +118,14 @@ class CreateOIDevice:
         self._last_now: float | None = None
         self._values: dict | None = None
 
-    @classmethod
-    def from_config(cls, base_cfg, body, robot_id: int) -> "CreateOIDevice":
-        return cls(body, model=base_cfg.model, robot_id=robot_id)
-
-    def endpoint(self) -> dict:
-        """What the robot config's ``base:`` section needs to reach this device."""
-        return {"port": self.path, "baudrate": P.GEOMETRY[self.model].default_baud}
-
     @property
     def path(self) -> str:
         """Where a driver opens the robot (the pty slave)."""
         return self.link.path
+
+    def endpoint(self) -> dict:
+        """Where and how the driver reaches this device: the ``base:`` keys of the robot config."""
+        return {"port": self.path, "baudrate": P.BAUD_RATES[self.baud_code]}
 
     @property
     def mode_name(self) -> str:

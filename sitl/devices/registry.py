@@ -1,16 +1,42 @@
-"""SITL devices by ``base.type`` (the same names as runtime.drivers.registry)."""
+"""SITL device emulators by ``base.type``: the same keys as :data:`runtime.drivers.registry.BASES`.
+
+The launcher, for each robot, asks :func:`body_kind` which body to put in the world
+(:meth:`sitl.world.World.add_body`), builds the device with :func:`make_device`, serves it with
+``device.service(t)`` every physics step and merges ``device.endpoint()`` into the robot config it
+writes (and the manifest); ``device.close()`` at the end.
+
+A new base's emulator is one module plus one line in :data:`DEVICES`.  Its class provides:
+
+* the classmethod ``from_config(body, cfg, robot_id)``: the device for ``base:`` config ``cfg`` (the
+  driver's ``Config``) on ``body``, on a link of its own (a pty from :mod:`sitl.devices.pty_link`);
+* the static or class method ``body_kind(cfg) -> str``: a key of :data:`sitl.bodies.registry.BODIES`;
+* ``service(now)``: sample the body, act on the driver's bytes, send what is due at sim time ``now``;
+* ``close()``: close the link;
+* ``endpoint() -> dict``: the ``base:`` keys that point the driver at the device, e.g.
+  ``{"port": "/dev/pts/5", "baudrate": 115200}``; they must load as that driver's ``Config``.
+"""
 from __future__ import annotations
 
-import importlib
+from runtime.errors import InputError
+from runtime.lazy import resolve
 
-DEVICES = {"create_oi": "sitl.devices.create_oi:CreateOIDevice"}
-BODIES = {"create_oi": "create2"}
+DEVICES: dict[str, str] = {
+    "create_oi": "sitl.devices.create_oi:CreateOIDevice",   # Create 2 / Create 1 Open Interface on a pty
+}
+
+
+def device_class(type_name: str) -> type:
+    """The emulator class of ``base.type`` ``type_name``."""
+    if type_name not in DEVICES:
+        raise InputError(f"base.type {type_name!r}: expected one with a SITL device, one of {', '.join(DEVICES)}")
+    return resolve(DEVICES[type_name])
 
 
 def body_kind(base_cfg) -> str:
-    return BODIES[base_cfg.type]
+    """Which body (:data:`sitl.bodies.registry.BODIES`) a robot with ``base:`` config ``base_cfg`` needs."""
+    return device_class(base_cfg.type).body_kind(base_cfg)
 
 
 def make_device(base_cfg, body, robot_id: int):
-    module, _, cls = DEVICES[base_cfg.type].partition(":")
-    return getattr(importlib.import_module(module), cls).from_config(base_cfg, body, robot_id)
+    """The emulator for ``base_cfg`` on ``body`` (built from ``body_kind(base_cfg)``), ready to serve."""
+    return device_class(base_cfg.type).from_config(body, base_cfg, robot_id)

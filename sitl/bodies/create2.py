@@ -1,5 +1,8 @@
 """A simulated iRobot Create 2: a dynamic pybullet multibody and the readings its emulator serves.
 
+Body kind ``"create2"`` (:mod:`sitl.bodies.registry`); the Create OI device drives it for either OI
+model (a Create 1 runs on this body too: same size and wheels within a few percent).
+
 The body is built from primitives (no URDF file): a cylinder shell, two velocity-controlled wheel
 joints (sphere collision shapes, cheap and single-contact on the floor) and two frictionless caster
 spheres on fixed joints.  Everything the device emulators read comes from the physics: wheel joint
@@ -13,21 +16,24 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as p
 
+from runtime.drivers.create_oi_protocol import GEOMETRY
 from runtime.errors import InputError
 
-# Geometry and mass (iRobot Create 2 Open Interface spec and the robot's published dimensions).
-SHELL_RADIUS = 0.17           # m (340 mm diameter)
+# Size and wheels from the one geometry table the driver and the planner read; the rest from the
+# robot's published dimensions and mass.
+_G = GEOMETRY["create2"]
+SHELL_RADIUS = _G.radius_mm / 1000.0      # m
 SHELL_TOP = 0.092             # m above the floor
 SHELL_CLEARANCE = 0.010       # m, floor to the underside of the shell
-WHEEL_RADIUS = 0.036          # m (72 mm wheels)
+WHEEL_RADIUS = _G.wheel_diameter_mm / 2000.0   # m
 WHEEL_RADIUS_SIGMA = 0.004    # relative spread of the tyres' effective rolling radius
-WHEEL_TRACK = 0.235           # m between wheel contact points
+WHEEL_TRACK = _G.track_mm / 1000.0        # m between wheel contact points
 CASTER_RADIUS = 0.012         # m
 CASTER_X = 0.13               # m ahead of / behind the axle
 MASS_SHELL = 3.2              # kg
 MASS_WHEEL = 0.15             # kg each
 MASS_CASTER = 0.05            # kg each
-MAX_WHEEL_SPEED = 0.5         # m/s
+MAX_WHEEL_SPEED = _G.max_wheel_mm_s / 1000.0   # m/s
 MAX_WHEEL_TORQUE = 0.3        # N m per wheel at the wheel shaft (below the traction limit ~0.6)
 WHEEL_FRICTION = 1.0
 SHELL_FRICTION = 0.3
@@ -138,6 +144,8 @@ class Battery:
 
 class SimCreate2:
     """One Create 2 body in a :class:`sitl.world.World`; the device emulators call these methods."""
+
+    radius = SHELL_RADIUS         # the world keeps starts this far inside the arena walls
 
     def __init__(self, client: int, robot_id: int, start: tuple[float, float, float],
                  rng: np.random.Generator, gui: bool = False, wheel_radius_sigma: float = WHEEL_RADIUS_SIGMA):

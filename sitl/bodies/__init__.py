@@ -1,0 +1,1 @@
+"""Simulated robot bodies for the pybullet world, by kind (see :mod:`sitl.bodies.registry`)."""

@@ -80,7 +80,7 @@ class Daemon:
         self.ekf = PoseEKF(cfg.localization)
         if cfg.localization.initial_pose is not None:
             self.ekf.initialise(*cfg.localization.initial_pose)
-        radius = _radius(base)
+        radius = float(base.footprint.radius)       # obstacle inflation and avoidance
         c = cfg.control
         self.planner = RobotPlanner.from_config(cfg, radius)
         self.estimator = TravelEstimator(self.planner, Profile(speed=c.cruise_speed, radius=radius), self.pose)
@@ -255,15 +255,6 @@ class Daemon:
 def _for_agent(msg) -> bool:
     from runtime.fleet.messages import FLEET_MESSAGES
     return not isinstance(msg, FLEET_MESSAGES)
-
-
-def _radius(base) -> float:
-    """The base's footprint radius (m): obstacle inflation and avoidance use it."""
-    fp = getattr(base, "footprint", None)
-    if fp is not None:
-        return float(fp.radius)
-    from runtime.planning.grid import CREATE2_RADIUS
-    return CREATE2_RADIUS
 
 
 # ---------------------------------------------------------------------- process main loop

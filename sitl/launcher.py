@@ -47,8 +47,8 @@ class SimRobot:
     gps_dev: object
     udp_port: int
     config_path: Path
-    base_type: str = "create_oi"
-    radius: float = 0.17
+    base_type: str
+    radius: float                       # m, the body's footprint (for the run's picture)
     proc: subprocess.Popen | None = None
     daemon: object = None
     exit_reported: bool = False
@@ -173,7 +173,7 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
         cfg_path.write_text(yaml.safe_dump(data, sort_keys=False))
         C.load_robot(cfg_path)   # what we wrote must load
         robots[r.id] = SimRobot(r.id, body, base_dev, gps_dev, ports[r.id], cfg_path, base_cfg.type,
-                                float(getattr(body, "radius", 0.17)))
+                                float(body.radius))
 
     manifest_path = Path(manifest) if manifest else run_dir / "manifest.json"
     out = Fleet(fleet, world_cfg, robots, world, run_dir, manifest_path, key=key)

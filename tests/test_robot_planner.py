@@ -22,7 +22,7 @@ def _planner(planner: str, rrt_iterations: int = 20000) -> RobotPlanner:
 
 
 def _estimator(planner: str, rrt_iterations: int = 20000) -> TravelEstimator:
-    return TravelEstimator(_planner(planner, rrt_iterations), T.Profile(speed=0.25), lambda: START)
+    return TravelEstimator(_planner(planner, rrt_iterations), T.Profile(speed=0.25, radius=0.17), lambda: START)
 
 
 def test_rrt_miss_drives_the_astar_path_not_a_straight_line_into_the_box(caplog):
@@ -67,7 +67,7 @@ def test_rrt_misses_in_bids_are_priced_not_bid_as_cannot():
 
 def test_estimates_are_one_search_reused_until_the_robot_moves():
     pose = {"p": START}
-    est = TravelEstimator(_planner("astar"), T.Profile(speed=0.5), lambda: pose["p"])
+    est = TravelEstimator(_planner("astar"), T.Profile(speed=0.5, radius=0.17), lambda: pose["p"])
     calls = []
     real = est.planner.costs
     est.planner.costs = lambda start, points: calls.append(points) or real(start, points)

@@ -29,7 +29,7 @@ class ExecContext:
     planner: object                   # runtime.planning.robot_planner.RobotPlanner
     tunables: Tunables
     log: object
-    radius: float = 0.17
+    radius: float                     # m, the base's footprint (obstacle avoidance)
 
     @property
     def goal_tolerance(self) -> float:

@@ -36,8 +36,8 @@ class Task:
 
 @dataclass(frozen=True)
 class Profile:
-    speed: float = 0.25          # m/s cruise
-    radius: float = 0.17         # m, footprint
+    speed: float                 # m/s cruise
+    radius: float                # m, footprint
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,9 @@
 """The SITL's operator: hands the scenario's tasks to the fleet over MAVLink, as a person at a ground station
 would, and watches the run through what the robots report.
 
-It owns a :class:`~runtime.comms.gcs.GroundStation` on the fleet's ground-station port: each hand-over is one
+It owns a :class:`~runtime.comms.gcs.GroundStation` on a port of its own (the fleet's configured
+ground-station port stays free for QGC or MAVProxy; the robots stream to the operator too, since it sends
+them a GCS HEARTBEAT every second, as a ground station does): each hand-over is one
 mission upload (the standard protocol, with its retries and timeouts) to the robot the scenario names, at
 its time.  It asks a live robot for the fleet's task table every second, learns which fleet ids the robots
 gave the handed-in items, and turns what it sees into the run's trace: tasks awarded (a robot's state
@@ -27,9 +29,9 @@ class Operator:
     def __init__(self, fleet, scenario, signing_key: bytes | None = None):
         self.fleet = fleet
         self.scenario = scenario
-        self.gcs = GroundStation(fleet.fleet.gcs, signing_key=signing_key)
-        self.handovers = scenario.handovers()
         self.addresses = {rid: ("127.0.0.1", r.udp_port) for rid, r in fleet.robots.items()}
+        self.gcs = GroundStation(robots=self.addresses, signing_key=signing_key)
+        self.handovers = scenario.handovers()
         self.log = get_logger("sitl.operator")
         self.trace = RunTrace(world=fleet.world_cfg, title=f"{fleet.fleet.source}")
         for rid, r in fleet.robots.items():

@@ -29,7 +29,7 @@ def test_pycreate2_drives_a_sitl_robot_from_the_manifest(tmp_path):
             assert time.monotonic() < deadline, "no manifest"
             time.sleep(0.05)
         robot = json.loads(manifest.read_text())["robots"][0]
-        bot = pycreate2.Create2(robot["base"]["device"], baud=robot["base"]["baudrate"])
+        bot = pycreate2.Create2(robot["base"]["port"], baud=robot["base"]["baudrate"])
         bot.start()
         bot.safe()
         first = bot.get_sensors()

@@ -91,8 +91,10 @@ def test_a_robot_that_never_comes_up_is_treated_as_lost_and_the_rest_converge(tm
     has heard, so without comms.startup_grace the epsilon auction would wait for robot 4's rung for ever."""
     from runtime import config as C
     from runtime.daemon import Daemon
+    from sitl.operator import Operator
     f = launcher.build(_fleet_copy(tmp_path), tmp_path / "run", seed=3)
     daemons = {}
+    op = Operator(f, f.scenario)              # hands the formation to robot 1 over MAVLink
     try:
         daemons = {rid: Daemon(C.load_robot(r.config_path)) for rid, r in f.robots.items() if rid != 4}
         grace = daemons[1].cfg.comms.startup_grace
@@ -100,15 +102,17 @@ def test_a_robot_that_never_comes_up_is_treated_as_lost_and_the_rest_converge(tm
             d.open(f.world.t)
         while f.world.t < grace + 60:
             f.advance_to(f.world.t + 0.05)
+            op.poll(f.world.t)
             for d in daemons.values():
                 d.step(f.world.t)
             if f.world.t > grace and all(d.agent.converged for d in daemons.values()):
                 break
         assert all(d.agent.converged for d in daemons.values())
         assert all(d.stats.peers_lost == [4] for d in daemons.values())
-        held = [d.agent.assignment for d in daemons.values()]
-        assert None not in held and len(set(held)) == 3
+        held = [c.task_id for d in daemons.values() for c in d.agent.commitments]
+        assert len(held) == 3 and len(set(held)) == 3
     finally:
+        op.close()
         for d in daemons.values():
             d.close()
         f.close()

@@ -15,6 +15,7 @@ import yaml
 
 from runtime.localization.enu import geodetic_to_enu
 from sitl import launcher
+from sitl.operator import Operator
 from sitl.ports import free_udp_base
 from tests.test_sitl_fleet import ROOT
 
@@ -26,7 +27,7 @@ def _fleet(tmp_path):
         "robot": str(ROOT / "configs" / "robots" / "create2.yaml"),
         "robots": [{"id": 1, "start": [-4.0, -4.0, 0.0]}, {"id": 2, "start": [-4.0, 4.0, 0.0]},
                    {"id": 3, "start": [4.0, 0.0, 3.14159]}],
-        "formation": [[4.0, 4.0], [4.0, -4.0], [-4.0, 0.0]],
+        "scenario": {"type": "formation", "positions": [[4.0, 4.0], [4.0, -4.0], [-4.0, 0.0]]},
         "base_port": base, "gcs": f"127.0.0.1:{base}", "seed": 3, "gps_noise": 0.5, "timeout": 120,
     }
     p = tmp_path / "fleet.yaml"
@@ -60,9 +61,11 @@ def test_fused_pose_beats_gps_and_odometry(tmp_path):
                 return fixes
             d.gps.poll = tapped
         starts = {r.id: r.start for r in f.fleet.robots}
+        op = Operator(f, f.scenario)              # hands the formation in over MAVLink
         while f.world.t < 60.0:
             f.advance_to(f.world.t + 0.05)
             clock.sleep_until(f.world.t)
+            op.poll(f.world.t)
             for rid, d in daemons.items():
                 d.step(clock.now())
                 x, y, _ = f.true_pose(rid)
@@ -75,6 +78,7 @@ def test_fused_pose_beats_gps_and_odometry(tmp_path):
                 oy = sy + o.x * math.sin(syaw) + o.y * math.cos(syaw)
                 err["odometry"].append((ox - x) ** 2 + (oy - y) ** 2)
         travelled = [d.base.odometry.distance for d in daemons.values()]
+        op.close()
     finally:
         for d in daemons.values():
             d.close()

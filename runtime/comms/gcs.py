@@ -1,7 +1,9 @@
 """A minimal ground station: one UDP socket that watches a fleet and hands it missions.
 
 The SITL launcher uses it to be the fleet's operator (it never reads daemon internals), and ``mrta mission
-status`` to ask a robot for the fleet's tasks.  It keeps per robot what the robot reports (HEARTBEAT,
+status`` to ask a robot for the fleet's tasks.  Like QGC or MAVProxy it sends a HEARTBEAT (MAV_TYPE_GCS) to
+the robots it knows once a second, so they stream their telemetry to it wherever it listens; by default
+it listens on a port of its own, leaving the fleet's configured ground-station port to a stock GCS.  It keeps per robot what the robot reports (HEARTBEAT,
 positions, :class:`~runtime.fleet.messages.RobotState`, MISSION_ITEM_REACHED, MISSION_CURRENT, STATUSTEXT)
 and a copy of the fleet's task table from the robots' answers to its table requests; it runs the mission
 protocol's ground side (:class:`~runtime.comms.mission.MissionClient`) for uploads, one per robot at a
@@ -16,10 +18,12 @@ from dataclasses import dataclass, field
 from runtime.comms import codec, dialect
 from runtime.comms.link import parse_address
 from runtime.comms.mission import MissionClient
+from runtime.errors import InputError
 from runtime.fleet.messages import RobotState, TableRequest, TaskRecord
 from runtime.log import get_logger
 
 GCS_SYSTEM, GCS_COMPONENT = 255, 190
+HEARTBEAT_PERIOD = 1.0
 
 
 @dataclass
@@ -49,14 +53,19 @@ class Upload:
 
 
 class GroundStation:
-    def __init__(self, address: str, *, signing_key: bytes | None = None, reuse: bool = True):
-        host, port = parse_address(address, "ground station address")
-        self.address = address
+    def __init__(self, address: str = "127.0.0.1:0", *, robots: dict[int, tuple] | None = None,
+                 signing_key: bytes | None = None):
+        host, port = parse_address(address, "ground station address", allow_port_zero=True)
         self.log = get_logger("gcs")
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        if reuse:
-            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        self.sock.bind((host, port))
+        try:
+            self.sock.bind((host, port))
+        except OSError as e:
+            self.sock.close()
+            raise InputError(f"ground station: cannot bind {address!r} ({e.strerror})") from None
+        self.address = "%s:%d" % self.sock.getsockname()[:2]
+        self.targets: dict[int, tuple] = dict(robots or {})     # robot -> its MAVLink address (heartbeats)
+        self._next_heartbeat = -math.inf
         self.sock.setblocking(False)
         self.module = dialect.load()
         self.mav = self.module.MAVLink(None, srcSystem=GCS_SYSTEM, srcComponent=GCS_COMPONENT)
@@ -101,9 +110,16 @@ class GroundStation:
 
     # ------------------------------------------------------------------ receiving
     def poll(self, now: float | None = None) -> int:
-        """Drain the socket, drive the uploads; returns how many messages were decoded."""
+        """Heartbeat the robots when due, drain the socket, drive the uploads; returns how many messages were
+        decoded."""
         if now is not None:
             self.now = now
+        if self.now >= self._next_heartbeat:
+            self._next_heartbeat = self.now + HEARTBEAT_PERIOD
+            hb = self.mav.heartbeat_encode(self.module.MAV_TYPE_GCS, self.module.MAV_AUTOPILOT_INVALID, 0, 0,
+                                           self.module.MAV_STATE_ACTIVE)
+            for address in self.targets.values():
+                self.send(hb, address)
         n = 0
         while True:
             try:

@@ -257,7 +257,7 @@ def write_fleet(run_dir: Path, world, robots, yaws, tasks, planner: str, cruise:
     fleet = {"world": str(world_path), "robot": str(robot_path),
              "robots": [{"id": i + 1, "start": [float(robots[i][0]), float(robots[i][1]), float(yaws[i])]}
                         for i in range(n)],
-             "formation": [[float(x), float(y)] for x, y in tasks],
+             "scenario": {"type": "formation", "positions": [[float(x), float(y)] for x, y in tasks]},
              "gcs": f"127.0.0.1:{base}", "base_port": base, "seed": int(seed), "timeout": float(timeout)}
     fleet_path = run_dir / "fleet.yaml"
     fleet_path.write_text(yaml.safe_dump(fleet, sort_keys=False))
@@ -285,13 +285,12 @@ def drive_mission(fleet_path: Path, run_dir: Path, method: str, timeout: float) 
         bids = {}
         events = list(res["events"])
         for rid, r in f.robots.items():
-            task = r.daemon.agent.assignment
-            bids[rid] = r.daemon.agent.book.cost(task) if task is not None else math.nan
-            s = r.daemon.stats
+            bid, offers = _held_bid(r.daemon.agent)
+            bids[rid] = bid
+            s = r.daemon.planner.stats
             if s.plan_fallbacks or s.plan_failures or s.bid_fallbacks:
                 events.append(f"robot {rid}: {s.bid_fallbacks} bid cost(s) the first RRT tree missed, "
                               f"{s.plan_fallbacks} path(s) from A* after RRT missed, {s.plan_failures} without any path")
-            offers = getattr(r.daemon.agent, "idle_offers", 0)
             if offers:
                 events.append(f"robot {rid}: {offers} resale(s) found no worse bid and went to a robot holding no task")
     finally:
@@ -301,6 +300,18 @@ def drive_mission(fleet_path: Path, run_dir: Path, method: str, timeout: float) 
     return {"assignment": res["assignment"], "valid": res["valid"], "bid_cost": float(sum(bids.values())),
             "driven": float(sum(driven.values())), "driven_per_robot": driven, "arrived": arrived,
             "sim_time": res["sim_time"], "wall_s": wall, "events": events}
+
+
+def _held_bid(agent) -> tuple[float, int]:
+    """The cost the robot's round solver bid for the task it holds (nan: none), and its resales that found no
+    worse bid (BS and RTMA count them)."""
+    bid, offers = math.nan, 0
+    for r in agent.rounds.values():
+        offers += getattr(r.solver, "idle_offers", 0)
+        local = r.solver.assignment
+        if local is not None:
+            bid = r.solver.book.cost(local)
+    return bid, offers
 
 
 def drive_inflate(args) -> float:

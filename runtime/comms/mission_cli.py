@@ -1,5 +1,8 @@
-"""`mrta mission upload TARGET FILE` and `mrta mission download TARGET [FILE]`: a ground station's mission
-transfer with one robot over UDP, driven by :class:`~runtime.comms.mission.MissionClient`.
+"""`mrta mission upload TARGET FILE`, `mrta mission download TARGET [FILE]` and `mrta mission status TARGET`: a
+ground station's mission transfer with one robot over UDP, driven by
+:class:`~runtime.comms.mission.MissionClient`, and the fleet's tasks as that robot knows them (each with its
+holders and state, from the robot's replicated task table: MRTA_TABLE_REQUEST, answered with one
+MRTA_TASK_RECORD per task).
 
 TARGET is the robot's MAVLink UDP address ``HOST:PORT`` (``udp:`` or ``udpout:`` in front is accepted),
 e.g. the ``mavlink_udp`` of a SITL manifest.  We send from an ephemeral UDP port as system 255, component
@@ -132,6 +135,41 @@ def run(link: UdpTarget, client: MissionClient, first: list, deadline: float) ->
     return client
 
 
+def status(target: str, *, system: int | None = None, timeout: float = 10.0, key: bytes | None = None):
+    """The fleet's tasks as the robot at ``target`` knows them: its TaskRecords (with holders), by id.  Waits
+    for the robot's RobotState (the size of its table) and asks until every record is in."""
+    from runtime.comms import codec
+    from runtime.fleet.messages import RobotState, TableRequest, TaskRecord
+
+    deadline = time.monotonic() + float(timeout)
+    link = UdpTarget(target, key)
+    try:
+        sysid = system if system is not None else find_system(link, deadline)
+        records: dict[int, TaskRecord] = {}
+        known, asked = None, -float("inf")
+        while time.monotonic() < deadline:
+            now = time.monotonic()
+            link.heartbeat(now)
+            if now - asked > HEARTBEAT_PERIOD:
+                asked = now
+                link.send(codec.to_mavlink(TableRequest(GCS_SYSTEM, sysid, 0), link.mod))
+            for m in link.recv(POLL):
+                try:
+                    msg = codec.from_mavlink(m) if codec.is_agent(m) else None
+                except codec.InvalidMessage:
+                    continue
+                if isinstance(msg, TaskRecord):
+                    records[msg.task] = msg
+                elif isinstance(msg, RobotState) and msg.sender == sysid:
+                    known = msg.known
+            if known is not None and len(records) >= known:
+                return [records[t] for t in sorted(records)]
+        raise NoAnswer(f"{target}: no task table from system {sysid} within {timeout:g} s "
+                       f"(got {len(records)} of {'?' if known is None else known} tasks)")
+    finally:
+        link.close()
+
+
 def _session(target: str, system: int | None, timeout: float, key: bytes | None, start) -> MissionClient:
     deadline = time.monotonic() + float(timeout)
     link = UdpTarget(target, key)
@@ -170,7 +208,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     down = ms.add_parser("download", help="print the robot's mission, or save it as WPL 110")
     down.add_argument("target", metavar="TARGET", help="the robot's MAVLink UDP address HOST:PORT")
     down.add_argument("file", metavar="FILE", nargs="?", help="write the items here (QGC WPL 110)")
-    for q in (up, down):
+    st = ms.add_parser("status", help="the fleet's tasks as the robot knows them: holders and state")
+    st.add_argument("target", metavar="TARGET", help="the robot's MAVLink UDP address HOST:PORT")
+    for q in (up, down, st):
         q.add_argument("--system", type=int, default=None,
                        help="target system id (default: from the robot's first HEARTBEAT)")
         q.add_argument("--timeout", type=float, default=10.0, help="give up after S seconds (default 10)")
@@ -178,6 +218,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        help="MAVLink 2 signing key file (64 hex characters)")
     up.set_defaults(func=_upload_main)
     down.set_defaults(func=_download_main)
+    st.set_defaults(func=_status_main)
 
 
 def _common(args) -> dict:
@@ -215,6 +256,31 @@ def _download_main(args) -> int:
         print(f"wrote {len(items)} items to {args.file}")
     else:
         print(format_table(items, dialect.load()))
+    return 0
+
+
+def _status_main(args) -> int:
+    from runtime import tasks as T
+    from runtime.fleet.messages import STATE_NAMES
+
+    kw = _common(args)
+    try:
+        records = status(args.target, **kw)
+    except NoAnswer as e:
+        print(f"mrta: {e}", file=sys.stderr)
+        return 1
+    rows = [("seq", "task", "kind", "position (m)", "state", "holders")]
+    seq = 0
+    for r in records:
+        listed = STATE_NAMES[r.state] in ("open", "done")
+        kind = T.kind_of_command(r.command)
+        rows.append((str(seq) if listed else "-", f"{r.task >> 16}.{r.task & 0xFFFF}",
+                     kind.KIND if kind else str(r.command), f"({r.x:6.2f}, {r.y:6.2f})", STATE_NAMES[r.state],
+                     "+".join(f"R{h}" for h in r.holders) or "-"))
+        seq += listed
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    print("\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows))
+    print(f"{len(records)} task(s), {sum(r.state == 1 for r in records)} done")
     return 0
 
 

@@ -40,7 +40,9 @@ class FleetNode:
         self.pose: tuple[float, float] | None = None
         self.notices: list[Notice] = []
         self.events: list[TaskEvent] = []          # every agent event, for the run's trace
+        self.done_by: dict[int, tuple[int, ...]] = {}   # tasks this robot saw done: by whom
         self.holding: dict[int, tuple[int, ...]] = {}   # peer -> the tasks its last RobotState named
+        self.held_by: dict[int, set[int]] = {}          # task -> every robot seen holding it (who did it)
         self._last_state: tuple | None = None
         self._next_state = -math.inf
         self.log = get_logger("fleet", self.robot_id)
@@ -83,6 +85,8 @@ class FleetNode:
             return [] if msg.digest == self.table.digest else self.table.records(msg.sender)
         if isinstance(msg, RobotState):
             self.holding[msg.sender] = tuple(msg.tasks)
+            for t in msg.tasks:
+                self.held_by.setdefault(t, set()).add(msg.sender)
             return self.table.compare(msg.sender, msg.known, msg.digest, now) + self.agent.on_message(msg, now)
         return self.agent.on_message(msg, now)
 
@@ -96,8 +100,13 @@ class FleetNode:
         return tuple(sorted(who + [r for r, tasks in self.holding.items() if task_id in tasks]))
 
     def answer_table(self, dest: int) -> list[TaskRecord]:
-        """The table for a ground station: every task with the robots I believe hold it."""
-        return [replace(r, holders=self.holders(r.task)[:8]) for r in self.table.records(dest)]
+        """The table for a ground station: every task with the robots I believe hold it (a done task: the
+        robots that did it, as far as I saw, or the last ones seen holding it)."""
+        out = []
+        for r in self.table.records(dest):
+            who = self.holders(r.task) if r.state == OPEN else self.done_by.get(r.task) or self.held_by.get(r.task, ())
+            out.append(replace(r, holders=tuple(sorted(who))[:8]))
+        return out
 
     def on_progress(self, p: Progress, now: float) -> list:
         if p.event == "arrived":
@@ -120,6 +129,7 @@ class FleetNode:
             self.events.append(ev)
             who = "+".join(f"R{r}" for r in ev.robots)
             if ev.what == DONE:
+                self.done_by[ev.task] = tuple(ev.robots)
                 out += self.table.mark(ev.task, T_DONE)
                 self.notices.append(Notice(f"task {_tid(ev.task)} done by {who}", 5))
             elif ev.what == AWARDED:
@@ -140,7 +150,10 @@ class FleetNode:
         return EXECUTING if self.agent.commitments else IDLE
 
     def held(self) -> tuple[int, ...]:
-        return tuple(c.task_id for c in self.agent.commitments)[:MAX_HELD]
+        held = tuple(c.task_id for c in self.agent.commitments)[:MAX_HELD]
+        for t in held:
+            self.held_by.setdefault(t, set()).add(self.robot_id)
+        return held
 
     def robot_state(self, dest: int = BROADCAST) -> RobotState:
         x, y = self.pose if self.pose is not None else (math.nan, math.nan)

@@ -253,51 +253,83 @@ def _goal_held(f: Fleet, op, now: float, since: float | None) -> tuple[bool, flo
     return False, None
 
 
+class Lockstep:
+    """The daemons inside this process on a simulated clock, with the operator: :meth:`step` runs one control
+    cycle of physics, daemons and operator.  Deterministic for a given seed."""
+
+    def __init__(self, f: Fleet):
+        from runtime.daemon import Daemon
+        from sitl.operator import Operator
+
+        self.f = f
+        self.clock = SimClock(f.world.t)
+        self.daemons = {}
+        for r in f.robots.values():
+            r.daemon = self.daemons[r.id] = Daemon(C.load_robot(r.config_path))
+            r.daemon.open(self.clock.now())
+        self.op = Operator(f, f.scenario, f.key)
+        self.period = min(d.period for d in self.daemons.values())
+        self.stopped: set[int] = set()          # robots whose daemon no longer runs (killed by a test)
+        self._preroll()
+
+    def _preroll(self) -> None:
+        """Hand-overs due at the start complete before the first cycle, as if the operator had uploaded while
+        the robots were booting: the daemons only answer messages until then."""
+        f, op = self.f, self.op
+        for _ in range(PREROLL_ROUNDS):
+            if not op.due(f.world.t):
+                break
+            op.poll(f.world.t)
+            self._service()
+        for _ in range(3):                 # the table copies spread to every robot
+            op.poll(f.world.t)
+            self._service()
+
+    def _service(self) -> None:
+        for rid, d in self.daemons.items():
+            if rid not in self.stopped:
+                d.service(self.clock.now())
+
+    def step(self) -> None:
+        f = self.f
+        f.advance_to(f.world.t + self.period)
+        self.clock.sleep_until(f.world.t)
+        for rid, d in self.daemons.items():
+            if rid not in self.stopped:
+                d.step(self.clock.now())
+        self.op.poll(f.world.t)
+        self.op.record(f.world.t)
+
+    def kill(self, rid: int) -> None:
+        """Robot ``rid``'s daemon dies: it neither steps nor answers from now on (its body stays)."""
+        self.stopped.add(rid)
+        self.daemons[rid].link.close()
+        self.op.robot_died(rid, self.f.world.t)
+
+    def close(self) -> None:
+        self.op.close()
+
+
 def run_lockstep(f: Fleet, timeout: float | None = None, progress=None, on_step=None) -> dict:
     """Daemons in this process on a simulated clock: deterministic for a given seed.
     ``on_step(fleet)`` is called after every control cycle (tests attach observers there)."""
-    from runtime.daemon import Daemon
-    from sitl.operator import Operator
-
-    clock = SimClock(f.world.t)
-    for r in f.robots.values():
-        r.daemon = Daemon(C.load_robot(r.config_path))
-        r.daemon.open(clock.now())
-    op = Operator(f, f.scenario, f.key)
-    period = min(r.daemon.period for r in f.robots.values())
+    run = Lockstep(f)
     timeout = timeout or f.fleet.timeout
-    # hand-overs due at the start complete before the first cycle, as if the operator had uploaded while
-    # the robots were booting: the daemons only answer messages until then
-    for _ in range(PREROLL_ROUNDS):
-        if not op.due(f.world.t):
-            break
-        op.poll(f.world.t)
-        for r in f.robots.values():
-            r.daemon.service(clock.now())
-    for _ in range(3):                 # the table copies spread to every robot
-        op.poll(f.world.t)
-        for r in f.robots.values():
-            r.daemon.service(clock.now())
     since, next_progress, done = None, 0.0, False
     try:
         while f.world.t < timeout:
-            f.advance_to(f.world.t + period)
-            clock.sleep_until(f.world.t)
-            for r in f.robots.values():
-                r.daemon.step(clock.now())
-            op.poll(f.world.t)
-            op.record(f.world.t)
+            run.step()
             if on_step is not None:
                 on_step(f)
-            done, since = _goal_held(f, op, f.world.t, since)
+            done, since = _goal_held(f, run.op, f.world.t, since)
             if done:
                 break
             if progress and f.world.t >= next_progress:
-                progress(f, op)
+                progress(f, run.op)
                 next_progress += 5.0
-        return finish(f, op, timed_out=not done)
+        return finish(f, run.op, timed_out=not done)
     finally:
-        op.close()
+        run.close()
 
 
 def daemon_stats(f: Fleet) -> dict[int, dict]:

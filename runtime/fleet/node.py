@@ -42,7 +42,6 @@ class FleetNode:
         self.events: list[TaskEvent] = []          # every agent event, for the run's trace
         self.done_by: dict[int, tuple[int, ...]] = {}   # tasks this robot saw done: by whom
         self.holding: dict[int, tuple[int, ...]] = {}   # peer -> the tasks its last RobotState named
-        self.held_by: dict[int, set[int]] = {}          # task -> every robot seen holding it (who did it)
         self._last_state: tuple | None = None
         self._next_state = -math.inf
         self.log = get_logger("fleet", self.robot_id)
@@ -75,6 +74,8 @@ class FleetNode:
     def on_message(self, msg, now: float) -> list:
         if isinstance(msg, TaskRecord):
             task, state = self.table.merge(msg)
+            if state == T_DONE:
+                self.done_by.setdefault(msg.task, self.holders(msg.task))     # who held it when it was done
             out = []
             if task is not None and state == OPEN:
                 out += self.agent.add_tasks([task], now)
@@ -85,8 +86,6 @@ class FleetNode:
             return [] if msg.digest == self.table.digest else self.table.records(msg.sender)
         if isinstance(msg, RobotState):
             self.holding[msg.sender] = tuple(msg.tasks)
-            for t in msg.tasks:
-                self.held_by.setdefault(t, set()).add(msg.sender)
             return self.table.compare(msg.sender, msg.known, msg.digest, now) + self.agent.on_message(msg, now)
         return self.agent.on_message(msg, now)
 
@@ -100,11 +99,11 @@ class FleetNode:
         return tuple(sorted(who + [r for r, tasks in self.holding.items() if task_id in tasks]))
 
     def answer_table(self, dest: int) -> list[TaskRecord]:
-        """The table for a ground station: every task with the robots I believe hold it (a done task: the
-        robots that did it, as far as I saw, or the last ones seen holding it)."""
+        """The table for a ground station: every task with the robots I believe hold it (a done task: those
+        that held it when it was done, as far as I know)."""
         out = []
         for r in self.table.records(dest):
-            who = self.holders(r.task) if r.state == OPEN else self.done_by.get(r.task) or self.held_by.get(r.task, ())
+            who = self.holders(r.task) if r.state == OPEN else self.done_by.get(r.task, ())
             out.append(replace(r, holders=tuple(sorted(who))[:8]))
         return out
 
@@ -150,10 +149,7 @@ class FleetNode:
         return EXECUTING if self.agent.commitments else IDLE
 
     def held(self) -> tuple[int, ...]:
-        held = tuple(c.task_id for c in self.agent.commitments)[:MAX_HELD]
-        for t in held:
-            self.held_by.setdefault(t, set()).add(self.robot_id)
-        return held
+        return tuple(c.task_id for c in self.agent.commitments)[:MAX_HELD]
 
     def robot_state(self, dest: int = BROADCAST) -> RobotState:
         x, y = self.pose if self.pose is not None else (math.nan, math.nan)

@@ -1,0 +1,76 @@
+"""Helpers for SITL tests: shipped fleet configs on free ports, and a stock pymavlink ground station."""
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import yaml
+
+os.environ.setdefault("MAVLINK20", "1")       # as MAVProxy does (--mav20, its default): MAVLink 2 frames
+from pymavlink import mavutil  # noqa: E402
+
+from sitl.ports import free_udp_base
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIGS = ROOT / "configs"
+
+
+def shipped_fleet(tmp_path: Path, name: str, **changes) -> Path:
+    """A copy of configs/fleets/NAME with absolute paths and a block of free UDP ports."""
+    src = CONFIGS / "fleets" / name
+    data = yaml.safe_load(src.read_text())
+    for key in ("world", "robot"):
+        data[key] = str((src.parent / data[key]).resolve())
+    for r in data["robots"]:
+        if r.get("robot"):
+            r["robot"] = str((src.parent / r["robot"]).resolve())
+    base = free_udp_base(len(data["robots"]))
+    data["base_port"], data["gcs"] = base, f"127.0.0.1:{base}"
+    data.update(changes)
+    path = tmp_path / f"fleet_{name}"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+class StockGcs:
+    """pymavlink's own connection to one robot's MAVLink port (udpout, as MAVProxy's --master=udpout does):
+    requests go out from its socket and the robot answers to where they came from."""
+
+    def __init__(self, port: int, system: int):
+        self.conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=255, source_component=190,
+                                               dialect="common")
+        self.system = system
+        self.mav = self.conn.mav
+        self.got: list = []
+
+    def heartbeat(self) -> None:
+        self.mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_GCS, mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+
+    def drain(self) -> list:
+        out = []
+        while True:
+            m = self.conn.recv_match(blocking=False)
+            if m is None:
+                self.got += out
+                return out
+            if m.get_type() != "BAD_DATA":
+                out.append(m)
+
+    def wait(self, pred, timeout: float, step=None) -> list:
+        """Messages until one satisfies ``pred`` (returned last) or ``timeout`` wall seconds; ``step()`` is called
+        between polls (a lock-step test advances the fleet there)."""
+        seen, t0 = [], time.monotonic()
+        while time.monotonic() - t0 < timeout:
+            for m in self.drain():
+                seen.append(m)
+                if pred(m):
+                    return seen
+            if step is not None:
+                step()
+            else:
+                time.sleep(0.002)
+        return seen
+
+    def close(self) -> None:
+        self.conn.close()

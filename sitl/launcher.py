@@ -235,7 +235,6 @@ def finish(f: Fleet, op, timed_out: bool) -> dict:
 
 def print_summary(f: Fleet, res: dict, out=sys.stdout) -> None:
     f.scenario.print_summary(res, out)
-    print(f"assignment valid: {res['valid']}   sim time {res['sim_time']:.1f} s", file=out)
     for e in res["events"]:
         print(f"event: {e}", file=out)
     if res.get("picture"):

@@ -23,6 +23,7 @@ from sitl.scenarios.base import match_tasks
 
 TABLE_PERIOD = 1.0          # s between table requests
 STALE = 3.0                 # s without a RobotState: the robot is not live
+RELEASE_GRACE = 2.5         # s a task a robot stopped holding may take to show up done before it counts as released
 
 
 class Operator:
@@ -45,6 +46,8 @@ class Operator:
         self._holders: dict[int, tuple[int, ...]] = {}
         self._reached: dict[int, int] = {}
         self._taken: set[int] = set()
+        self._dropped: dict[tuple[int, int], float] = {}     # (robot, task) it stopped holding -> when
+        self._placeholders = 0
         self._next_table = 0.0
         self._asker = 0
         self._last_pose: dict[int, tuple[float, float]] = {}
@@ -65,9 +68,9 @@ class Operator:
             self._started.add(k)
             up = gcs.upload(h.to, self.addresses[h.to], h.items, now)
             up.handover = h
-            for label, it in zip(h.labels, h.items):
-                self.trace.tasks[len(self.trace.tasks) + 1] = TaskMark(len(self.trace.tasks) + 1, "?", it.x, it.y,
-                                                                       label, 1, now)
+            for label, it in zip(h.labels, h.items):       # until the robots name it: a placeholder id
+                self._placeholders += 1
+                self.trace.tasks[self._placeholders] = TaskMark(self._placeholders, "?", it.x, it.y, label, 1, now)
         for up in gcs.finished:
             h = up.handover
             h.done, h.result, h.error = True, up.client.result, up.client.error
@@ -94,12 +97,12 @@ class Operator:
         """Trace marks keyed by fleet id once the robots have named the tasks."""
         from runtime import tasks as T
         for label, it, tid in zip(h.labels, h.items, h.task_ids):
-            if tid is None or tid in self.trace.tasks:
+            old = next((k for k, m in self.trace.tasks.items() if m.label == label and k < 65536), None)
+            if tid is None or old is None:
                 continue
             kind = T.kind_of_command(it.command)
             need = int(it.param1) if kind is not None and kind.KIND == "rendezvous" else 1
-            old = next((k for k, m in self.trace.tasks.items() if m.label == label and k < 65536), None)
-            arrived = self.trace.tasks.pop(old).arrived_at if old is not None else h.at
+            arrived = self.trace.tasks.pop(old).arrived_at
             self.trace.tasks[tid] = TaskMark(tid, kind.KIND if kind else "?", it.x, it.y, label, need, arrived)
 
     def _events(self, now: float) -> None:
@@ -111,7 +114,7 @@ class Operator:
             if v.tasks != before:
                 for t in before:
                     if t not in v.tasks and t not in self.done_at:
-                        self.trace.event(now, "released", t, (rid,))
+                        self._dropped[(rid, t)] = now
                 for t in v.tasks:
                     if t not in before:
                         self.trace.event(now, "awarded", t, (rid,))
@@ -123,11 +126,27 @@ class Operator:
                 self.trace.event(now, "arrived", tid, (rid,))
             self._reached[rid] = len(v.reached)
         for tid, r in gcs.table.items():
+            if tid not in self.trace.tasks:
+                self._mark(tid, r, now)
             if r.state == DONE and tid not in self.done_at:
                 self.done_at[tid] = now
                 by = tuple(r.holders) or self._holders.get(tid, ())
                 self.done_by[tid] = by
                 self.trace.event(now, "done", tid, by)
+        for (rid, t), when in list(self._dropped.items()):
+            if t in self.done_at and rid in self.done_by[t]:
+                del self._dropped[(rid, t)]                     # it let go because it had done it
+            elif now - when > RELEASE_GRACE:
+                del self._dropped[(rid, t)]
+                self.trace.event(when, "released", t, (rid,))
+
+    def _mark(self, tid: int, r, now: float) -> None:
+        """A task the operator did not hand in itself (another ground station did): mark it by its fleet id."""
+        from runtime import tasks as T
+        kind = T.kind_of_command(r.command)
+        need = int(r.param1) if kind is not None and kind.KIND == "rendezvous" else 1
+        self.trace.tasks[tid] = TaskMark(tid, kind.KIND if kind else "?", r.x, r.y, f"{tid >> 16}.{tid & 0xFFFF}",
+                                         need, now)
 
     def robot_died(self, rid: int, now: float) -> None:
         if rid in self.dead:
@@ -182,6 +201,14 @@ class RunView:
     def task_state(self, tid: int) -> int | None:
         r = self.op.gcs.table.get(tid)
         return None if r is None else r.state
+
+    def table(self) -> dict:
+        """The fleet's tasks as the operator last heard them (fleet id -> TaskRecord)."""
+        return dict(self.op.gcs.table)
+
+    def first_seen(self, tid: int) -> float | None:
+        mark = self.op.trace.tasks.get(tid)
+        return None if mark is None else mark.arrived_at
 
     def true_pose(self, rid: int):
         return self.op.fleet.true_pose(rid)

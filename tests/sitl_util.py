@@ -43,29 +43,31 @@ class StockGcs:
         self.system = system
         self.mav = self.conn.mav
         self.got: list = []
-
+        self.pending: list = []
     def heartbeat(self) -> None:
         self.mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_GCS, mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
 
     def drain(self) -> list:
+        """What a previous :meth:`wait` left over, then every message waiting on the socket."""
         out = []
-        while True:
-            m = self.conn.recv_match(blocking=False)
-            if m is None:
-                self.got += out
-                return out
+        while (m := self.conn.recv_match(blocking=False)) is not None:
             if m.get_type() != "BAD_DATA":
                 out.append(m)
+        self.got += out
+        out, self.pending = self.pending + out, []
+        return out
 
     def wait(self, pred, timeout: float, step=None) -> list:
         """Messages until one satisfies ``pred`` (returned last) or ``timeout`` wall seconds; ``step()`` is called
         between polls (a lock-step test advances the fleet there)."""
         seen, t0 = [], time.monotonic()
         while time.monotonic() - t0 < timeout:
-            for m in self.drain():
-                seen.append(m)
+            batch = self.drain()
+            for k, m in enumerate(batch):
                 if pred(m):
-                    return seen
+                    self.pending = batch[k + 1:]      # the rest of the batch: the next wait sees it first
+                    return seen + batch[:k + 1]
+            seen += batch
             if step is not None:
                 step()
             else:

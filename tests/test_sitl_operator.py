@@ -132,3 +132,186 @@ def test_disarm_stops_the_robot_within_a_cycle_and_its_task_is_done_by_another(t
             gcs.close()
         run.close()
         f.close()
+
+
+class _Fleet:
+    """`mrta sitl run FLEET` as a process (one daemon process per robot), as an operator starts it."""
+
+    def __init__(self, tmp_path, fleet, speedup: float, timeout: float = 600):
+        import json
+        self.run_dir = tmp_path / "run"
+        self.proc = subprocess.Popen([sys.executable, "-m", "runtime.cli", "sitl", "run", str(fleet), "--run-dir",
+                                      str(self.run_dir), "--speedup", str(speedup), "--timeout", str(timeout)],
+                                     cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        deadline = time.monotonic() + 90
+        while not (self.run_dir / "clock").exists():
+            assert time.monotonic() < deadline and self.proc.poll() is None, self.output()
+            time.sleep(0.05)
+        self.manifest = json.loads((self.run_dir / "manifest.json").read_text())
+        self.ports = {r["id"]: int(r["mavlink_udp"].rsplit(":", 1)[1]) for r in self.manifest["robots"]}
+
+    def daemon_pid(self, rid: int) -> int:
+        for p in os.listdir("/proc"):
+            if not p.isdigit():
+                continue
+            try:
+                cmd = open(f"/proc/{p}/cmdline", "rb").read().replace(b"\0", b" ").decode(errors="replace")
+            except OSError:
+                continue
+            if " daemon " in cmd and f"robot_{rid}.yaml" in cmd and str(self.run_dir) in cmd:
+                return int(p)
+        raise AssertionError(f"no daemon process for robot {rid}")
+
+    def output(self) -> str:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                return self.proc.communicate(timeout=30)[0]
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+        return self.proc.communicate()[0] or ""
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+
+
+def _fleet_tasks(port: int, system: int, timeout: float = 10.0):
+    from runtime.comms.mission_cli import status
+    return status(f"127.0.0.1:{port}", system=system, timeout=timeout)
+
+
+@pytest.mark.slow
+def test_an_operator_mission_is_done_waypoint_by_waypoint_even_when_the_robot_it_went_to_dies(tmp_path):
+    """Six waypoints uploaded with pymavlink's mission handshake to robot 1 of a running four-robot fleet; a
+    second upload to robot 2 while the fleet is busy adds two more; robot 1 is killed once it has announced
+    its tasks.  Every waypoint is reached by exactly one robot (MISSION_ITEM_REACHED), all are done."""
+    fleet = _Fleet(tmp_path, shipped_fleet(tmp_path, "operator_4.yaml"), speedup=4)
+    listen = mavutil.mavlink_connection(f"udpin:{fleet.manifest['ground_station']}", source_system=254,
+                                        dialect="common")              # the fleet's ground-station port
+    g1 = g2 = None
+    try:
+        g1 = StockGcs(fleet.ports[1], 1)
+        g1.heartbeat()
+        first = [(-3.0, -3.0), (0.0, -3.5), (3.0, -3.0), (3.0, 3.0), (0.0, 3.5), (-3.0, 3.0)]
+        ack = stock_upload(g1, _items(g1.mav, 1, first))
+        assert ack is not None and ack.type == MAV.MAV_MISSION_ACCEPTED
+        mine = [r.task for r in _fleet_tasks(fleet.ports[3], 3)]          # robot 3 has robot 1's tasks
+        assert len(mine) == 6 and all(t >> 16 == 1 for t in mine)
+        time.sleep(1.0)
+        g2 = StockGcs(fleet.ports[2], 2)
+        g2.heartbeat()
+        ack = stock_upload(g2, _items(g2.mav, 2, [(-1.5, 0.5), (1.5, -0.5)]))
+        assert ack is not None and ack.type == MAV.MAV_MISSION_ACCEPTED
+        os.kill(fleet.daemon_pid(1), signal.SIGKILL)
+        killed = time.monotonic()
+        reached: dict[int, set] = {}
+        deadline = time.monotonic() + 150
+        records = []
+        while time.monotonic() < deadline:
+            while (m := listen.recv_match(type="MISSION_ITEM_REACHED", blocking=False)) is not None:
+                reached.setdefault(m.seq, set()).add(m.get_srcSystem())
+            if time.monotonic() - killed > 5:
+                records = _fleet_tasks(fleet.ports[2], 2)
+                if len(records) == 8 and all(r.state == 1 for r in records):
+                    break
+            time.sleep(0.2)
+        time.sleep(1.0)
+        while (m := listen.recv_match(type="MISSION_ITEM_REACHED", blocking=False)) is not None:
+            reached.setdefault(m.seq, set()).add(m.get_srcSystem())
+        assert len(records) == 8 and all(r.state == 1 for r in records), [(r.task, r.state, r.holders) for r in records]
+        assert sorted(reached) == list(range(8)), reached
+        assert all(len(who) == 1 for who in reached.values()), reached
+        late = {seq for seq, who in reached.items() if seq < 6 and 1 not in who}
+        assert late, "robot 1 did everything before it was killed: the test proves nothing"
+    finally:
+        for g in (g1, g2):
+            if g is not None:
+                g.close()
+        listen.close()
+        out = fleet.output()
+        print(out[-3000:])
+        fleet.close()
+
+
+@pytest.mark.slow
+def test_a_ground_station_connects_and_the_cruise_speed_it_sets_is_driven(tmp_path):
+    """QGroundControl's and MAVProxy's connection steps against a SITL robot, each answered within 1 s; then a
+    PARAM_SET of CTL_CRUISE_SPD changes how fast that robot drives (its peers keep the configured speed)."""
+    fleet = _Fleet(tmp_path, shipped_fleet(tmp_path, "operator_4.yaml"), speedup=2)
+    listen = mavutil.mavlink_connection(f"udpin:{fleet.manifest['ground_station']}", source_system=254,
+                                        dialect="common")
+    g = StockGcs(fleet.ports[1], 1)
+    answered = {}
+
+    def ask(what, send, pred):
+        t0 = time.monotonic()
+        send()
+        seen = g.wait(pred, 1.0)
+        assert seen and pred(seen[-1]), f"{what}: no answer within 1 s ({[m.get_type() for m in seen]})"
+        answered[what] = time.monotonic() - t0
+        return seen
+
+    try:
+        g.heartbeat()
+        seen = ask("AUTOPILOT_VERSION", lambda: g.mav.command_long_send(1, 1, MAV.MAV_CMD_REQUEST_MESSAGE, 0,
+                                                                         MAV.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
+                                                                         0, 0, 0, 0, 0, 0),
+                   lambda m: m.get_type() == "AUTOPILOT_VERSION")
+        ack = next(m for m in seen if m.get_type() == "COMMAND_ACK")
+        assert ack.command == MAV.MAV_CMD_REQUEST_MESSAGE and ack.result == MAV.MAV_RESULT_ACCEPTED
+        caps = seen[-1].capabilities
+        assert caps & MAV.MAV_PROTOCOL_CAPABILITY_MAVLINK2 and caps & MAV.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+        assert not caps & MAV.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
+
+        seen = ask("PARAM_REQUEST_LIST", lambda: g.mav.param_request_list_send(1, 1),
+                   lambda m: m.get_type() == "PARAM_VALUE")
+        count = seen[-1].param_count
+        params = {m.param_index: m for m in g.wait(lambda m: False, 1.5) + seen if m.get_type() == "PARAM_VALUE"}
+        assert sorted(params) == list(range(count)) and {m.param_count for m in params.values()} == {count}
+        names = {m.param_id if isinstance(m.param_id, str) else m.param_id.decode(): m.param_value
+                 for m in params.values()}
+        assert names["CTL_CRUISE_SPD"] == pytest.approx(0.25)
+
+        for mtype in (MAV.MAV_MISSION_TYPE_MISSION, MAV.MAV_MISSION_TYPE_FENCE, MAV.MAV_MISSION_TYPE_RALLY):
+            seen = ask(f"MISSION_REQUEST_LIST {mtype}", lambda t=mtype: g.mav.mission_request_list_send(1, 1, t),
+                       lambda m, t=mtype: m.get_type() == "MISSION_COUNT" and m.mission_type == t)
+            assert seen[-1].count == 0
+        seen = ask("unknown COMMAND_LONG", lambda: g.mav.command_long_send(1, 1, MAV.MAV_CMD_DO_SET_SERVO, 0, 1, 1500,
+                                                                           0, 0, 0, 0, 0),
+                   lambda m: m.get_type() == "COMMAND_ACK" and m.command == MAV.MAV_CMD_DO_SET_SERVO)
+        assert seen[-1].result == MAV.MAV_RESULT_UNSUPPORTED
+        open_param_file = bytes([0, 0, 0, 4, 26, 0, 0, 0, 0, 0, 0, 0]) + b"@PARAM/param.pck" + bytes(251 - 12 - 16)
+        seen = ask("FILE_TRANSFER_PROTOCOL", lambda: g.mav.file_transfer_protocol_send(0, 1, 1, open_param_file),
+                   lambda m: m.get_type() == "FILE_TRANSFER_PROTOCOL")
+        assert seen[-1].payload[3] == 129                         # Nack
+
+        seen = ask("PARAM_SET", lambda: g.mav.param_set_send(1, 1, b"CTL_CRUISE_SPD", 0.1,
+                                                             MAV.MAV_PARAM_TYPE_REAL32),
+                   lambda m: m.get_type() == "PARAM_VALUE")
+        assert seen[-1].param_value == pytest.approx(0.1)
+
+        # each robot's corner: the auction gives every robot its own, 2.8 m away
+        corners = [(-4.0, -4.0), (-4.0, 4.0), (4.0, -4.0), (4.0, 4.0)]
+        ack = stock_upload(g, _items(g.mav, 1, corners))
+        assert ack is not None and ack.type == MAV.MAV_MISSION_ACCEPTED
+        speeds: dict[int, list] = {}
+        deadline = time.monotonic() + 40
+        while time.monotonic() < deadline:
+            while (m := listen.recv_match(type="LOCAL_POSITION_NED", blocking=False)) is not None:
+                speeds.setdefault(m.get_srcSystem(), []).append(math.hypot(m.vx, m.vy))
+            records = _fleet_tasks(fleet.ports[2], 2) if len(speeds.get(1, ())) > 100 else []
+            if records and all(r.state == 1 for r in records):
+                break
+            time.sleep(0.2)
+        assert records and all(r.state == 1 for r in records), records
+        top = {rid: sorted(v)[int(0.95 * len(v))] for rid, v in speeds.items()}     # 95th percentile
+        print("answered within (s):", {k: round(v, 3) for k, v in answered.items()}, "top speeds:", top)
+        assert top[1] < 0.13, top                                   # 0.1 m/s, set by the ground station
+        assert all(top[r] > 0.2 for r in (2, 3, 4)), top            # 0.25 m/s, the configured cruise speed
+    finally:
+        g.close()
+        listen.close()
+        fleet.output()
+        fleet.close()

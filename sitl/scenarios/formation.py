@@ -112,3 +112,4 @@ class Scenario:
         print(f"\nglobal cost (path lengths from the start poses) {res['global_cost']:.3f} m   "
               f"Hungarian optimum {res['optimum']:.3f} m   "
               f"gap {gap:+.2f} %", file=out)
+        print(f"assignment valid: {res['valid']}   sim time {res['sim_time']:.1f} s", file=out)

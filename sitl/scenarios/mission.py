@@ -95,24 +95,33 @@ class Scenario:
             tid is not None and run.task_state(tid) == DONE for h in run.handovers for tid in h.task_ids)
 
     def summary(self, run) -> dict:
-        rows = []
+        """Every task: the scenario's, then any an operator handed in from another ground station."""
+        rows, ours = [], set()
         for h in run.handovers:
             for label, it, tid in zip(h.labels, h.items, h.task_ids or [None] * len(h.items)):
                 state = run.task_state(tid) if tid is not None else None
+                ours.add(tid)
                 rows.append({"label": label, "task": tid, "x": it.x, "y": it.y, "at": h.at, "to": h.to,
                              "state": STATE_NAMES.get(state, "not handed in" if not h.done else "refused"),
                              "by": run.done_by.get(tid, ()), "done_at": run.done_at.get(tid)})
-        valid = all(r["state"] == "done" for r in rows) and bool(rows)
-        return {"tasks": rows, "valid": valid, "driven": dict(run.driven)}
+        for tid, rec in sorted(run.table().items()):
+            if tid not in ours:
+                rows.append({"label": "op", "task": tid, "x": rec.x, "y": rec.y, "at": run.first_seen(tid),
+                             "to": tid >> 16, "state": STATE_NAMES.get(rec.state), "by": run.done_by.get(tid, ()),
+                             "done_at": run.done_at.get(tid)})
+        done = sum(r["state"] == "done" for r in rows)
+        return {"tasks": rows, "valid": bool(rows) and done == len(rows), "done": done, "driven": dict(run.driven)}
 
     @staticmethod
     def print_summary(res: dict, out) -> None:
         print("\ntask  fleet id  position (m)      handed in  state      done by  done at (s)", file=out)
+        at = lambda r: "-" if r["at"] is None else f"{r['at']:7.1f} s"      # noqa: E731
         for r in res["tasks"]:
             tid = "-" if r["task"] is None else f"{r['task'] >> 16}.{r['task'] & 0xFFFF}"
             by = "+".join(f"R{b}" for b in r["by"]) or "-"
             at = "-" if r["done_at"] is None else f"{r['done_at']:.1f}"
-            print(f"{r['label']:>4}  {tid:>8}  ({r['x']:5.2f}, {r['y']:5.2f})  {r['at']:7.1f} s  {r['state']:9}  "
+            print(f"{r['label']:>4}  {tid:>8}  ({r['x']:5.2f}, {r['y']:5.2f})  {at(r):>9}  {r['state']:9}  "
                   f"{by:>7}  {at:>11}", file=out)
         if res["driven"]:
             print("driven (m): " + ", ".join(f"R{rid} {d:.1f}" for rid, d in sorted(res["driven"].items())), file=out)
+        print(f"tasks done: {res['done']}/{len(res['tasks'])}   sim time {res['sim_time']:.1f} s", file=out)

@@ -10,9 +10,9 @@ import importlib
 from runtime.allocation.agent import Method
 
 METHODS: dict[str, str] = {
-    "auction": "runtime.allocation.formation.family:AUCTION",    # epsilon-scaling auction (optimal)
     "bs": "runtime.allocation.formation.family:BS",              # paper 002 basic market algorithm
     "rtma": "runtime.allocation.formation.family:RTMA",          # paper 002 robot and task mean allocation
+    "auction": "runtime.allocation.formation.family:AUCTION",    # epsilon-scaling auction (optimal)
 }
 DEFAULT = "auction"
 

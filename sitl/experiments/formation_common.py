@@ -17,6 +17,7 @@ import numpy as np
 
 from runtime.allocation.formation.assignment import hungarian, percent_error, straight_line_costs
 from runtime.allocation.formation.deferred_acceptance import bs_outcome, rtma_outcome
+from runtime.allocation.formation import simulate
 from runtime.allocation.formation.simulate import BusParams, solve
 from runtime.errors import InputError
 from runtime.log import get_logger
@@ -24,7 +25,7 @@ from sitl.experiments import report
 
 log = get_logger("experiments.formation")
 
-METHODS = ("bs", "rtma", "auction")
+METHODS = tuple(m for m in simulate.METHODS if m != "hungarian")      # the registry's formation solvers
 # BS and RTMA end in the deferred-acceptance matching whatever the message order
 # (runtime.allocation.formation.deferred_acceptance): large samples are solved in closed form
 CLOSED_FORM = {"bs": bs_outcome, "rtma": rtma_outcome}

@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from runtime.allocation.formation.assignment import check_costs, hungarian, percent_error, straight_line_costs
+from runtime.allocation.formation.simulate import METHODS    # the registry's formation solvers, and hungarian
 from runtime.errors import InputError
 from runtime.jsonfile import read_json
 
-METHODS = ("auction", "bs", "rtma", "hungarian")
 
 
 def _finite(v) -> bool:

@@ -95,6 +95,17 @@ class EpsAuctionAgent:
         self._peer_rung: dict[int, int] = {}       # robot -> lowest rung it has reported
         self.log = get_logger("alloc.auction", self.robot_id)
 
+    @staticmethod
+    def options_for(costs) -> dict:
+        """``cost_unit`` for a cost matrix solved in-process: 1 for integer costs (eps_final < 1/n is then
+        exact), else 1 ppm of the largest cost."""
+        import numpy as np
+
+        c = np.asarray(costs, dtype=float)
+        if np.all(c == np.round(c)):
+            return {"cost_unit": 1.0}
+        return {"cost_unit": 1e-6 * float(c.max())} if c.max() > 0 else {}
+
     # ------------------------------------------------------------------ agent interface
     @property
     def assignment(self) -> int | None:

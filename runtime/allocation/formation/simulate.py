@@ -14,10 +14,13 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from runtime.allocation.formation.assignment import check_costs, global_cost, hungarian, straight_line_costs
+from runtime.allocation import registry
 from runtime.allocation.bus import InMemoryBus
+from runtime.allocation.formation.assignment import check_costs, global_cost, hungarian, straight_line_costs
 
-METHODS = ("bs", "rtma", "auction", "hungarian")
+# the registered methods that solve the formation problem in-process (their Method.solver), and Hungarian
+SOLVERS = {m.name: m.solver for m in registry.all_methods() if m.solver is not None}
+METHODS = (*SOLVERS, "hungarian")
 
 
 @dataclass(frozen=True)
@@ -42,28 +45,17 @@ class Result:
 
 
 def agent_class(method: str):
-    if method == "bs":
-        from runtime.allocation.formation.bs import BSAgent
-        return BSAgent
-    if method == "rtma":
-        from runtime.allocation.formation.rtma import RTMAAgent
-        return RTMAAgent
-    if method == "auction":
-        from runtime.allocation.formation.eps_auction import EpsAuctionAgent
-        return EpsAuctionAgent
-    raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    if method not in SOLVERS:
+        raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+    return SOLVERS[method]
 
 
 def make_agents(method: str, costs, bid_timeout: float = 1.0, **options) -> dict[int, object]:
-    """One agent per row of ``costs``: robot id i + 1, cost(task j) = costs[i][j].  The auction's
-    ``cost_unit`` defaults to 1 for integer costs (exact) and to 1 ppm of the largest cost otherwise."""
+    """One agent per row of ``costs``: robot id i + 1, cost(task j) = costs[i][j].  A solver may choose
+    options for the matrix (``options_for``: the auction's cost unit)."""
     c = np.asarray(costs, dtype=float)
     cls = agent_class(method)
-    if method == "auction" and "cost_unit" not in options:
-        if np.all(c == np.round(c)):
-            options["cost_unit"] = 1.0       # integer costs: eps_final < 1/n is enough to be exact
-        elif c.max() > 0:
-            options["cost_unit"] = 1e-6 * float(c.max())   # real costs: 1 ppm of the largest
+    options = {**getattr(cls, "options_for", lambda costs: {})(c), **options}
     ids = list(range(1, c.shape[0] + 1))
     agents = {}
     for i, rid in enumerate(ids):

@@ -23,13 +23,19 @@ u16 = st.integers(0, 0xFFFF)
 u32 = st.integers(0, 0xFFFFFFFF)
 f32 = st.floats(width=32, allow_nan=False)       # float32 values survive the wire exactly
 
-MESSAGES = st.one_of(
-    st.builds(M.TaskInfo, robot, dest, u16, f32, f32, u16),
-    st.builds(M.Announce, robot, dest, u32, u16, f32, f32, f32),
-    st.builds(M.Bid, robot, dest, u32, u16, f32),
-    st.builds(M.Award, robot, dest, u32, u16, robot, f32, f32),
-    st.builds(M.Price, robot, dest, u16, robot, f32, u16),
-    st.builds(M.Status, robot, dest, u32, u16, st.booleans()),
+task = st.integers(0, 0xFFFE)                    # valid task ids (0xFFFF: "none", only in Status)
+finite = st.floats(width=32, allow_nan=False, allow_infinity=False)
+MESSAGES = st.one_of(                            # values the protocol allows (the codec refuses the others)
+    st.builds(M.TaskInfo, robot, dest, task, finite, finite, st.integers(1, 0xFFFF), u32),
+    st.builds(M.Announce, robot, dest, u32, task, finite, finite, f32, u32),
+    st.builds(M.Bid, robot, dest, u32, task, f32, u32),
+    st.builds(M.Award, robot, dest, u32, task, robot, f32, f32, u32),
+    st.builds(M.Price, robot, dest, task, robot, finite, u16, u32),
+    st.builds(M.Status, robot, dest, u32, u16, st.booleans(), u32),
+    st.builds(lambda s, d, r, t, rs: M.RoundStart(s, d, r, t, tuple(dict.fromkeys((s, *rs)))), robot, dest, u32,
+              st.lists(st.integers(1, 0xFFFFFFFF), min_size=1, max_size=40, unique=True).map(tuple),
+              st.lists(robot, max_size=39, unique=True)),
+    st.builds(M.RoundLeave, robot, dest, u32),
 )
 
 
@@ -79,8 +85,8 @@ def test_special_floats_and_none_task(mod):
     assert codec.from_mavlink(_wire(mod, a)[1]) == a
     offer = M.Announce(3, 0, 8, 2, 1.5, -2.25, -math.inf)  # reserve -inf: for robots holding no task
     assert codec.from_mavlink(_wire(mod, offer)[1]) == offer
-    b = codec.from_mavlink(_wire(mod, M.Bid(3, 0, 7, 2, math.nan))[1])
-    assert math.isnan(b.cost)
+    with pytest.raises(codec.InvalidMessage, match="Bid from 3: cost: expected a number, got NaN"):
+        codec.from_mavlink(_wire(mod, M.Bid(3, 0, 7, 2, math.nan))[1])     # refused once, at decode
     s = M.Status(4, 0, 0, 0xFFFF, False)
     assert codec.from_mavlink(_wire(mod, s)[1]) == s
 

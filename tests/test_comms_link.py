@@ -272,11 +272,13 @@ def rx_signed():
 
 robot = st.integers(2, 250)
 u16 = st.integers(0, 0xFFFF)
+task = st.integers(0, 0xFFFE)                              # valid task ids (0xFFFF means "none")
 f32 = st.floats(width=32, allow_nan=False)
-AGENT = st.one_of(
-    st.builds(M.TaskInfo, robot, st.just(0), u16, f32, f32, u16),
-    st.builds(M.Bid, robot, st.just(1), st.integers(0, 2**32 - 1), u16, f32),
-    st.builds(M.Award, robot, st.just(0), st.integers(0, 2**32 - 1), u16, robot, f32, f32),
+finite = st.floats(width=32, allow_nan=False, allow_infinity=False)
+AGENT = st.one_of(                                         # messages the protocol allows (invalid ones: below)
+    st.builds(M.TaskInfo, robot, st.just(0), task, finite, finite, st.integers(1, 0xFFFF)),
+    st.builds(M.Bid, robot, st.just(1), st.integers(0, 2**32 - 1), task, f32),
+    st.builds(M.Award, robot, st.just(0), st.integers(0, 2**32 - 1), task, robot, f32, f32),
     st.builds(M.Status, robot, st.just(1), st.integers(0, 2**32 - 1), u16, st.booleans()),
 )
 _stamp = [signing_timestamp(time.time())]
@@ -372,3 +374,17 @@ def test_counters_are_plain_numbers():
     c = LinkCounters()
     assert set(c.as_dict()) >= {"received", "bad_crc", "parse_errors", "unsigned_dropped",
                                 "bad_signature_dropped", "not_for_us"}
+
+
+def test_values_the_protocol_does_not_allow_are_dropped_once_at_decode_and_counted(links):
+    """Validation happens in the codec: a handler never sees a Price held by robot 0, a NaN bid, a round
+    naming a robot twice, or a task record with an infinite position."""
+    from runtime.fleet.messages import TaskRecord
+    a = links(1)
+    b = links(2, peers=[a])
+    bad = [M.Price(2, 0, 3, 0, 0.5, 2), M.Bid(2, 0, 11, 3, float("nan")),
+           M.RoundStart(2, 0, 7, (65537,), (2, 2)), TaskRecord(2, 0, 65537, 16, 4, 0, 0, 0, 0, 0, float("inf"), 0.0)]
+    good = M.Bid(2, 0, 11, 3, 0.75)
+    b.send_agent(bad + [good], 0.0)
+    assert drain(a, 0.0) == [good]
+    assert settle(a, 0.0, "invalid", len(bad)) == len(bad)

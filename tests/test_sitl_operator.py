@@ -315,3 +315,76 @@ def test_a_ground_station_connects_and_the_cruise_speed_it_sets_is_driven(tmp_pa
         listen.close()
         fleet.output()
         fleet.close()
+
+
+@pytest.mark.slow
+def test_any_robot_gives_the_fleet_mission_and_an_empty_upload_withdraws_what_is_not_done(tmp_path):
+    from runtime.comms.mission import MissionItem
+    scenario = {"type": "mission", "wait": True,
+                "tasks": [{"kind": "goto", "x": -2.0, "y": -1.5}, {"kind": "goto", "x": 3.5, "y": 3.5},
+                          {"kind": "goto", "x": -3.5, "y": 3.5}]}
+    f = launcher.build(shipped_fleet(tmp_path, "operator_4.yaml", scenario=scenario), tmp_path / "run")
+    run = launcher.Lockstep(f)
+    g = StockGcs(f.robots[4].udp_port, 4)
+    try:
+        run.step()
+        # downloading from robot 4 (the tasks went to robot 1): the fleet's three tasks, in the frame sent
+        g.mav.mission_request_list_send(4, 1, 0)
+        count = g.wait(lambda m: m.get_type() == "MISSION_COUNT", 5.0, run.step)[-1]
+        assert count.count == 3
+        items = []
+        for seq in range(3):
+            g.mav.mission_request_int_send(4, 1, seq, 0)
+            items.append(MissionItem.from_mavlink(g.wait(lambda m: m.get_type() == "MISSION_ITEM_INT", 5.0,
+                                                         run.step)[-1]))
+        g.mav.mission_ack_send(4, 1, 0, 0)
+        assert [(it.frame, it.command, round(it.x, 3), round(it.y, 3)) for it in items] == [
+            (ENU, WAYPOINT, -2.0, -1.5), (ENU, WAYPOINT, 3.5, 3.5), (ENU, WAYPOINT, -3.5, 3.5)]
+        # the nearest one gets done; then an empty upload withdraws the two still open, everywhere
+        first = run.op.handovers[0].task_ids[0]
+        while f.world.t < 60 and run.daemons[4].node.table.state(first) != 1:
+            run.step()
+        ack = stock_upload(g, [], run.step)
+        assert ack is not None and ack.type == MAV.MAV_MISSION_ACCEPTED
+        for _ in range(10):
+            run.step()
+        for d in run.daemons.values():
+            states = sorted(e.state for e in d.node.table.entries.values())
+            assert states == [2, 2, 3], states             # withdrawn, withdrawn, and the done one cleared
+            assert not d.agent.commitments                 # nobody drives to a withdrawn task
+            assert d.node.table.listing() == []            # the next download is empty
+        texts = [m.text for m in g.got if m.get_type() == "STATUSTEXT"]
+        assert any("2 task(s) withdrawn" in t for t in texts), texts
+    finally:
+        g.close()
+        run.close()
+        f.close()
+
+
+@pytest.mark.slow
+def test_a_fleet_mixes_robot_templates(tmp_path):
+    """Each robot may name its own robot template: here robot 2 runs BS while the others run the fleet's
+    template (auction), and robot 3 is a Create 1.  The configs the launcher writes carry each robot's own."""
+    import yaml
+
+    from runtime import config as C
+    t = yaml.safe_load((ROOT / "configs" / "robots" / "create2.yaml").read_text())
+    t["allocation"] = {"method": "bs", "bid_timeout": 0.5}
+    (tmp_path / "bs.yaml").write_text(yaml.safe_dump(t))
+    t1 = yaml.safe_load((ROOT / "configs" / "robots" / "create2.yaml").read_text())
+    t1["base"]["model"] = "create1"
+    (tmp_path / "create1.yaml").write_text(yaml.safe_dump(t1))
+    path = shipped_fleet(tmp_path, "create2_4.yaml")
+    data = yaml.safe_load(path.read_text())
+    data["robots"][1]["robot"] = str(tmp_path / "bs.yaml")
+    data["robots"][2]["robot"] = str(tmp_path / "create1.yaml")
+    path.write_text(yaml.safe_dump(data))
+    f = launcher.build(path, tmp_path / "run")
+    try:
+        cfgs = {rid: C.load_robot(r.config_path) for rid, r in f.robots.items()}
+        assert [cfgs[r].allocation.method for r in (1, 2, 3, 4)] == ["auction", "bs", "auction", "auction"]
+        assert cfgs[2].allocation.bid_timeout == 0.5
+        assert [cfgs[r].base.model for r in (1, 2, 3, 4)] == ["create2", "create2", "create1", "create2"]
+        assert cfgs[3].base.baudrate == 57600                       # the Create 1's own rate, from its device
+    finally:
+        f.close()

@@ -10,6 +10,7 @@ answers an auction rather than running one: there (dest, auction) names it, and 
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +30,10 @@ class TaskInfo:
     n_tasks: int
     round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
 
+    def invalid(self) -> str | None:
+        return _bad_task(self.task) or _not_finite(x=self.x, y=self.y) or (
+            None if 0 < self.n_tasks <= 0xFFFF else f"n_tasks {self.n_tasks}: expected 1..65535")
+
 
 @dataclass(frozen=True)
 class Announce:
@@ -43,6 +48,9 @@ class Announce:
     reserve: float
     round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
 
+    def invalid(self) -> str | None:
+        return _bad_task(self.task) or _not_finite(x=self.x, y=self.y) or _nan(reserve=self.reserve)
+
 
 @dataclass(frozen=True)
 class Bid:
@@ -52,6 +60,9 @@ class Bid:
     task: int
     cost: float
     round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
+
+    def invalid(self) -> str | None:
+        return _bad_task(self.task) or _nan(cost=self.cost)
 
 
 @dataclass(frozen=True)
@@ -66,6 +77,9 @@ class Award:
     mean: float
     round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
 
+    def invalid(self) -> str | None:
+        return _bad_task(self.task) or _bad_robot(self.winner) or _nan(cost=self.cost, mean=self.mean)
+
 
 @dataclass(frozen=True)
 class Price:
@@ -79,6 +93,9 @@ class Price:
     price: float
     phase: int
     round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
+
+    def invalid(self) -> str | None:
+        return _bad_task(self.task) or _bad_robot(self.holder) or _not_finite(price=self.price)
 
 
 @dataclass(frozen=True)
@@ -105,6 +122,13 @@ class RoundStart:
     tasks: tuple[int, ...]
     robots: tuple[int, ...]
 
+    def invalid(self) -> str | None:
+        if not self.tasks or len(set(self.tasks)) != len(self.tasks):
+            return f"tasks {list(self.tasks)}: expected distinct fleet task ids"
+        if self.sender not in self.robots or len(set(self.robots)) != len(self.robots):
+            return f"robots {list(self.robots)}: expected distinct ids, the sender's among them"
+        return next(filter(None, map(_bad_robot, self.robots)), None)
+
 
 @dataclass(frozen=True)
 class RoundLeave:
@@ -112,6 +136,22 @@ class RoundLeave:
     sender: int
     dest: int
     round: int
+
+
+def _bad_task(task: int) -> str | None:
+    return None if 0 <= task < 0xFFFF else f"task {task}: expected 0..65534"
+
+
+def _bad_robot(robot: int) -> str | None:
+    return None if 1 <= robot <= 250 else f"robot {robot}: expected 1..250"
+
+
+def _not_finite(**values: float) -> str | None:
+    return next((f"{k} {v}: expected a finite number" for k, v in values.items() if not math.isfinite(v)), None)
+
+
+def _nan(**values: float) -> str | None:
+    return next((f"{k}: expected a number, got NaN" for k, v in values.items() if math.isnan(v)), None)
 
 
 AGENT_MESSAGES = (TaskInfo, Announce, Bid, Award, Price, Status)

@@ -246,6 +246,12 @@ def print_summary(f: Fleet, res: dict, out=sys.stdout) -> None:
 def _goal_held(f: Fleet, op, now: float, since: float | None) -> tuple[bool, float | None]:
     from sitl.operator import RunView
 
+    refused = op.refused()
+    if refused:                        # the goal cannot be met: end the run, saying why
+        for line in refused:
+            if line not in f.events:
+                f.events.append(line)
+        return True, since
     if f.scenario.goal(RunView(op)):
         since = now if since is None else since
         return now - since > SETTLE, since

@@ -54,6 +54,11 @@ class Operator:
         self.now = 0.0
 
     # ------------------------------------------------------------------ the loop
+    def refused(self) -> list[str]:
+        """One line per hand-over the fleet refused (the run cannot meet its goal)."""
+        return [f"hand-over of {len(h.items)} task(s) at {h.at:g} s to robot {h.to} refused: "
+                f"{h.error or result_name(h.result)}" for h in self.handovers if h.done and h.result != ACCEPTED]
+
     def due(self, now: float) -> bool:
         """A hand-over is due at ``now`` and not finished."""
         return any(h.at <= now and not h.done for h in self.handovers)

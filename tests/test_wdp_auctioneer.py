@@ -87,7 +87,7 @@ def test_late_duplicate_and_foreign_bids_are_counted():
     auct = SimultaneousAuctioneer(AUCTIONEER, (1, 2), {7: (0.0, 0.0)}, bid_window=1.0)
     offers = auct.on_tick(0.0)
     assert [type(m) for m in offers] == [TaskOffer] and offers[0].deadline == 1.0
-    a = offers[0].auction
+    a = offers[0].round
     assert auct.on_message(CoalitionBid(1, AUCTIONEER, a, 7, (1, 2), 4.0), 0.1) == []
     auct.on_message(CoalitionBid(1, AUCTIONEER, a, 7, (2, 1), 6.0), 0.2)          # same coalition
     auct.on_message(CoalitionBid(2, AUCTIONEER, a + 1, 7, (2,), 6.0), 0.2)        # wrong round

@@ -18,11 +18,10 @@ import math
 from dataclasses import dataclass, field
 from typing import Callable, Iterable
 
-from runtime.allocation.coalition import winner_determination as wd
+from runtime.allocation.coalition.bidbook import BidBook
 from runtime.allocation.formation.messages import BROADCAST
 from runtime.allocation.coalition.wdp_messages import (AwardAck, AwardCancel, CoalitionAward, CoalitionBid, TaskDone,
-                                             TaskOffer)
-from runtime.allocation.coalition.wdp_model import Problem, TaskBid
+                                                       TaskOffer)
 from runtime.log import get_logger
 
 
@@ -65,7 +64,7 @@ class SimultaneousAuctioneer:
         self.auction = 0
         self.phase = "idle"              # idle -> bidding -> running
         self.deadline = math.inf
-        self.received: dict[tuple[int, tuple[int, ...]], float] = {}
+        self.book: BidBook | None = None
         self.awards: dict[int, _Award] = {}          # task -> current award
         self.completed: dict[int, tuple[int, ...]] = {}
         self.leftover: set[int] = set()
@@ -86,6 +85,11 @@ class SimultaneousAuctioneer:
             out += self._expire_awards(now)
         return out
 
+    @property
+    def received(self) -> dict[tuple[int, tuple[int, ...]], float]:
+        """The bids of the round: (task, sorted coalition) -> value."""
+        return {} if self.book is None else self.book.received
+
     def on_message(self, msg, now: float) -> list:
         if getattr(msg, "sender", None) in self.unresponsive:
             self.unresponsive.discard(msg.sender)       # heard again: eligible for leftovers
@@ -94,7 +98,7 @@ class SimultaneousAuctioneer:
             return []
         if isinstance(msg, AwardAck):
             award = self.awards.get(msg.task)
-            if msg.auction != self.auction or award is None or msg.sender not in award.robots:
+            if msg.round != self.auction or award is None or msg.sender not in award.robots:
                 self.stats.ignored += 1
                 return []
             award.acked.add(msg.sender)
@@ -116,37 +120,18 @@ class SimultaneousAuctioneer:
         self.auction += 1
         self.phase = "bidding"
         self.deadline = now + self.bid_window
+        self.book = BidBook(self.auction, tuple(sorted(self.tasks)), self.robots, self.deadline)
         self.log.info("round %d: offering %d tasks until %.3f", self.auction, len(self.tasks), self.deadline)
-        return [TaskOffer(self.robot_id, BROADCAST, self.auction, t, float(x), float(y), len(self.tasks), self.deadline)
-                for t, (x, y) in sorted(self.tasks.items())]
+        return [TaskOffer(self.robot_id, BROADCAST, self.auction, t, float(x), float(y), len(self.tasks), self.deadline,
+                          self.robots) for t, (x, y) in sorted(self.tasks.items())]
 
     def _take_bid(self, bid: CoalitionBid, now: float) -> None:
-        try:
-            robots = tuple(bid.robots)
-            ok = (bid.auction == self.auction and bid.task in self.tasks and len(robots) > 0
-                  and len(set(robots)) == len(robots) and all(r in self.robots for r in robots)
-                  and bid.sender in robots and isinstance(bid.value, (int, float)) and not isinstance(bid.value, bool)
-                  and math.isfinite(bid.value) and bid.value >= 0)
-        except TypeError:
-            ok = False
-        if not ok:
-            self.stats.dropped += 1
-            return
-        if self.phase != "bidding" or now > self.deadline:
-            self.stats.late += 1
-            return
-        key = (bid.task, tuple(sorted(robots)))
-        if key in self.received:
-            self.stats.duplicates += 1
-            self.received[key] = max(self.received[key], float(bid.value))
-            return
-        self.received[key] = float(bid.value)
-        self.stats.bids += 1
+        outcome = "dropped" if self.book is None else self.book.take(bid, now)
+        setattr(self.stats, outcome, getattr(self.stats, outcome) + 1)
 
     def _close(self, now: float) -> list:
         self.phase = "running"
-        bids = tuple(TaskBid(t, rs, v) for (t, rs), v in sorted(self.received.items()))
-        result = wd.solve(Problem(self.robots, tuple(sorted(self.tasks)), bids), self.method)
+        result, bids = self.book.solve(self.method)
         self.round_value = result.value
         self.leftover = set(self.tasks) - set(result.assignment)
         self.log.info("round %d: %d bids, value %.3f by %s, %d tasks left over", self.auction, len(bids),
@@ -181,7 +166,7 @@ class SimultaneousAuctioneer:
 
     def _done(self, msg: TaskDone, now: float) -> list:
         award = self.awards.get(msg.task)
-        if msg.auction != self.auction or award is None or msg.sender not in award.robots:
+        if msg.round != self.auction or award is None or msg.sender not in award.robots:
             self.stats.ignored += 1
             return []
         award.acked.add(msg.sender)          # finishing implies it had accepted
@@ -216,7 +201,7 @@ class SimultaneousAuctioneer:
 @dataclass
 class _Job:
     task: int
-    auction: int
+    round: int
     auctioneer: int
     until: float
 
@@ -236,12 +221,12 @@ class CoalitionBidder:
 
     def on_message(self, msg, now: float) -> list:
         if isinstance(msg, TaskOffer):
-            return [CoalitionBid(self.robot_id, msg.sender, msg.auction, msg.task, tuple(robots), float(value))
+            return [CoalitionBid(self.robot_id, msg.sender, msg.round, msg.task, tuple(robots), float(value))
                     for robots, value in self.bids_for(msg.task, msg.x, msg.y)]
         if isinstance(msg, CoalitionAward) and self.robot_id in msg.robots:
             if msg.task not in self.jobs:
-                self.jobs[msg.task] = _Job(msg.task, msg.auction, msg.sender, now + self.work_time(msg.task))
-            return [AwardAck(self.robot_id, msg.sender, msg.auction, msg.task)]
+                self.jobs[msg.task] = _Job(msg.task, msg.round, msg.sender, now + self.work_time(msg.task))
+            return [AwardAck(self.robot_id, msg.sender, msg.round, msg.task)]
         if isinstance(msg, AwardCancel):
             self.jobs.pop(msg.task, None)
             return []
@@ -254,5 +239,5 @@ class CoalitionBidder:
             if now >= job.until:
                 del self.jobs[task]
                 self.done.append(task)
-                out.append(TaskDone(self.robot_id, job.auctioneer, job.auction, task))
+                out.append(TaskDone(self.robot_id, job.auctioneer, job.round, task))
         return out

@@ -1,0 +1,150 @@
+"""Acceptance in the SITL (lock-step, deterministic): six Create 2 daemons allocate rendezvous tasks by the
+coalition method (configs/fleets/coalition_6.yaml).  Coalitions meet around their points, round 1 is optimal
+over the bids received, the leftover task is done after the first finish, and a member killed mid-drive has
+its task offered again and done."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+import yaml
+
+from runtime.allocation.agent import DONE
+from runtime.allocation.coalition import meeting
+from sitl import launcher
+from sitl.ports import free_udp_base
+
+ROOT = Path(__file__).resolve().parents[1]
+FLEET = ROOT / "configs" / "fleets" / "coalition_6.yaml"
+EKF_MARGIN = 0.15          # m: a daemon drives on its pose estimate (GPS noise 0.3 m), not on the true pose
+
+
+def _fleet_copy(tmp_path) -> Path:
+    data = yaml.safe_load(FLEET.read_text())
+    data["world"] = str(ROOT / "configs" / "worlds" / "arena_10m.yaml")
+    data["robot"] = str(ROOT / "configs" / "robots" / "create2_coalition.yaml")
+    base = free_udp_base(len(data["robots"]))
+    data["base_port"], data["gcs"] = base, f"127.0.0.1:{base}"
+    p = tmp_path / "fleet.yaml"
+    p.write_text(yaml.safe_dump(data))
+    return p
+
+
+class Stopped:
+    """A killed robot's daemon: closed (motors stopped, socket shut), never stepped again."""
+
+    def __init__(self, daemon):
+        self.period = daemon.period
+        self.id = daemon.id
+
+    def step(self, now: float) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+class Watch:
+    """Samples the true poses at every control cycle: for each task, the closest its coalition came to being
+    all together at the point (the largest member distance, minimised over time), and when tasks finished."""
+
+    def __init__(self):
+        self.closest: dict[int, float] = {}
+        self.coalition: dict[int, tuple[int, ...]] = {}
+        self.done_at: dict[int, float] = {}
+        self.kill_at: float | None = None
+        self.victim: tuple[int, int] | None = None       # (robot, task)
+
+    def daemons(self, f):
+        return {rid: r.daemon for rid, r in f.robots.items() if not isinstance(r.daemon, Stopped)}
+
+    def __call__(self, f) -> None:
+        ds = self.daemons(f)
+        jobs: dict[int, dict[int, tuple]] = {}
+        for rid, d in ds.items():
+            job = d.agent.member.job
+            if job is not None:
+                jobs.setdefault(job.task, {})[rid] = (job.round, job.robots)
+            for ev in d.node.events:
+                if ev.what == DONE and ev.task not in self.done_at:
+                    self.done_at[ev.task] = f.world.t
+        table = ds[min(ds)].node.table.entries
+        for task, who in jobs.items():
+            coalitions = set(who.values())
+            assert len(coalitions) == 1, f"t={f.world.t:.2f}: task {task} held by two coalitions {who}"
+            (_, robots), = coalitions
+            if set(who) != set(robots):
+                continue
+            point = table[task].task.position
+            spread = max(math.dist(f.true_pose(r)[:2], point) for r in robots)
+            if spread < self.closest.get(task, math.inf):
+                self.closest[task], self.coalition[task] = spread, robots
+        if self.kill_at is not None and self.victim is None and f.world.t >= self.kill_at:
+            self._kill(f, ds)
+
+    def _kill(self, f, ds) -> None:
+        for rid in sorted(ds, reverse=True):
+            job = ds[rid].agent.member.job
+            if rid != min(ds) and job is not None and not job.arrived:
+                self.victim = (rid, job.task)
+                ds[rid].close()
+                f.robots[rid].daemon = Stopped(ds[rid])
+                return
+
+
+def _run(tmp_path, watch: Watch) -> tuple[dict, dict, float]:
+    """The run's result, the live robots' agents, and the goal tolerance they drove to."""
+    f = launcher.build(_fleet_copy(tmp_path), tmp_path / "run", seed=1)
+    try:
+        res = launcher.run_lockstep(f, timeout=150, on_step=watch)
+        live = {rid: r.daemon for rid, r in f.robots.items() if not isinstance(r.daemon, Stopped)}
+    finally:
+        f.close()
+    return res, {rid: d.agent for rid, d in live.items()}, live[min(live)].cfg.control.goal_tolerance
+
+
+def _ring(k: int, agent) -> float:
+    return meeting.ring_radius(k, agent.estimator.profile.radius, agent.options.spacing)
+
+
+@pytest.mark.slow
+def test_coalitions_meet_leftover_after_the_first_finish_and_round_one_is_optimal(tmp_path):
+    from tests.test_coalition_fleet import brute_force
+
+    watch = Watch()
+    res, agents, tolerance = _run(tmp_path, watch)
+    assert res["goal_met"] and res["valid"], res
+    ids = [row["task"] for row in res["tasks"]]
+    assert sorted(watch.done_at) == sorted(ids)
+    auct = agents[1]
+    first = auct.rounds[0]
+    assert first.robots == (1, 2, 3, 4, 5, 6) and first.tasks == tuple(sorted(ids))
+    assert math.isclose(first.value, brute_force(first.tasks, first.bids))
+    (late,) = set(ids) - set(first.winners)                          # 9 places, 6 robots: one left over
+    first_finish = min(watch.done_at.values())
+    assert next(r for r in auct.rounds if late in r.winners).opened >= first_finish
+    assert watch.done_at[late] > first_finish
+    needs = {(t["x"], t["y"]): t["robots"] for t in yaml.safe_load(FLEET.read_text())["scenario"]["tasks"]}
+    for row in res["tasks"]:
+        task, k = row["task"], len(watch.coalition[row["task"]])
+        assert k == needs[(row["x"], row["y"])]
+        limit = _ring(k, auct) + tolerance + EKF_MARGIN
+        assert watch.closest[task] <= limit, (task, watch.closest[task], limit)
+    print({f"{t >> 16}.{t & 0xFFFF}": (watch.coalition[t], round(watch.closest[t], 3), round(watch.done_at[t], 1))
+           for t in ids}, "round 1 value", round(first.value, 3), "sim", round(res["sim_time"], 1))
+
+
+@pytest.mark.slow
+def test_a_member_killed_mid_drive_has_its_task_offered_again_and_done(tmp_path):
+    watch = Watch()
+    watch.kill_at = 8.0
+    res, agents, _ = _run(tmp_path, watch)
+    assert watch.victim is not None
+    victim, task = watch.victim
+    assert res["goal_met"] and res["valid"], res
+    auct = agents[min(agents)]
+    assert auct.auction.stats.released >= 1
+    assert sum(1 for r in auct.rounds if task in r.winners) >= 2            # won again in a later round
+    assert victim not in watch.coalition[task]
+    print("killed", victim, "task", task, "done at", round(watch.done_at[task], 1), "by", watch.coalition[task])

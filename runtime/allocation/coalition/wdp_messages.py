@@ -52,6 +52,14 @@ def _ids(msg) -> str | None:
     return None
 
 
+def _led(msg) -> str | None:
+    """Ids, and ``robots`` a coalition that names its sender."""
+    why = _ids(msg) or _robots(msg.robots, MAX_COALITION)
+    if why is None and msg.sender not in msg.robots:
+        why = f"robots {list(msg.robots)}: expected the sender {msg.sender} among them"
+    return why
+
+
 @dataclass(frozen=True)
 class TaskOffer:
     """Auctioneer offers ``task`` at (x, y) in round ``round`` to the robots ``robots``; bids are taken
@@ -90,14 +98,10 @@ class CoalitionBid:
     value: float
 
     def invalid(self) -> str | None:
-        why = _ids(self) or _robots(self.robots, MAX_COALITION)
-        if why:
-            return why
-        if self.sender not in self.robots:
-            return f"robots {list(self.robots)}: expected the sender {self.sender} among them"
-        if not (_number(self.value) and self.value >= 0):
-            return f"value {self.value}: expected a finite number >= 0"
-        return None
+        why = _led(self)
+        if why is None and not (_number(self.value) and self.value >= 0):
+            why = f"value {self.value}: expected a finite number >= 0"
+        return why
 
 
 @dataclass(frozen=True)
@@ -156,12 +160,7 @@ class MemberReport:
     arrived: bool
 
     def invalid(self) -> str | None:
-        why = _ids(self) or _robots(self.robots, MAX_COALITION)
-        if why:
-            return why
-        if self.sender not in self.robots:
-            return f"robots {list(self.robots)}: expected the sender {self.sender} among them"
-        return None if isinstance(self.arrived, bool) else "arrived: expected true/false"
+        return _led(self) or (None if isinstance(self.arrived, bool) else "arrived: expected true/false")
 
 
 @dataclass(frozen=True)

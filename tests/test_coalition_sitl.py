@@ -10,10 +10,11 @@ from pathlib import Path
 import pytest
 import yaml
 
-from runtime.allocation.agent import DONE
+from runtime.allocation.agent import DONE, RELEASED
 from runtime.allocation.coalition import meeting
 from sitl import launcher
-from sitl.ports import free_udp_base
+from sitl.operator import RunView
+from tests.sitl_util import shipped_fleet
 
 ROOT = Path(__file__).resolve().parents[1]
 FLEET = ROOT / "configs" / "fleets" / "coalition_6.yaml"
@@ -21,46 +22,24 @@ EKF_MARGIN = 0.15          # m: a daemon drives on its pose estimate (GPS noise 
 
 
 def _fleet_copy(tmp_path) -> Path:
-    data = yaml.safe_load(FLEET.read_text())
-    data["world"] = str(ROOT / "configs" / "worlds" / "arena_10m.yaml")
-    data["robot"] = str(ROOT / "configs" / "robots" / "create2_coalition.yaml")
-    base = free_udp_base(len(data["robots"]))
-    data["base_port"], data["gcs"] = base, f"127.0.0.1:{base}"
-    p = tmp_path / "fleet.yaml"
-    p.write_text(yaml.safe_dump(data))
-    return p
-
-
-class Stopped:
-    """A killed robot's daemon: closed (motors stopped, socket shut), never stepped again."""
-
-    def __init__(self, daemon):
-        self.period = daemon.period
-        self.id = daemon.id
-
-    def step(self, now: float) -> None:
-        pass
-
-    def close(self) -> None:
-        pass
+    return shipped_fleet(tmp_path, FLEET.name)
 
 
 class Watch:
-    """Samples the true poses at every control cycle: for each task, the closest its coalition came to being
-    all together at the point (the largest member distance, minimised over time), and when tasks finished."""
+    """Samples the true poses after every control cycle: for each task, the closest its coalition came to being
+    all together at the point (the largest member distance, minimised over time), and when tasks finished.
+    With ``kill_at``, kills the highest-id robot (not the auctioneer) driving to its slot at that time: its
+    daemon stops and is closed (motors stopped, socket shut)."""
 
-    def __init__(self):
+    def __init__(self, kill_at: float | None = None):
         self.closest: dict[int, float] = {}
         self.coalition: dict[int, tuple[int, ...]] = {}
         self.done_at: dict[int, float] = {}
-        self.kill_at: float | None = None
+        self.kill_at = kill_at
         self.victim: tuple[int, int] | None = None       # (robot, task)
 
-    def daemons(self, f):
-        return {rid: r.daemon for rid, r in f.robots.items() if not isinstance(r.daemon, Stopped)}
-
-    def __call__(self, f) -> None:
-        ds = self.daemons(f)
+    def __call__(self, f, run) -> None:
+        ds = {rid: d for rid, d in run.daemons.items() if rid not in run.stopped}
         jobs: dict[int, dict[int, tuple]] = {}
         for rid, d in ds.items():
             job = d.agent.member.job
@@ -81,27 +60,31 @@ class Watch:
             if spread < self.closest.get(task, math.inf):
                 self.closest[task], self.coalition[task] = spread, robots
         if self.kill_at is not None and self.victim is None and f.world.t >= self.kill_at:
-            self._kill(f, ds)
-
-    def _kill(self, f, ds) -> None:
-        for rid in sorted(ds, reverse=True):
-            job = ds[rid].agent.member.job
-            if rid != min(ds) and job is not None and not job.arrived:
-                self.victim = (rid, job.task)
-                ds[rid].close()
-                f.robots[rid].daemon = Stopped(ds[rid])
-                return
+            for rid in sorted(ds, reverse=True):
+                job = ds[rid].agent.member.job
+                if rid != min(ds) and job is not None and not job.arrived:
+                    self.victim = (rid, job.task)
+                    run.kill(rid)
+                    ds[rid].close()
+                    return
 
 
-def _run(tmp_path, watch: Watch) -> tuple[dict, dict, float]:
-    """The run's result, the live robots' agents, and the goal tolerance they drove to."""
+def _run(tmp_path, watch: Watch, timeout: float = 150.0) -> tuple[dict, dict, float]:
+    """Lock-step until every task is done: the run's result, the live robots' daemons, the goal tolerance."""
     f = launcher.build(_fleet_copy(tmp_path), tmp_path / "run", seed=1)
+    run = launcher.Lockstep(f)
     try:
-        res = launcher.run_lockstep(f, timeout=150, on_step=watch)
-        live = {rid: r.daemon for rid, r in f.robots.items() if not isinstance(r.daemon, Stopped)}
+        goal = False
+        while f.world.t < timeout and not goal:
+            run.step()
+            watch(f, run)
+            goal = f.scenario.goal(RunView(run.op))
+        res = launcher.finish(f, run.op, timed_out=not goal)
+        live = {rid: d for rid, d in run.daemons.items() if rid not in run.stopped}
     finally:
+        run.close()
         f.close()
-    return res, {rid: d.agent for rid, d in live.items()}, live[min(live)].cfg.control.goal_tolerance
+    return res, live, live[min(live)].cfg.control.goal_tolerance
 
 
 def _ring(k: int, agent) -> float:
@@ -113,11 +96,11 @@ def test_coalitions_meet_leftover_after_the_first_finish_and_round_one_is_optima
     from tests.test_coalition_fleet import brute_force
 
     watch = Watch()
-    res, agents, tolerance = _run(tmp_path, watch)
+    res, daemons, tolerance = _run(tmp_path, watch)
     assert res["goal_met"] and res["valid"], res
     ids = [row["task"] for row in res["tasks"]]
     assert sorted(watch.done_at) == sorted(ids)
-    auct = agents[1]
+    auct = daemons[1].agent
     first = auct.rounds[0]
     assert first.robots == (1, 2, 3, 4, 5, 6) and first.tasks == tuple(sorted(ids))
     assert math.isclose(first.value, brute_force(first.tasks, first.bids))
@@ -137,14 +120,16 @@ def test_coalitions_meet_leftover_after_the_first_finish_and_round_one_is_optima
 
 @pytest.mark.slow
 def test_a_member_killed_mid_drive_has_its_task_offered_again_and_done(tmp_path):
-    watch = Watch()
-    watch.kill_at = 8.0
-    res, agents, _ = _run(tmp_path, watch)
+    watch = Watch(kill_at=8.0)
+    res, daemons, _ = _run(tmp_path, watch)
     assert watch.victim is not None
     victim, task = watch.victim
     assert res["goal_met"] and res["valid"], res
-    auct = agents[min(agents)]
-    assert auct.auction.stats.released >= 1
+    auctioneer = daemons[min(daemons)]
+    auct = auctioneer.agent
+    assert victim in auctioneer.stats.peers_lost                           # by heartbeat timeout
+    assert any(ev.what == RELEASED and ev.task == task and f"robot {victim} lost" in ev.detail
+               for ev in auctioneer.node.events)
     assert sum(1 for r in auct.rounds if task in r.winners) >= 2            # won again in a later round
     assert victim not in watch.coalition[task]
     print("killed", victim, "task", task, "done at", round(watch.done_at[task], 1), "by", watch.coalition[task])

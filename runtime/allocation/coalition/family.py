@@ -26,7 +26,6 @@ from runtime.allocation.coalition.auctioneer import Auctioneer
 from runtime.allocation.coalition.member import Member
 from runtime.allocation.coalition.options import CoalitionOptions
 from runtime.allocation.coalition.view import FleetView
-from runtime.allocation.coalition.wdp_auctioneer import SimultaneousAuctioneer
 from runtime.allocation.coalition.wdp_messages import (WIRE_MESSAGES, AwardAck, AwardCancel, CoalitionAward,
                                                        CoalitionBid, CoalitionDone, MemberReport, TaskOffer,
                                                        why_invalid)
@@ -170,6 +169,7 @@ def _make(ctx: AgentContext) -> CoalitionAgent:
     return CoalitionAgent(ctx)
 
 
+# no Method.solver: that slot holds the formation problem's in-process solvers (mrta assign, the formation
+# experiments); the coalition family's in-process runs are runtime.allocation.coalition.simulate
 COALITION = Method("coalition", "paper 001 simultaneous coalition auction: rendezvous tasks by coalitions of robots",
-                   CoalitionOptions, _make, KINDS, WIRE_MESSAGES, str(Path(__file__).with_name("coalition.xml")),
-                   SimultaneousAuctioneer)
+                   CoalitionOptions, _make, KINDS, WIRE_MESSAGES, str(Path(__file__).with_name("coalition.xml")))

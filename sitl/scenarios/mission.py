@@ -119,9 +119,9 @@ class Scenario:
         for r in res["tasks"]:
             tid = "-" if r["task"] is None else f"{r['task'] >> 16}.{r['task'] & 0xFFFF}"
             by = "+".join(f"R{b}" for b in r["by"]) or "-"
-            at = "-" if r["done_at"] is None else f"{r['done_at']:.1f}"
+            done_at = "-" if r["done_at"] is None else f"{r['done_at']:.1f}"
             print(f"{r['label']:>4}  {tid:>8}  ({r['x']:5.2f}, {r['y']:5.2f})  {at(r):>9}  {r['state']:9}  "
-                  f"{by:>7}  {at:>11}", file=out)
+                  f"{by:>7}  {done_at:>11}", file=out)
         if res["driven"]:
             print("driven (m): " + ", ".join(f"R{rid} {d:.1f}" for rid, d in sorted(res["driven"].items())), file=out)
         print(f"tasks done: {res['done']}/{len(res['tasks'])}   sim time {res['sim_time']:.1f} s", file=out)

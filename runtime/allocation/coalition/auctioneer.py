@@ -14,7 +14,7 @@ robot.  Sans-IO: every input carries ``now``; the output is the messages to send
   has not reported for ``member_timeout`` seconds.  The remaining members are released too: they are free
   again and bid in the next round like everyone else (usually winning again, being close).
 * **Completion.**  Members report arrival; once all have arrived the task is done: a DONE event (the
-  fleet table marks it done) and ``CoalitionDone`` to everyone.
+  fleet table marks it done) and, one tick later, ``CoalitionDone`` to everyone.
 * **Leftovers** (step 4).  Tasks not won stay open and are offered in the next round, which opens as
   soon as robots are free again (paper's Delta t = 0: a rendezvous member is free only when its coalition
   is done).  A round that awarded nothing is not repeated for the same tasks and robots before a back-off
@@ -110,6 +110,7 @@ class Auctioneer:
         self.finished: dict[int, tuple[int, tuple[int, ...]]] = {}     # task -> (round, robots)
         self.cancelled: set[tuple[int, int]] = set()                   # (round, task)
         self.rounds: list[RoundRecord] = []
+        self.deferred: list[tuple[float, object]] = []                 # (when, message): sent at a later tick
         self.stats = AuctionStats()
         self._backoff: tuple = ((), -math.inf, 1.0)                    # (key, until, wait)
 
@@ -135,9 +136,11 @@ class Auctioneer:
 
     # ------------------------------------------------------------------ each tick
     def tick(self, now: float, me_free: bool) -> list:
+        out = [m for t, m in self.deferred if t < now]
+        self.deferred = [(t, m) for t, m in self.deferred if t >= now]
         if not self.active:
-            return []
-        out = self._expire(now)
+            return out
+        out += self._expire(now)
         if self.book is not None and now >= self.book.deadline:
             out += self._close(now)
         if self.book is None and now - self.since >= self.o.start_wait:
@@ -250,7 +253,10 @@ class Auctioneer:
         self.stats.completed += 1
         self.log.info("task %d done: coalition %s met", c.task, list(c.robots))
         self.events.append(TaskEvent(c.task, DONE, c.robots))
-        return [CoalitionDone(self.robot_id, BROADCAST, c.round, c.task, c.robots)]
+        # the fleet table's DONE record (sent by the node this cycle) reaches the members first: they still hold
+        # the task then, so every robot records the whole coalition as who did it; CoalitionDone follows
+        self.deferred.append((now, CoalitionDone(self.robot_id, BROADCAST, c.round, c.task, c.robots)))
+        return []
 
     # ------------------------------------------------------------------ messages
     def on_bid(self, m, now: float) -> None:

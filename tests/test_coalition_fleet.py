@@ -189,3 +189,13 @@ def test_a_task_handed_to_another_robot_and_tasks_arriving_later():
     second = f.hand_in(3, TASKS[2:])
     f.run(300, stop=all_done(first + second))
     assert sorted(f.done()) == sorted(first + second)
+
+
+def test_a_task_needing_more_robots_than_the_fleet_has_waits_and_is_said_so(caplog):
+    f = SimFleet({1: (0.0, 0.0), 2: (1.0, 0.0)})
+    ids = start(f, tasks=[(2.0, 2.0, 3, 100.0), (1.0, 1.0, 2, 100.0)])
+    with caplog.at_level("WARNING"):
+        f.run(60, stop=lambda fl: fl.table_state(ids[1]) == T_DONE)
+    assert f.table_state(ids[1]) == T_DONE and f.table_state(ids[0]) != T_DONE
+    assert sum(f"task {ids[0]} needs 3 robots, 2 are live" in r.getMessage() for r in caplog.records) == 1
+    assert ids[0] in f.robots[1].agent.view.tasks                 # still open, waiting

@@ -133,3 +133,18 @@ def test_a_member_killed_mid_drive_has_its_task_offered_again_and_done(tmp_path)
     assert sum(1 for r in auct.rounds if task in r.winners) >= 2            # won again in a later round
     assert victim not in watch.coalition[task]
     print("killed", victim, "task", task, "done at", round(watch.done_at[task], 1), "by", watch.coalition[task])
+
+
+def test_the_run_summary_prints_who_did_each_task_and_when():
+    import io
+
+    from sitl.scenarios.mission import Scenario
+    rows = [{"label": "T0", "task": 65537, "x": -1.5, "y": 1.5, "at": 0.0, "to": 1, "state": "done", "by": (2, 3),
+             "done_at": 21.04},
+            {"label": "op", "task": 131073, "x": 0.0, "y": 0.0, "at": None, "to": 2, "state": "open", "by": (),
+             "done_at": None}]
+    out = io.StringIO()
+    Scenario.print_summary({"tasks": rows, "driven": {1: 2.0}, "done": 1, "sim_time": 30.0}, out)
+    lines = out.getvalue().splitlines()
+    assert "R2+R3" in lines[2] and lines[2].rstrip().endswith("21.0") and "0.0 s" in lines[2]
+    assert lines[3].split()[1] == "2.1" and lines[3].rstrip().endswith("-")

@@ -110,6 +110,7 @@ class Auctioneer:
         self.finished: dict[int, tuple[int, tuple[int, ...]]] = {}     # task -> (round, robots)
         self.cancelled: set[tuple[int, int]] = set()                   # (round, task)
         self.rounds: list[RoundRecord] = []
+        self._too_big: set[int] = set()
         self.deferred: list[tuple[float, object]] = []                 # (when, message): sent at a later tick
         self.stats = AuctionStats()
         self._backoff: tuple = ((), -math.inf, 1.0)                    # (key, until, wait)
@@ -175,7 +176,9 @@ class Auctioneer:
 
     def _open(self, now: float, me_free: bool) -> list:
         robots = self._free(me_free)
-        tasks = [t for t in self._offerable() if self.view.tasks[t].spec.robots <= len(robots)]
+        offerable = self._offerable()
+        self._warn_too_big(offerable)
+        tasks = [t for t in offerable if self.view.tasks[t].spec.robots <= len(robots)]
         if not tasks:
             return []
         key, until, wait = self._backoff
@@ -193,6 +196,15 @@ class Auctioneer:
             out.append(TaskOffer(self.robot_id, BROADCAST, rid, t, x, y, len(tasks), self.book.deadline,
                                  tuple(robots)))
         return out
+
+    def _warn_too_big(self, tasks) -> None:
+        """Say once per task when it needs more robots than the fleet has live: it waits, it is not dropped."""
+        live = len(self.view.live())
+        for t in tasks:
+            k = self.view.tasks[t].spec.robots
+            if k > live and t not in self._too_big:
+                self._too_big.add(t)
+                self.log.warning("task %d needs %d robots, %d are live: it waits for more", t, k, live)
 
     def _close(self, now: float) -> list:
         book, self.book = self.book, None

@@ -115,7 +115,8 @@ def test_coalitions_meet_leftover_after_the_first_finish_and_round_one_is_optima
         limit = _ring(k, auct) + tolerance + EKF_MARGIN
         assert watch.closest[task] <= limit, (task, watch.closest[task], limit)
     print({f"{t >> 16}.{t & 0xFFFF}": (watch.coalition[t], round(watch.closest[t], 3), round(watch.done_at[t], 1))
-           for t in ids}, "round 1 value", round(first.value, 3), "sim", round(res["sim_time"], 1))
+           for t in ids}, "round 1 value", round(first.value, 3), "over", len(first.bids), "bids; sim",
+          round(res["sim_time"], 1), "s")
 
 
 @pytest.mark.slow

@@ -114,12 +114,9 @@ class Member:
         if job is not None and (job.round, job.task) == (m.round, m.task):
             return [AwardAck(self.robot_id, m.sender, m.round, m.task)]            # a duplicate: ack again
         task = self.view.tasks.get(m.task)
-        if (not self.free or task is None or m.sender != self.view.auctioneer()
-                or len(m.robots) != task.spec.robots):
+        why = self._refuse(m, task)
+        if why is not None:
             self.stats.declined += 1
-            why = ("busy" if job is not None else "not available" if not self.free
-                   else "unknown task" if task is None else "not the auctioneer"
-                   if m.sender != self.view.auctioneer() else "wrong coalition size")
             self.log.info("declining task %d from robot %d: %s", m.task, m.sender, why)
             return [AwardCancel(self.robot_id, m.sender, m.round, m.task)]
         robots = tuple(m.robots)
@@ -133,6 +130,20 @@ class Member:
         self.log.info("committed to task %d with %s: slot %d/%d at (%.2f, %.2f)", m.task,
                       [r for r in robots if r != self.robot_id], index + 1, k, *spot)
         return [AwardAck(self.robot_id, m.sender, m.round, m.task)]
+
+    def _refuse(self, m, task: Task | None) -> str | None:
+        """Why this robot cannot take the award ``m``, or None."""
+        if self.job is not None:
+            return f"busy with task {self.job.task}"
+        if not self.free:
+            return "disarmed or not localized"
+        if task is None:
+            return "not an open task in my table"
+        if m.sender != self.view.auctioneer():
+            return f"robot {self.view.auctioneer()} is the auctioneer"
+        if len(m.robots) != task.spec.robots:
+            return f"the task needs {task.spec.robots} robots, the award names {len(m.robots)}"
+        return None
 
     def on_cancel(self, m, now: float) -> None:
         job = self.job

@@ -112,9 +112,10 @@ class CoalitionAgent:
     def on_message(self, msg, now: float) -> list:
         sender = getattr(msg, "sender", None)
         if isinstance(msg, RobotState):
-            if self.view.known(sender):
+            if self.view.known(sender) and self.view.on_state(msg):
                 self.view.heard(sender, now)
-                self.view.on_state(msg)
+            else:
+                self.dropped += 1
             return []
         if (not isinstance(msg, WIRE_MESSAGES) or not self.view.known(sender)
                 or getattr(msg, "dest", None) not in (BROADCAST, self.robot_id) or why_invalid(msg)):

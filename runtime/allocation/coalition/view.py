@@ -41,9 +41,18 @@ class FleetView:
         self.lost.discard(rid)
         self.peers.setdefault(rid, Peer()).heard = now
 
-    def on_state(self, m: RobotState) -> None:
+    def on_state(self, m: RobotState) -> bool:
+        """Take a peer's state; False (and nothing taken) if its values are not a state's."""
+        try:
+            ok = m.invalid() is None and all(isinstance(t, int) for t in m.tasks)
+            x, y = float(m.x), float(m.y)
+        except (TypeError, ValueError):
+            return False
+        if not ok:
+            return False
         p = self.peers.setdefault(m.sender, Peer())
-        p.state, p.tasks, p.x, p.y = m.state, tuple(m.tasks), float(m.x), float(m.y)
+        p.state, p.tasks, p.x, p.y = m.state, tuple(m.tasks), x, y
+        return True
 
     def on_lost(self, rid: int) -> None:
         if rid in self.configured:

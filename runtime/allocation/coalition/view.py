@@ -33,10 +33,10 @@ class FleetView:
     # ------------------------------------------------------------------ input
     def known(self, rid) -> bool:
         """A configured peer (messages from anyone else are not fleet business)."""
-        return rid in self.configured
+        return isinstance(rid, int) and rid in self.configured
 
     def heard(self, rid: int, now: float) -> None:
-        if rid not in self.configured:
+        if not self.known(rid):
             return
         self.lost.discard(rid)
         self.peers.setdefault(rid, Peer()).heard = now

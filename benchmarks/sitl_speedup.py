@@ -38,7 +38,7 @@ def fleet_file(tmp: Path, n: int, idle: bool = False) -> Path:
     base = free_udp_base(len(data["robots"]), start=31000, stride=113)
     data["base_port"], data["gcs"] = base, f"127.0.0.1:{base}"
     if idle:   # formation = where the robots stand: they settle at once and idle
-        data["formation"] = [r["start"][:2] for r in data["robots"]]
+        data["scenario"]["positions"] = [r["start"][:2] for r in data["robots"]]
     p = tmp / f"fleet{n}{'_idle' if idle else ''}.yaml"
     p.write_text(yaml.safe_dump(data))
     return p

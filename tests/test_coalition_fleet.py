@@ -1,5 +1,5 @@
 """The coalition method on the in-memory bus: FleetNodes running CoalitionAgents with kinematic execution
-(runtime/allocation/coalition/simulate.py).  Every task done by a coalition of its size, coalitions disjoint
+(runtime/fleet/simulate.py).  Every task done by a coalition of its size, coalitions disjoint
 at every step, round 1 optimal over the bids received, leftovers after the first completion, lost members,
 a lost auctioneer, a disarmed member, and a lossy bus."""
 from __future__ import annotations
@@ -9,8 +9,9 @@ import math
 from hypothesis import given, settings, strategies as st
 
 from runtime.allocation.coalition.options import CoalitionOptions
-from runtime.allocation.coalition.simulate import SimFleet
+from runtime.fleet.simulate import SimFleet
 from runtime.fleet.messages import DONE as T_DONE
+from runtime.tasks.rendezvous import Rendezvous
 
 STARTS = {1: (-3.0, -2.0), 2: (-3.0, 0.0), 3: (-3.0, 2.0), 4: (3.0, -2.0), 5: (3.0, 0.0), 6: (3.0, 2.0)}
 # three tasks for two robots and one for three: 9 places for 6 robots, so one task is left over
@@ -55,7 +56,7 @@ class Watch:
             for task, who in f.holders().items():
                 if len(set(who.values())) > 1:
                     self.violations.append(f"t={f.now:.2f} task {task} held by two coalitions {who}")
-                for rid, (_, robots) in who.items():
+                for rid, robots in who.items():
                     if rid not in robots:
                         self.violations.append(f"t={f.now:.2f} robot {rid} holds {task} outside its coalition")
         for task in f.done():
@@ -71,7 +72,7 @@ def all_done(ids):
 
 def start(f: SimFleet, to: int = 1, tasks=TASKS) -> list[int]:
     f.run(0.5)
-    return f.hand_in(to, tasks)
+    return f.hand_in(to, [Rendezvous(*t) for t in tasks])
 
 
 def test_every_task_done_by_a_coalition_of_its_size_and_round_one_is_optimal():
@@ -191,7 +192,7 @@ def test_a_task_handed_to_another_robot_and_tasks_arriving_later():
     f = SimFleet(STARTS)
     first = start(f, to=5, tasks=TASKS[:2])
     f.run(5)
-    second = f.hand_in(3, TASKS[2:])
+    second = f.hand_in(3, [Rendezvous(*t) for t in TASKS[2:]])
     f.run(300, stop=all_done(first + second))
     assert sorted(f.done()) == sorted(first + second)
 

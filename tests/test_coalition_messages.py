@@ -10,7 +10,8 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from runtime.allocation.coalition import wdp_messages as W
-from runtime.allocation.coalition.simulate import SimFleet
+from runtime.fleet.simulate import SimFleet
+from runtime.tasks.rendezvous import Rendezvous
 from runtime.comms import codec, dialect
 from runtime.fleet.messages import RobotState
 
@@ -129,7 +130,7 @@ def _busy_fleet() -> SimFleet:
     if _FLEET is None:
         f = SimFleet({1: (-3.0, -2.0), 2: (-3.0, 0.0), 3: (3.0, 0.0), 4: (3.0, 2.0)})
         f.run(0.5)
-        f.hand_in(1, [(0.0, 0.0, 2, 100.0), (0.0, 2.0, 2, 100.0), (1.0, -2.0, 3, 100.0)])
+        f.hand_in(1, [Rendezvous(0.0, 0.0, 2, 100.0), Rendezvous(0.0, 2.0, 2, 100.0), Rendezvous(1.0, -2.0, 3, 100.0)])
         f.run(4.0)
         assert f.robots[1].agent.auction.coalitions and f.robots[2].agent.member.job is not None
         _FLEET = f

@@ -15,14 +15,16 @@ class GotoExecutor:
         self.task = commitment.task
         self.ctx = ctx
         self.goal = self.task.position
-        self.hold = self._hold()
+        self.hold = self.finishes_after(self.task)
         self.follow = FollowPath(follower=ctx.pursuit())
         self.arrived_at: float | None = None
         self.finished = False
         self._planned = False
 
-    def _hold(self) -> float | None:
-        return getattr(self.task.spec, "hold", 0.0)
+    @staticmethod
+    def finishes_after(task) -> float | None:
+        """Seconds after arrival at which this executor reports the task done (None: never)."""
+        return task.spec.hold
 
     @property
     def behaviours(self) -> list:

@@ -7,5 +7,6 @@ from runtime.execution.goto import GotoExecutor
 
 
 class RendezvousExecutor(GotoExecutor):
-    def _hold(self) -> float | None:
+    @staticmethod
+    def finishes_after(task) -> float | None:
         return None

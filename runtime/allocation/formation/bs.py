@@ -244,16 +244,17 @@ class BSAgent:
                 self._release(a.task)
                 return []
             if not math.isfinite(a.reserve):      # nobody (free) can take it yet: ask again later
-                self.log.warning("task %d: no robot%s can take it yet; announcing again", a.task,
-                                 " without a task" if a.reserve == -INF else "")
+                (self.log.warning if a.rearms == 0 else self.log.debug)(
+                    "task %d: no robot%s can take it yet; announcing again", a.task,
+                    " without a task" if a.reserve == -INF else "")
                 a.rearms += 1
                 a.bids = {r: b for r, b in a.bids.items() if math.isfinite(b)}
                 a.expected = set(self.alive)
                 a.deadline = now + self.bid_timeout
                 a.tries = 0
                 return []
-            self.log.warning("task %d: no bid worse than mine (%.3f): offering it to robots holding no task",
-                             a.task, a.reserve)
+            self.log.info("task %d: no bid worse than mine (%.3f): offering it to robots holding no task",
+                          a.task, a.reserve)
             del self.auctions[a.id]
             self.idle_offers += 1
             return self._open(a.task, -INF, now)

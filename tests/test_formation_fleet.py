@@ -1,0 +1,110 @@
+"""The formation methods (BS, RTMA, epsilon auction) as daemon agents, on the in-memory bus with kinematic
+robots (runtime/fleet/simulate.py): tasks arriving at any time, more tasks than robots, robots lost or
+disarmed while holding a task, message loss.  Every task is done, by one robot, and no robot drives to a task
+another has done."""
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+from runtime.allocation.formation.assignment import hungarian
+from runtime.allocation.agent import DONE
+from runtime.fleet.messages import DONE as T_DONE
+from runtime.fleet.simulate import SimFleet
+from runtime.tasks.goto import Goto
+
+METHODS = ("bs", "rtma", "auction")
+STARTS = {1: (-3.0, -3.0), 2: (-3.0, 3.0), 3: (3.0, -3.0)}
+SIX = [Goto(-4.0, -1.0), Goto(-4.0, 1.0), Goto(0.0, 4.0), Goto(4.0, 1.0), Goto(4.0, -1.0), Goto(0.0, -4.0)]
+
+
+def all_done(ids):
+    return lambda f: all(f.table_state(t) == T_DONE for t in ids)
+
+
+class Once:
+    """Observer: who reported each task done (each exactly once), and no robot committed to a done task."""
+
+    def __init__(self):
+        self.late: list[str] = []
+
+    def __call__(self, f: SimFleet) -> None:
+        for task, who in f.holders().items():
+            if f.table_state(task) == T_DONE:
+                for rid in who:
+                    if f.robots[rid].node.table.state(task) == T_DONE:     # it knows, and still holds it
+                        self.late.append(f"t={f.now:.2f} robot {rid} holds done task {task}")
+
+
+def done_by(f: SimFleet) -> dict[int, list[int]]:
+    out: dict[int, list[int]] = {}
+    for rid, r in f.robots.items():
+        for ev in r.node.events:
+            if ev.what == DONE:
+                out.setdefault(ev.task, []).append(rid)
+    return out
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_more_tasks_than_robots_and_a_second_hand_in_while_busy(method):
+    f = SimFleet(STARTS, method=method)
+    f.run(0.5)
+    first = f.hand_in(1, SIX)
+    f.run(5.0)
+    second = f.hand_in(2, [Goto(0.0, 0.5), Goto(1.0, 3.0, hold=2.0)])
+    watch = Once()
+    f.run(300.0, stop=all_done(first + second), observe=watch)
+    assert all(f.table_state(t) == T_DONE for t in first + second), f.now
+    by = done_by(f)
+    assert sorted(by) == sorted(first + second) and all(len(v) == 1 for v in by.values()), by
+    assert not watch.late, watch.late[:3]
+    assert all(not r.agent.commitments for r in f.robots.values())          # everyone free at the end
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_a_robot_lost_while_holding_a_task_and_one_disarmed_do_not_lose_their_tasks(method):
+    f = SimFleet({**STARTS, 4: (3.0, 3.0)}, method=method)
+    f.run(0.5)
+    ids = f.hand_in(1, SIX)
+    f.run(60.0, stop=lambda fl: all(fl.robots[r].agent.commitments for r in (3, 4)))
+    lost_task = f.robots[3].agent.commitments[0].task_id
+    f.kill(3)
+    node4 = f.robots[4].node
+    disarmed_task = f.robots[4].agent.commitments[0].task_id
+    f.bus.send(node4.set_armed(False, f.now), f.now)
+    assert not f.robots[4].agent.commitments                                 # it lets go at once
+    f.run(400.0, stop=all_done(ids))
+    assert all(f.table_state(t) == T_DONE for t in ids)
+    by = done_by(f)
+    assert 3 not in by[lost_task] and 4 not in by[disarmed_task], by
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_a_formation_is_one_task_per_robot_and_the_auction_is_optimal(method):
+    starts = {1: (-3.0, -3.0), 2: (-3.0, 3.0), 3: (3.0, -3.0), 4: (3.0, 3.0)}
+    positions = [(0.0, 1.5), (1.5, 0.0), (0.0, -1.5), (-1.5, 0.0)]
+    f = SimFleet(starts, method=method)
+    f.run(0.5)
+    ids = f.hand_in(1, [Goto(x, y, hold=None) for x, y in positions])      # station keeping: never done
+    f.run(60.0)
+    held = {rid: [c.task_id for c in r.agent.commitments] for rid, r in f.robots.items()}
+    assert all(len(h) == 1 for h in held.values()) and sorted(h[0] for h in held.values()) == sorted(ids)
+    assert all(r.agent.converged for r in f.robots.values())
+    cost = [[math.dist(starts[r], p) for p in positions] for r in sorted(starts)]
+    total = sum(cost[r - 1][ids.index(held[r][0])] for r in sorted(starts))
+    if method == "auction":
+        assert total == pytest.approx(hungarian(cost)[1], abs=4 * 0.01)     # n x cost_unit of the optimum
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.sampled_from(METHODS), st.integers(0, 10_000), st.floats(0.0, 0.25), st.floats(0.0, 0.2))
+def test_every_task_is_done_once_over_a_lossy_bus(method, seed, drop, duplicate):
+    f = SimFleet(STARTS, method=method, drop=drop, duplicate=duplicate, jitter=0.005, seed=seed)
+    f.run(0.5)
+    ids = f.hand_in(1, SIX[:4])
+    f.run(600.0, stop=all_done(ids))
+    assert all(f.table_state(t) == T_DONE for t in ids), (f.now, {t: f.table_state(t) for t in ids})
+    by = done_by(f)
+    assert all(len(by[t]) == 1 for t in ids), by

@@ -22,8 +22,30 @@ from runtime.errors import InputError
 from runtime.fleet.messages import RobotState, TableRequest, TaskRecord
 from runtime.log import get_logger
 
-GCS_SYSTEM, GCS_COMPONENT = 255, 190
+GCS_SYSTEM, GCS_COMPONENT = 255, 190      # MAVProxy's and QGC's ground-station ids
 HEARTBEAT_PERIOD = 1.0
+
+
+def ground_mav(signing_key: bytes | None = None, link_id: int = 1):
+    """The fleet dialect's module and a MAVLink encoder/parser with a ground station's ids, signing with
+    ``signing_key`` (its own ``link_id``) when given."""
+    import time
+
+    from runtime.comms.link import signing_timestamp
+
+    module = dialect.load()
+    mav = module.MAVLink(None, srcSystem=GCS_SYSTEM, srcComponent=GCS_COMPONENT)
+    mav.robust_parsing = True
+    if signing_key is not None:
+        s = mav.signing
+        s.secret_key, s.sign_outgoing, s.link_id = bytes(signing_key), True, int(link_id)
+        s.timestamp = signing_timestamp(time.time())
+    return module, mav
+
+
+def gcs_heartbeat(module, mav):
+    """A ground station's HEARTBEAT (MAV_TYPE_GCS): robots stream their telemetry to whoever sends it."""
+    return mav.heartbeat_encode(module.MAV_TYPE_GCS, module.MAV_AUTOPILOT_INVALID, 0, 0, module.MAV_STATE_ACTIVE)
 
 
 @dataclass
@@ -67,15 +89,7 @@ class GroundStation:
         self.targets: dict[int, tuple] = dict(robots or {})     # robot -> its MAVLink address (heartbeats)
         self._next_heartbeat = -math.inf
         self.sock.setblocking(False)
-        self.module = dialect.load()
-        self.mav = self.module.MAVLink(None, srcSystem=GCS_SYSTEM, srcComponent=GCS_COMPONENT)
-        self.mav.robust_parsing = True
-        if signing_key is not None:
-            from runtime.comms.link import signing_timestamp
-            import time
-            s = self.mav.signing
-            s.secret_key, s.sign_outgoing, s.link_id = bytes(signing_key), True, 1
-            s.timestamp = signing_timestamp(time.time())
+        self.module, self.mav = ground_mav(signing_key)
         self.robots: dict[int, RobotView] = {}
         self.table: dict[int, TaskRecord] = {}       # fleet task id -> the latest record heard
         self.uploads: dict[int, Upload] = {}         # robot -> its upload in flight
@@ -116,8 +130,7 @@ class GroundStation:
             self.now = now
         if self.now >= self._next_heartbeat:
             self._next_heartbeat = self.now + HEARTBEAT_PERIOD
-            hb = self.mav.heartbeat_encode(self.module.MAV_TYPE_GCS, self.module.MAV_AUTOPILOT_INVALID, 0, 0,
-                                           self.module.MAV_STATE_ACTIVE)
+            hb = gcs_heartbeat(self.module, self.mav)
             for address in self.targets.values():
                 self.send(hb, address)
         n = 0

@@ -23,15 +23,13 @@ import time
 from pathlib import Path
 
 from runtime.comms import dialect, mission_files
+from runtime.comms.gcs import GCS_SYSTEM, HEARTBEAT_PERIOD, gcs_heartbeat, ground_mav
 from runtime.comms.link import load_key, parse_address, signing_timestamp
 from runtime.comms.mission import ACCEPTED, MISSION, MissionClient, MissionItem
 from runtime.errors import InputError
 from runtime.log import get_logger
 
-GCS_SYSTEM, GCS_COMPONENT = 255, 190      # MAVProxy's ground-station ids
-HEARTBEAT_PERIOD = 1.0                    # s
 POLL = 0.02                               # s: socket wait per loop turn
-MAV_TYPE_GCS, MAV_AUTOPILOT_INVALID, MAV_STATE_ACTIVE = 6, 8, 4
 log = get_logger("comms.mission_cli")
 
 
@@ -50,13 +48,7 @@ class UdpTarget:
             family, _, _, _, self.addr = socket.getaddrinfo(host, port, 0, socket.SOCK_DGRAM)[0]
         except socket.gaierror as e:
             raise InputError(f"TARGET: cannot resolve {target!r} ({e.strerror})") from None
-        self.mod = dialect.load()
-        self.mav = self.mod.MAVLink(None, srcSystem=GCS_SYSTEM, srcComponent=GCS_COMPONENT)
-        self.mav.robust_parsing = True
-        if key is not None:
-            s = self.mav.signing
-            s.secret_key, s.sign_outgoing, s.link_id = bytes(key), True, 0
-            s.timestamp = signing_timestamp(time.time())
+        self.mod, self.mav = ground_mav(key, link_id=0)
         self.sock = socket.socket(family, socket.SOCK_DGRAM)
         self.sock.bind(("::", 0) if family == socket.AF_INET6 else ("0.0.0.0", 0))
         self._next_heartbeat = -float("inf")
@@ -75,7 +67,7 @@ class UdpTarget:
         """Our GCS HEARTBEAT, once per HEARTBEAT_PERIOD."""
         if now >= self._next_heartbeat:
             self._next_heartbeat = now + HEARTBEAT_PERIOD
-            self.send(self.mav.heartbeat_encode(MAV_TYPE_GCS, MAV_AUTOPILOT_INVALID, 0, 0, MAV_STATE_ACTIVE))
+            self.send(gcs_heartbeat(self.mod, self.mav))
 
     def recv(self, wait: float) -> list:
         """Messages from TARGET that arrive within ``wait`` seconds (good frames only)."""
@@ -108,7 +100,7 @@ def find_system(link: UdpTarget, deadline: float) -> int:
     while time.monotonic() < deadline:
         link.heartbeat(time.monotonic())
         for m in link.recv(POLL):
-            if m.get_type() == "HEARTBEAT" and m.type != MAV_TYPE_GCS:
+            if m.get_type() == "HEARTBEAT" and m.type != link.mod.MAV_TYPE_GCS:
                 return m.get_srcSystem()
     raise NoAnswer(f"{link.target}: no HEARTBEAT from a robot (is it running? --system skips the wait)")
 

@@ -59,9 +59,8 @@ class Round:
 
 @dataclass
 class PeerView:
-    state: int = IDLE
+    state: int = IDLE                  # never heard: taken to be free, so a fleet's first round has everyone
     tasks: tuple[int, ...] = ()
-    heard: bool = False
 
 
 @dataclass
@@ -85,7 +84,6 @@ class FormationAgent:
         self.lost: set[int] = set()
         self.view: dict[int, PeerView] = {p: PeerView() for p in self.peers}
         self.rounds: dict[int, Round] = {}            # rounds I take part in
-        self.declined: set[int] = set()
         self.available = True
         self.localized = True
         self._count = 0
@@ -210,7 +208,7 @@ class FormationAgent:
         is still allocating, the lower id keeps the task.  Inside one round the solver decides: a peer's state
         may lag a resale there."""
         v = self.view.setdefault(m.sender, PeerView())
-        v.state, v.tasks, v.heard = m.state, tuple(m.tasks), True
+        v.state, v.tasks = m.state, tuple(m.tasks)
         mine = self._assigned()
         if mine is None or mine not in v.tasks or m.sender > self.robot_id or self.allocating or m.state != EXECUTING:
             return []
@@ -225,18 +223,13 @@ class FormationAgent:
     def _on_round_start(self, m: RoundStart, now: float) -> list:
         if self.robot_id not in m.robots or m.round in self.rounds:
             return []
-        if not self.free or any(t not in self.tasks for t in m.tasks) and not self._learn(m.tasks):
-            self.declined.add(m.round)
+        if not self.free or any(t not in self.tasks for t in m.tasks):    # busy, or my table is behind
             return [RoundLeave(self.robot_id, BROADCAST, m.round)]
         r = Round(m.round, tuple(m.tasks), tuple(m.robots), last_heard=now)
         r.solver = self._solver(r)
         self.rounds[r.id] = r
         self.log.info("joined round %s: %d tasks, robots %s", _rid(r.id), len(r.tasks), list(r.robots))
         return []
-
-    def _learn(self, task_ids) -> bool:
-        """A round names tasks I do not know: my table is behind (the daemon will sync it); I cannot price them."""
-        return False
 
     def _solver(self, r: Round):
         tasks = [self.tasks[t] for t in r.tasks]

@@ -20,8 +20,8 @@ get lost and are disarmed.  :class:`FormationAgent` runs the solver in **rounds*
   live robot holds are not offered again; a lost robot's tasks are.  If two robots end up holding the
   same task (rounds that overlapped), the lower id keeps it and the other lets it go.
 * A round that got no task taken is not repeated by its initiator with the same tasks and free robots
-  until a back-off (doubling, at most 30 s) has passed: a task nobody can reach is reported, not
-  auctioned in a loop.
+  until a back-off (doubling, at most 30 s) has passed: a task nobody can reach is not auctioned in a
+  tight loop (the robot an operator hands it to refuses a task it cannot reach in the first place).
 
 With every robot free and the tasks handed in at once (a formation), round 1 is exactly the solver's
 problem: same robots, same tasks in the same order, started by the lowest id, so the daemons give the

@@ -520,4 +520,6 @@ def _main(args) -> int:
     print_summary(f, res)
     if args.json:
         Path(args.json).write_text(json.dumps(res, indent=2, default=str))
+    if getattr(f.fleet.scenario, "wait", False):        # serving an operator until stopped: every task done?
+        return 0 if res["done"] == len(res["tasks"]) and not res["events"] else 1
     return 0 if res["goal_met"] and not stop["flag"] else 1

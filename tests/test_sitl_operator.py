@@ -13,6 +13,7 @@ import time
 import pytest
 
 from sitl import launcher
+from sitl.operator import RunView
 from tests.sitl_util import ROOT, StockGcs, mavutil, shipped_fleet
 
 MAV = mavutil.mavlink
@@ -119,7 +120,6 @@ def test_disarm_stops_the_robot_within_a_cycle_and_its_task_is_done_by_another(t
         assert after[0][1:] == (0.0, 0.0), after[:3]
         assert not run.daemons[holder].agent.commitments and not run.daemons[holder].node.armed
         # someone else does the task (the operator sees it done)
-        from sitl.operator import RunView
         while f.world.t < 120 and not f.scenario.goal(RunView(run.op)):
             run.step()
         res = launcher.finish(f, run.op, timed_out=False)
@@ -387,4 +387,32 @@ def test_a_fleet_mixes_robot_templates(tmp_path):
         assert [cfgs[r].base.model for r in (1, 2, 3, 4)] == ["create2", "create2", "create1", "create2"]
         assert cfgs[3].base.baudrate == 57600                       # the Create 1's own rate, from its device
     finally:
+        f.close()
+
+
+@pytest.mark.slow
+def test_a_fleet_config_hands_tasks_in_at_their_times(tmp_path):
+    """Tasks listed with arrival times reach the fleet over MAVLink at those times, to the robot named."""
+    scenario = {"type": "mission", "tasks": [{"kind": "goto", "x": -3.0, "y": -3.5},
+                                             {"kind": "goto", "x": 3.0, "y": 3.5, "at": 8.0, "to": 3},
+                                             {"kind": "goto", "x": 3.5, "y": -3.0, "at": 8.0, "to": 3, "hold": 3.0}]}
+    f = launcher.build(shipped_fleet(tmp_path, "operator_4.yaml", scenario=scenario), tmp_path / "run")
+    run = launcher.Lockstep(f)
+    try:
+        seen_at = {}
+        while f.world.t < 90:
+            run.step()
+            for tid in run.daemons[2].node.table.entries:
+                seen_at.setdefault(tid, f.world.t)
+            if f.scenario.goal(RunView(run.op)):
+                break
+        first, later = run.op.handovers
+        assert first.to == 1 and later.to == 3 and all(t >> 16 == 3 for t in later.task_ids)
+        assert seen_at[first.task_ids[0]] < 1.0 and all(8.0 <= seen_at[t] < 9.0 for t in later.task_ids), seen_at
+        assert all(run.op.done_at[t] > 8.0 for t in later.task_ids)
+        held = next(t for t in later.task_ids if run.op.trace.tasks[t].label == "T2")
+        arrived = min(e.t for e in run.op.trace.events if e.what == "arrived" and e.task == held)
+        assert run.op.done_at[held] >= arrived + 3.0                 # a 3 s hold before it is done
+    finally:
+        run.close()
         f.close()

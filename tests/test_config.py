@@ -134,3 +134,41 @@ def test_random_config_data_never_crashes(data):
         C.from_dict(C.RobotConfig, data, "random.yaml")
     except ConfigError as exc:
         assert str(exc).startswith("random.yaml: ")
+
+
+@pytest.mark.parametrize("data, key, allowed", [
+    ({"allocation": {"method": "greedy"}}, "allocation.method", "bs|rtma|auction|coalition"),
+    ({"base": {"type": "roomba"}}, "base.type", "create_oi"),
+])
+def test_a_wrong_union_tag_names_the_allowed_values(tmp_path, data, key, allowed):
+    path = _write(tmp_path, data)
+    with pytest.raises(ConfigError) as info:
+        C.load_robot(path)
+    assert str(info.value).startswith(f"{path}: {key}: expected one of {allowed}, got ")
+
+
+def test_each_method_s_options_are_its_config_schema(tmp_path):
+    """allocation: takes the keys of the chosen method's options and no other's."""
+    cfg = C.load_robot(_write(tmp_path, {"allocation": {"method": "auction", "theta": 4.0}}))
+    assert cfg.allocation.method == "auction" and cfg.allocation.theta == 4.0
+    with pytest.raises(ConfigError, match=r"allocation.theta: expected no such key"):
+        C.load_robot(_write(tmp_path, {"allocation": {"method": "bs", "theta": 4.0}}))
+
+
+@pytest.mark.parametrize("scenario, key, expected", [
+    ({"type": "parade"}, "scenario.type", "one of formation|mission"),
+    ({"type": "mission", "tasks": [{"kind": "dance", "x": 0, "y": 0}]}, "scenario.tasks[0].kind",
+     "one of goto|rendezvous"),
+    ({"type": "mission", "tasks": [{"kind": "rendezvous", "x": 0, "y": 0, "robots": 12}]},
+     "scenario.tasks[0].robots", "[1, 8]"),
+    ({"type": "mission", "tasks": [{"x": 0, "y": 0, "to": 9}]}, "scenario.tasks[0].to", "a robot of the fleet"),
+    ({"type": "formation"}, "scenario.positions", "at least one position"),
+])
+def test_bad_scenarios_name_the_key(tmp_path, scenario, key, expected):
+    good = yaml.safe_load((CONFIGS / "fleets" / "create2_4.yaml").read_text())
+    data = dict(good, world=str(CONFIGS / "worlds" / "arena_10m.yaml"), robot=str(CONFIGS / "robots" / "create2.yaml"),
+                scenario=scenario)
+    path = _write(tmp_path, data, "fleet.yaml")
+    with pytest.raises(ConfigError) as info:
+        C.load_fleet(path)
+    assert str(info.value).startswith(f"{path}: {key}: expected") and expected in str(info.value), str(info.value)

@@ -55,9 +55,16 @@ class Operator:
 
     # ------------------------------------------------------------------ the loop
     def refused(self) -> list[str]:
-        """One line per hand-over the fleet refused (the run cannot meet its goal)."""
-        return [f"hand-over of {len(h.items)} task(s) at {h.at:g} s to robot {h.to} refused: "
-                f"{h.error or result_name(h.result)}" for h in self.handovers if h.done and h.result != ACCEPTED]
+        """One line per hand-over the fleet refused (the run cannot meet its goal), with the robot's reason
+        (its STATUSTEXT) when it gave one."""
+        out = []
+        for h in self.handovers:
+            if h.done and h.result != ACCEPTED:
+                view = self.gcs.robots.get(h.to)
+                why = next((text for _, text in reversed(view.texts) if "refused" in text), None) if view else None
+                out.append(f"hand-over of {len(h.items)} task(s) at {h.at:g} s to robot {h.to} refused: "
+                           f"{why or h.error or result_name(h.result)}")
+        return out
 
     def due(self, now: float) -> bool:
         """A hand-over is due at ``now`` and not finished."""

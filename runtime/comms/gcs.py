@@ -63,6 +63,7 @@ class RobotView:
     messages: int = 0
     reached: list[int] = field(default_factory=list)
     texts: list[tuple[float, str]] = field(default_factory=list)
+    chunks: dict[int, dict[int, str]] = field(default_factory=dict)   # STATUSTEXT id -> chunk_seq -> text
     current: int | None = None         # MISSION_CURRENT.seq
 
 
@@ -161,6 +162,20 @@ class GroundStation:
             self._settle(up)
         return n
 
+    def _statustext(self, view: RobotView, m) -> None:
+        """A line of text: whole, or reassembled from MAVLink 2 chunks (same ``id``, a short last chunk)."""
+        text = m.text if isinstance(m.text, str) else bytes(m.text).decode(errors="replace")
+        text = text.split("\0", 1)[0]
+        key = getattr(m, "id", 0)
+        if not key:
+            view.texts.append((self.now, text))
+            return
+        parts = view.chunks.setdefault(key, {})
+        parts[getattr(m, "chunk_seq", 0)] = text
+        if len(text) < 50:
+            view.texts.append((self.now, "".join(parts[k] for k in sorted(parts))))
+            del view.chunks[key]
+
     def _settle(self, up: Upload) -> None:
         if up.client.done and self.uploads.get(up.robot) is up:
             del self.uploads[up.robot]
@@ -183,7 +198,7 @@ class GroundStation:
         elif kind == "MISSION_CURRENT":
             view.current = int(m.seq)
         elif kind == "STATUSTEXT":
-            view.texts.append((self.now, m.text if isinstance(m.text, str) else bytes(m.text).decode(errors="replace")))
+            self._statustext(view, m)
         elif kind.startswith("MISSION_") and src in self.uploads:
             up = self.uploads[src]
             for reply in up.client.handle(m, self.now):

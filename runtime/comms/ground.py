@@ -61,6 +61,7 @@ class GroundServices:
         self._out: list = []                   # messages to peers produced while serving (new tasks ...)
         self._next_report = -math.inf
         self.reached: list[int] = []           # seqs reported reached (for tests and the trace)
+        self._text_id = 0
 
     # ------------------------------------------------------------------ requests
     def serve(self, now: float) -> list:
@@ -194,8 +195,18 @@ class GroundServices:
         link.send_gcs(self.mav.mission_current_encode(seq, total, state, 0))
 
     def _text(self, severity: int, text: str) -> None:
-        for i in range(0, max(len(text), 1), STATUSTEXT_LEN):
-            self.d.link.send_gcs(self.mav.statustext_encode(severity, text[i:i + STATUSTEXT_LEN].encode()))
+        """One STATUSTEXT, or several chunks of 50 characters with a common ``id`` and their ``chunk_seq``
+        (MAVLink 2's way of sending a longer line; a last chunk shorter than 50, or empty, ends it)."""
+        data = text.encode()
+        if len(data) <= STATUSTEXT_LEN:
+            self.d.link.send_gcs(self.mav.statustext_encode(severity, data))
+        else:
+            self._text_id = self._text_id % 0xFFFF + 1
+            chunks = [data[i:i + STATUSTEXT_LEN] for i in range(0, len(data), STATUSTEXT_LEN)]
+            if len(chunks[-1]) == STATUSTEXT_LEN:
+                chunks.append(b"")
+            for k, chunk in enumerate(chunks):
+                self.d.link.send_gcs(self.mav.statustext_encode(severity, chunk, self._text_id, k))
         self.log.info("%s", text)
 
 

@@ -265,6 +265,11 @@ def test_a_ground_station_connects_and_the_cruise_speed_it_sets_is_driven(tmp_pa
         assert caps & MAV.MAV_PROTOCOL_CAPABILITY_MAVLINK2 and caps & MAV.MAV_PROTOCOL_CAPABILITY_MISSION_INT
         assert not caps & MAV.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
 
+        seen = ask("HOME_POSITION", lambda: g.mav.command_long_send(1, 1, MAV.MAV_CMD_GET_HOME_POSITION, 0, 0, 0, 0, 0,
+                                                                     0, 0, 0),
+                   lambda m: m.get_type() == "HOME_POSITION")
+        assert (seen[-1].latitude, seen[-1].longitude) == (337756000, -843963000)     # the datum
+
         seen = ask("PARAM_REQUEST_LIST", lambda: g.mav.param_request_list_send(1, 1),
                    lambda m: m.get_type() == "PARAM_VALUE")
         count = seen[-1].param_count

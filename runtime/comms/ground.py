@@ -58,6 +58,7 @@ class GroundServices:
         self.params = ParamTable(_params(daemon))
         self.gcs = GcsServices(self.mav, daemon.id, 1, self.params)
         self.gcs.register_command(MAV_CMD_COMPONENT_ARM_DISARM, self._arm_disarm)
+        self.gcs.register_message(self.m.MAVLINK_MSG_ID_HOME_POSITION, self._home)
         self._out: list = []                   # messages to peers produced while serving (new tasks ...)
         self._next_report = -math.inf
         self.reached: list[int] = []           # seqs reported reached (for tests and the trace)
@@ -159,6 +160,12 @@ class GroundServices:
         if frame == FRAME_LOCAL_NED:
             return y, x
         return x, y
+
+    def _home(self):
+        """HOME_POSITION: the fleet frame's origin (the datum), where a ground station centres its map."""
+        d = self.d.cfg.datum
+        return self.mav.home_position_encode(int(round(d.lat * 1e7)), int(round(d.lon * 1e7)), int(round(d.alt * 1000)),
+                                             0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0)
 
     def _arm_disarm(self, msg, now: float) -> int:
         p1 = float(msg.param1)

@@ -88,7 +88,8 @@ class FormationAgent:
         self.localized = True
         self._count = 0
         self._free_since: float | None = None
-        self._held: int | None = None                 # the task of my last commitment (for events)
+        self._held: int | None = None                 # the task of my last commitment
+        self._announced: int | None = None            # the last task I reported awarded
         self._events: list[TaskEvent] = []
         self._backoff = _Backoff()
         self._now = 0.0
@@ -308,9 +309,11 @@ class FormationAgent:
         held = self._assigned()
         if held != self._held:
             if held is not None:
-                self._events.append(TaskEvent(held, AWARDED, (self.robot_id,)))
                 self._backoff = _Backoff()
             self._held = held
+        if held is not None and held != self._announced and not self.allocating:
+            self._announced = held                   # told once the round has settled, not at every bid
+            self._events.append(TaskEvent(held, AWARDED, (self.robot_id,)))
         return out
 
 

@@ -172,3 +172,9 @@ def test_bad_scenarios_name_the_key(tmp_path, scenario, key, expected):
     with pytest.raises(ConfigError) as info:
         C.load_fleet(path)
     assert str(info.value).startswith(f"{path}: {key}: expected") and expected in str(info.value), str(info.value)
+
+
+def test_an_unknown_key_with_odd_characters_is_shown_quoted_on_one_line():
+    with pytest.raises(ConfigError) as info:
+        C.from_dict(C.RobotConfig, {"control": {"rate\n": 1}}, "odd.yaml")
+    assert str(info.value).startswith("odd.yaml: control.'rate\\n': expected no such key") and "\n" not in str(info.value)

@@ -5,9 +5,8 @@ is imported only when asked for.  A new family is one package plus one line here
 """
 from __future__ import annotations
 
-import importlib
-
 from runtime.allocation.agent import Method
+from runtime.lazy import resolve
 
 METHODS: dict[str, str] = {
     "bs": "runtime.allocation.formation.family:BS",              # paper 002 basic market algorithm
@@ -25,8 +24,7 @@ def names() -> tuple[str, ...]:
 def method(name: str) -> Method:
     if name not in METHODS:
         raise KeyError(f"allocation method {name!r}: expected one of {'|'.join(METHODS)}")
-    module, _, attr = METHODS[name].partition(":")
-    return getattr(importlib.import_module(module), attr)
+    return resolve(METHODS[name])
 
 
 def options_classes() -> dict[str, type]:

@@ -122,7 +122,8 @@ def _build(tp: Any, value: Any, file: str, key: str, meta: dict | None = None) -
         fields = {f.name: f for f in dataclasses.fields(tp) if f.name != "source"}
         for k in value:
             if k not in fields:
-                raise ConfigError(file, f"{key}.{k}" if key else str(k),
+                shown = k if isinstance(k, str) and k.isprintable() and k.strip() == k and k else repr(k)
+                raise ConfigError(file, f"{key}.{shown}" if key else shown,
                                   "no such key (known: " + ", ".join(fields) + ")")
         kwargs = {}
         hints = typing.get_type_hints(tp)

@@ -1,17 +1,13 @@
 """How a held task is carried out: one executor per task kind, and the executive that runs them.
 
-``EXECUTORS`` maps a task kind to ``module:Class``; a new task kind adds its executor here (one line).
+A task kind's module names its executor (``EXECUTOR = "module:Class"``, e.g. runtime/tasks/goto.py), so a new
+kind is its spec module, its executor module and one line in runtime/tasks/__init__.py's ``KINDS``.
 """
 from __future__ import annotations
 
-import importlib
-
-EXECUTORS: dict[str, str] = {
-    "goto": "runtime.execution.goto:GotoExecutor",
-    "rendezvous": "runtime.execution.rendezvous:RendezvousExecutor",
-}
+from runtime import tasks
+from runtime.lazy import resolve
 
 
 def executor_class(kind: str) -> type:
-    module, _, cls = EXECUTORS[kind].partition(":")
-    return getattr(importlib.import_module(module), cls)
+    return resolve(tasks.kind(kind).EXECUTOR)

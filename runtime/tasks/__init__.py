@@ -1,8 +1,9 @@
 """Task kinds: the only list of them.  A new kind is one module here plus one line in ``KINDS``.
 
 Each kind module has ``KIND`` (its name), ``Spec`` (frozen dataclass), ``COMMANDS`` (the MAVLink mission
-commands that create it), ``estimate(spec, profile, travel)``, ``from_item(command, params, x, y)``
-(raises ValueError with a one-line reason for bad params) and ``to_item(spec)``.
+commands that create it), ``EXECUTOR`` (``"module:Class"`` of the executor that carries it out, in
+runtime/execution/), ``estimate(spec, profile, travel)``, ``from_item(command, params, x, y)`` (raises
+ValueError with a one-line reason for bad params) and ``to_item(spec)``.
 """
 from __future__ import annotations
 

@@ -13,6 +13,7 @@ from runtime.config.build import rng
 from runtime.tasks.model import Estimate, Profile, Travel
 
 KIND = "goto"
+EXECUTOR = "runtime.execution.goto:GotoExecutor"
 MAV_CMD_NAV_WAYPOINT = 16
 MAV_CMD_NAV_LOITER_UNLIM = 17
 COMMANDS = (MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_LOITER_UNLIM)

@@ -14,6 +14,7 @@ from runtime.config.build import rng
 from runtime.tasks.model import Estimate, Profile, Travel
 
 KIND = "rendezvous"
+EXECUTOR = "runtime.execution.rendezvous:RendezvousExecutor"
 MAV_CMD_WAYPOINT_USER_1 = 31000
 COMMANDS = (MAV_CMD_WAYPOINT_USER_1,)
 MAX_ROBOTS = 8

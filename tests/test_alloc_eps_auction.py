@@ -177,36 +177,34 @@ def test_phase_runs_down_to_eps_final_and_then_converges():
         assert a.converged
 
 
-values = st.one_of(st.none(), st.booleans(), st.integers(-5, 2 ** 33), st.text(max_size=3),
-                   st.floats(allow_nan=True, allow_infinity=True))
-messages = st.one_of(
-    st.builds(Price, sender=values, dest=st.sampled_from([0, 1, 2]), task=values, holder=values,
-              price=values, phase=values),
-    st.builds(TaskInfo, sender=values, dest=st.sampled_from([0, 1]), task=values, x=values, y=values,
-              n_tasks=values),
-    st.builds(Status, sender=values, dest=st.sampled_from([0, 1]), auction=values, task=values,
-              converged=values),
+sender = st.integers(1, 4)
+u16, u32 = st.integers(0, 0xFFFF), st.integers(0, 2 ** 32 - 1)
+f32 = st.floats(width=32)                             # NaN and infinities too: what a frame can carry
+messages = st.one_of(                                 # any message a frame can decode to, and non-messages
+    st.builds(Price, sender=sender, dest=st.sampled_from([0, 1, 2]), task=u16, holder=st.integers(0, 255),
+              price=f32, phase=u16),
+    st.builds(TaskInfo, sender=sender, dest=st.sampled_from([0, 1]), task=u16, x=f32, y=f32, n_tasks=u16),
+    st.builds(Status, sender=sender, dest=st.sampled_from([0, 1]), auction=u32, task=u16, converged=st.booleans()),
     st.integers(), st.none(), st.text(max_size=5))
 
 
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(messages, max_size=30), st.integers(0, 3))
-def test_random_messages_never_raise_and_malformed_ones_are_counted(msgs, cut):
+def test_what_the_codec_lets_through_never_raises(msgs, cut):
+    """Validation happens once, at decode (``invalid()``); the agent trusts what gets through and never raises on
+    it; objects that are no message of its own are counted."""
     a = informed(agent())
-    before = sum(a.dropped.values())
-    malformed = 0
     t = 0.0
-    for m in msgs[: len(msgs) - cut]:        # truncated streams as well
+    for m in msgs[: len(msgs) - cut]:         # truncated streams as well
+        if getattr(m, "invalid", lambda: None)():
+            continue
         t += 0.05
+        before = sum(a.dropped.values())
         out = a.on_message(m, t)
         out += a.on_tick(t)
         assert all(isinstance(o, (Price, Status, TaskInfo)) for o in out)
-        sender = getattr(m, "sender", None)
-        if isinstance(m, Price) and isinstance(sender, int) and not isinstance(sender, bool) \
-                and sender != 1 and not (isinstance(m.price, float) and math.isfinite(m.price)) \
-                and not (isinstance(m.price, int) and not isinstance(m.price, bool)):
-            malformed += 1
-    assert sum(a.dropped.values()) - before >= malformed
+        if not hasattr(m, "sender"):
+            assert sum(a.dropped.values()) == before + 1
     assert a.held is None or a.held in (0, 1, 2)
 
 

@@ -77,14 +77,6 @@ def is_permutation(assignment: Sequence[int | None], n: int) -> bool:
     return len(assignment) == n and sorted(a if a is not None else -1 for a in assignment) == list(range(n))
 
 
-def valid_task_id(task) -> bool:
-    return isinstance(task, int) and not isinstance(task, bool) and 0 <= task < MAX_TASKS
-
-
-def finite(*values) -> bool:
-    return all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values)
-
-
 class TaskBook:
     """Tasks one robot knows (id -> position), the size of the set once told, and this robot's costs.
 

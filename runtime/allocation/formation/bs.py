@@ -45,7 +45,7 @@ from collections import Counter
 from dataclasses import dataclass, field, replace
 from typing import Callable, Mapping, Sequence
 
-from runtime.allocation.formation.assignment import TaskBook, finite, valid_task_id
+from runtime.allocation.formation.assignment import TaskBook
 from runtime.allocation.formation.messages import (BROADCAST, Announce, Award, Bid, Status, TaskInfo, addressed_to,
                                          wire_float)
 from runtime.log import get_logger
@@ -285,9 +285,6 @@ class BSAgent:
             self.means.pop(task, None)
 
     def _on_bid(self, m: Bid, now: float) -> list:
-        if not valid_task_id(m.task) or not isinstance(m.cost, (int, float)) or math.isnan(m.cost):
-            self.dropped["malformed"] += 1
-            return []
         a = self.auctions.get(m.auction)
         if a is None or a.task != m.task or a.award is not None:
             self.dropped["stale bid"] += 1
@@ -300,10 +297,6 @@ class BSAgent:
         return []
 
     def _on_status(self, m: Status, now: float) -> list:
-        if (not isinstance(m.task, int) or isinstance(m.task, bool) or not isinstance(m.auction, int)
-                or isinstance(m.auction, bool) or not isinstance(m.converged, bool)):
-            self.dropped["malformed"] += 1
-            return []
         if m.dest == BROADCAST:
             return self._on_status_broadcast(m, now)
         a = self.auctions.get(m.auction)
@@ -325,10 +318,6 @@ class BSAgent:
 
     # ------------------------------------------------------------------ bidder side
     def _on_announce(self, m: Announce, now: float) -> list:
-        if (not valid_task_id(m.task) or not isinstance(m.auction, int) or not finite(m.x, m.y)
-                or not isinstance(m.reserve, (int, float)) or math.isnan(m.reserve)):
-            self.dropped["malformed"] += 1
-            return []
         if not self.book.learn(m.task, m.x, m.y):
             self.dropped["unknown task"] += 1
             return []
@@ -354,11 +343,6 @@ class BSAgent:
     def _on_award(self, m: Award, now: float) -> list:
         if m.winner != self.robot_id:
             return []
-        if (not valid_task_id(m.task) or not isinstance(m.auction, int)
-                or not isinstance(m.cost, (int, float)) or not isinstance(m.mean, (int, float))
-                or math.isnan(m.cost) or math.isnan(m.mean)):
-            self.dropped["malformed"] += 1
-            return []
         key = (m.sender, m.auction)
         ack = Status(self.robot_id, m.sender, m.auction, m.task, False)
         if key in self._awards_seen:
@@ -383,10 +367,6 @@ class BSAgent:
         return out
 
     def _on_taskinfo(self, m: TaskInfo, now: float) -> list:
-        if (not valid_task_id(m.task) or not finite(m.x, m.y) or not isinstance(m.n_tasks, int)
-                or not 0 < m.n_tasks <= 0xFFFF):
-            self.dropped["malformed"] += 1
-            return []
         if not self.book.learn(m.task, m.x, m.y, m.n_tasks):
             self.dropped["contradicts task set"] += 1
             return []

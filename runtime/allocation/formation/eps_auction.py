@@ -45,7 +45,7 @@ import math
 from collections import Counter
 from typing import Callable, Mapping, Sequence
 
-from runtime.allocation.formation.assignment import MAX_TASKS, NO_TASK, TaskBook, finite, valid_task_id
+from runtime.allocation.formation.assignment import MAX_TASKS, NO_TASK, TaskBook
 from runtime.allocation.formation.messages import BROADCAST, Price, Status, TaskInfo, addressed_to
 from runtime.log import get_logger
 
@@ -322,11 +322,6 @@ class EpsAuctionAgent:
 
     # ------------------------------------------------------------------ messages
     def _on_price(self, m: Price, now: float) -> list:
-        if (not valid_task_id(m.task) or not finite(m.price) or not isinstance(m.holder, int)
-                or isinstance(m.holder, bool) or not 1 <= m.holder <= 250 or not isinstance(m.phase, int)
-                or isinstance(m.phase, bool) or not 0 <= m.phase <= NO_RUNG):
-            self.dropped["malformed"] += 1
-            return []
         if self.book.complete and m.task not in self.book.positions and m.task not in self._dummies:
             self.dropped["unknown task"] += 1
             return []
@@ -356,10 +351,6 @@ class EpsAuctionAgent:
         return []
 
     def _on_taskinfo(self, m: TaskInfo, now: float) -> list:
-        if (not valid_task_id(m.task) or not finite(m.x, m.y) or not isinstance(m.n_tasks, int)
-                or isinstance(m.n_tasks, bool) or not 0 < m.n_tasks <= 0xFFFF):
-            self.dropped["malformed"] += 1
-            return []
         if not self.book.learn(m.task, m.x, m.y, m.n_tasks):
             self.dropped["contradicts task set"] += 1
             return []
@@ -368,10 +359,6 @@ class EpsAuctionAgent:
         return self._ready(now)
 
     def _on_status(self, m: Status, now: float) -> list:
-        if (not isinstance(m.task, int) or isinstance(m.task, bool) or not isinstance(m.auction, int)
-                or isinstance(m.auction, bool) or not isinstance(m.converged, bool)):
-            self.dropped["malformed"] += 1
-            return []
         if m.converged:
             return []
         out = []

@@ -211,18 +211,27 @@ def write_manifest(f: Fleet, speedup: float, seed: int, key_path: Path | None) -
 
 # ---------------------------------------------------------------------- results
 
-def finish(f: Fleet, op, timed_out: bool) -> dict:
-    """The scenario's summary, the run's common lines, and the trace and its picture in the run directory."""
+def finish(f: Fleet, op, ended: str) -> dict:
+    """The scenario's summary, the verdict, the run's events, and the trace and its picture in the run directory.
+    ``ended``: why the run stopped ("goal", "timeout", "stopped", "refused", "unreachable")."""
     from sitl.operator import RunView
     from sitl.run_plot import plot_run
 
     view = RunView(op)
     res = f.scenario.summary(view)
     res["sim_time"] = f.world.t
-    res["goal_met"] = f.scenario.goal(view)
     res["lost"] = sorted(op.dead)
-    if timed_out and not res["goal_met"]:
-        f.events.append(f"timeout after {f.world.t:.0f} s sim time without the scenario's goal")
+    short = f.scenario.shortfall(view)
+    res["goal_met"] = short is None
+    if short is None:
+        res["verdict"] = "goal met"
+    else:
+        why = {"timeout": f"timeout after {f.world.t:.0f} s", "stopped": "stopped by the operator",
+               "refused": "; ".join(op.refused()), "unreachable": f.scenario.unreachable(view) or "unreachable"}
+        parts = [why.get(ended, ended), short]
+        if op.dead:
+            parts.append("robot(s) " + ", ".join(map(str, sorted(op.dead))) + " died")
+        res["verdict"] = "goal not met: " + "; ".join(parts)
     res["events"] = list(f.events)
     try:
         op.trace.write(f.run_dir / "trace.json")
@@ -239,23 +248,25 @@ def print_summary(f: Fleet, res: dict, out=sys.stdout) -> None:
         print(f"event: {e}", file=out)
     if res.get("picture"):
         print(f"picture: {res['picture']}", file=out)
+    print(f"verdict: {res['verdict']}", file=out)
 
 
 # ---------------------------------------------------------------------- run modes
 
-def _goal_held(f: Fleet, op, now: float, since: float | None) -> tuple[bool, float | None]:
+def _check(f: Fleet, op, now: float, since: float | None, wait: bool = False) -> tuple[str | None, float | None]:
+    """Whether the run ends now, and why: "refused" (a hand-over was refused), "unreachable" (the goal cannot be
+    met any more), "goal" (met for SETTLE seconds; never while ``wait``ing for an operator)."""
     from sitl.operator import RunView
 
-    refused = op.refused()
-    if refused:                        # the goal cannot be met: end the run, saying why
-        for line in refused:
-            if line not in f.events:
-                f.events.append(line)
-        return True, since
-    if f.scenario.goal(RunView(op)):
+    view = RunView(op)
+    if op.refused():
+        return "refused", since
+    if f.scenario.unreachable(view):
+        return "unreachable", since
+    if not wait and f.scenario.goal(view):
         since = now if since is None else since
-        return now - since > SETTLE, since
-    return False, None
+        return ("goal" if now - since > SETTLE else None), since
+    return None, None
 
 
 class Lockstep:
@@ -320,19 +331,18 @@ def run_lockstep(f: Fleet, timeout: float | None = None, progress=None, on_step=
     ``on_step(fleet)`` is called after every control cycle (tests attach observers there)."""
     run = Lockstep(f)
     timeout = timeout or f.fleet.timeout
-    since, next_progress, done = None, 0.0, False
+    wait = getattr(f.fleet.scenario, "wait", False)
+    since, next_progress, ended = None, 0.0, None
     try:
-        while f.world.t < timeout:
+        while f.world.t < timeout and ended is None:
             run.step()
             if on_step is not None:
                 on_step(f)
-            done, since = _goal_held(f, run.op, f.world.t, since)
-            if done:
-                break
+            ended, since = _check(f, run.op, f.world.t, since, wait)
             if progress and f.world.t >= next_progress:
                 progress(f, run.op)
                 next_progress += 5.0
-        return finish(f, run.op, timed_out=not done)
+        return finish(f, run.op, ended or "timeout")
     finally:
         run.close()
 
@@ -385,10 +395,14 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
     timeout = timeout or f.fleet.timeout
     wait = getattr(f.fleet.scenario, "wait", False) if wait is None else wait
     since, next_progress, next_record = None, 0.0, 0.0
-    max_lag, slips, idle_from, done = 0.0, 0, None, False
+    max_lag, slips, idle_from, ended = 0.0, 0, None, None
     try:
-        while not (stop_flag and stop_flag()):
+        while True:
+            if stop_flag and stop_flag():
+                ended = ended or "stopped"
+                break
             if f.world.t >= timeout:
+                ended = ended or "timeout"
                 break
             target = clock.now()
             f.advance_to(min(target, f.world.t + 0.05))      # bounded chunks: keep watching the fleet
@@ -415,10 +429,10 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
             if idle_from is not None:
                 if time.monotonic() - idle_from[0] >= linger:
                     break
-            elif not wait:
-                done, since = _goal_held(f, op, now, since)
-                if done:
-                    if linger <= 0:
+            else:
+                ended, since = _check(f, op, now, since, wait)
+                if ended is not None:
+                    if ended != "goal" or linger <= 0:
                         break
                     idle_from = (time.monotonic(), {r.id: _cpu_seconds(r.proc.pid) for r in f.robots.values()})
             if progress and now >= next_progress:
@@ -427,7 +441,7 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
             time.sleep(0.002)
         f.device_hook = None
         publisher.close()
-        res = finish(f, op, timed_out=f.world.t >= timeout)
+        res = finish(f, op, ended or "timeout")
     finally:
         op.close()
     res["world_max_lag"] = max_lag
@@ -520,6 +534,7 @@ def _main(args) -> int:
     print_summary(f, res)
     if args.json:
         Path(args.json).write_text(json.dumps(res, indent=2, default=str))
-    if getattr(f.fleet.scenario, "wait", False):        # serving an operator until stopped: every task done?
-        return 0 if res["done"] == len(res["tasks"]) and not res["events"] else 1
-    return 0 if res["goal_met"] and not stop["flag"] else 1
+    if not res["goal_met"]:
+        print(f"mrta: {res['verdict']}", file=sys.stderr)
+        return 1
+    return 0

@@ -200,6 +200,10 @@ class RunView:
     def live_robots(self) -> list[int]:
         return self.op.live_robots()
 
+    def dead(self) -> list[int]:
+        """Robots whose daemon is known to have ended (its process exited, or a test killed it)."""
+        return sorted(self.op.dead)
+
     def held(self, rid: int) -> tuple[int, ...]:
         if rid not in self.op.live_robots():
             return ()

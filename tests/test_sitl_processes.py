@@ -28,7 +28,10 @@ def test_cli_runs_fleet_of_daemon_processes(tmp_path):
 
 @pytest.mark.slow
 def test_dead_daemon_is_reported_and_peers_notice(tmp_path):
-    f = launcher.build(_fleet_copy(tmp_path), tmp_path / "run")
+    """Three waypoints for four robots: robot 4 is killed 3 s in; the launcher reports it, the survivors' heartbeat
+    timeout fires for it, the three tasks are done by them, and the verdict says robot 4 died."""
+    tasks = [{"kind": "goto", "x": x, "y": y, "hold": 1.0} for x, y in ((-3.0, 0.0), (3.0, 0.0), (0.0, 3.5))]
+    f = launcher.build(_fleet_copy(tmp_path, scenario={"type": "mission", "tasks": tasks}), tmp_path / "run")
     killed = {}
 
     def kill_robot_4(fleet):
@@ -36,15 +39,39 @@ def test_dead_daemon_is_reported_and_peers_notice(tmp_path):
             killed["t"] = fleet.world.t
             os.kill(fleet.robots[4].proc.pid, signal.SIGKILL)
     try:
-        res = launcher.run_processes(f, 2.0, timeout=25, on_step=kill_robot_4)
+        res = launcher.run_processes(f, 2.0, timeout=60, on_step=kill_robot_4)
     finally:
         f.close()
     stats = launcher.daemon_stats(f)
     assert killed
     assert any("robot 4 daemon exited with code -9" in e for e in res["events"]), res["events"]
+    assert res["lost"] == [4] and res["goal_met"], res["verdict"]
+    assert all(4 not in r["by"] for r in res["tasks"]), res["tasks"]
     # the survivors' heartbeat timeout fired for robot 4
     for rid in (1, 2, 3):
         assert 4 in stats[rid]["peers_lost"], (rid, stats[rid])
+
+
+@pytest.mark.slow
+def test_the_verdict_says_why_a_formation_missing_a_robot_fails(tmp_path):
+    """`mrta sitl run` with a daemon killed five seconds in: exit 1 and one line saying why (it exited 0 before)."""
+    run_dir = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-m", "runtime.cli", "sitl", "run", str(_fleet_copy(tmp_path)),
+                             "--speedup", "2", "--timeout", "40", "--run-dir", str(run_dir)], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    import time
+    deadline = time.monotonic() + 90
+    while not (run_dir / "clock").exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(2.5)                                       # 5 s of sim time at 2x
+    pid = next(int(p.name) for p in __import__("pathlib").Path("/proc").iterdir() if p.name.isdigit()
+               and "robot_4.yaml" in _cmdline(p) and str(run_dir) in _cmdline(p))
+    os.kill(pid, signal.SIGKILL)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 1, out[-2000:]
+    assert err.strip().splitlines()[-1].startswith("mrta: goal not met: 4 positions to hold and 3 robots left")
+    assert "robot(s) 4 died" in err and "verdict: goal not met" in out
+    assert "    4  lost" in out
 
 
 @pytest.mark.slow

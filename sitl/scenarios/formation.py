@@ -54,23 +54,43 @@ class Scenario:
         return out
 
     def goal(self, run) -> bool:
-        """Every position held by a distinct live robot that stands on it; nobody still allocating."""
+        return self.shortfall(run) is None
+
+    def shortfall(self, run) -> str | None:
+        """What keeps the goal from being met (one line), or None: every position (one per robot of the fleet, as
+        far as there are robots) held by a distinct live robot that stands still on it, nobody allocating."""
         if not run.handovers[0].done or None in run.handovers[0].task_ids:
-            return False
-        assignment = self.assignment(run)
+            return "the positions are not all handed in yet"
+        live = set(run.live_robots())
+        assignment = {rid: t for rid, t in self.assignment(run).items() if rid in live}
         held = [t for t in assignment.values() if t is not None]
-        if len(held) != len(set(held)) or len(held) < min(len(self.positions), len(run.live_robots())):
-            return False
-        for rid, t in assignment.items():
-            if not run.settled(rid):
-                return False
+        need = min(len(self.positions), len(self.fleet.robots))
+        twice = sorted({f"P{t}" for t in held if held.count(t) > 1})
+        if twice:
+            return f"{', '.join(twice)} held by two robots"
+        if len(held) < need:
+            free = [f"P{i}" for i in range(len(self.positions)) if i not in held]
+            return f"{', '.join(free)} held by no live robot"
+        busy = sorted(rid for rid in assignment if not run.settled(rid))
+        if busy:
+            return "robot(s) " + ", ".join(map(str, busy)) + " still allocating"
+        for rid, t in sorted(assignment.items()):
             if t is None:
                 continue
             x, y, _ = run.true_pose(rid)
             vx, vy = run.velocity(rid)
-            if math.hypot(self.positions[t][0] - x, self.positions[t][1] - y) > self.cfg.tolerance or math.hypot(vx, vy) > 0.02:
-                return False
-        return True
+            d = math.hypot(self.positions[t][0] - x, self.positions[t][1] - y)
+            if d > self.cfg.tolerance:
+                return f"robot {rid} is {d:.2f} m from P{t}"
+            if math.hypot(vx, vy) > 0.02:
+                return f"robot {rid} is still moving on P{t}"
+        return None
+
+    def unreachable(self, run) -> str | None:
+        """The goal cannot be met any more: robots died, and fewer are left than positions to hold."""
+        left = len(self.fleet.robots) - len(run.dead())
+        need = min(len(self.positions), len(self.fleet.robots))
+        return f"{need} positions to hold and {left} robots left" if left < need else None
 
     def summary(self, run) -> dict:
         """Assignment, its global cost (planned path lengths from the start poses) beside the Hungarian optimum,
@@ -106,10 +126,14 @@ class Scenario:
             err = res["final_error"][rid]
             pos = "-" if task is None else "({:5.2f}, {:5.2f})".format(*res["tasks"][task])
             opt = res["optimal_assignment"].get(rid, "-")
-            print(f"{rid:5d}  {'-' if task is None else task:>4}  {pos:16}  {opt:>12}  "
+            held = "lost" if rid in res.get("lost", ()) else ("-" if task is None else task)
+            print(f"{rid:5d}  {held:>4}  {pos:16}  {opt:>12}  "
                   f"{'-' if math.isnan(err) else f'{err:.3f}':>15}", file=out)
-        gap = 100.0 * (res["global_cost"] - res["optimum"]) / res["optimum"] if res["optimum"] > 0 else 0.0
-        print(f"\nglobal cost (path lengths from the start poses) {res['global_cost']:.3f} m   "
-              f"Hungarian optimum {res['optimum']:.3f} m   "
-              f"gap {gap:+.2f} %", file=out)
+        if res["valid"]:
+            gap = 100.0 * (res["global_cost"] - res["optimum"]) / res["optimum"] if res["optimum"] > 0 else 0.0
+            print(f"\nglobal cost (path lengths from the start poses) {res['global_cost']:.3f} m   "
+                  f"Hungarian optimum {res['optimum']:.3f} m   "
+                  f"gap {gap:+.2f} %", file=out)
+        else:
+            print(f"\nglobal cost: - (no valid assignment)   Hungarian optimum {res['optimum']:.3f} m", file=out)
         print(f"assignment valid: {res['valid']}   sim time {res['sim_time']:.1f} s", file=out)

@@ -12,7 +12,7 @@ from typing import Any, Literal, Optional
 
 from runtime import tasks as T
 from runtime.config.build import ConfigError, Tagged, rng
-from runtime.fleet.messages import DONE, STATE_NAMES
+from runtime.fleet.messages import DONE, OPEN, STATE_NAMES
 
 
 @functools.lru_cache(maxsize=None)
@@ -89,10 +89,24 @@ class Scenario:
         return out
 
     def goal(self, run) -> bool:
-        if self.cfg.wait:
-            return False
-        return all(h.done for h in run.handovers) and all(
-            tid is not None and run.task_state(tid) == DONE for h in run.handovers for tid in h.task_ids)
+        """Every task handed in done (a fleet waiting for an operator keeps running: the launcher judges it
+        by this when it is stopped)."""
+        return self.shortfall(run) is None
+
+    def shortfall(self, run) -> str | None:
+        """What keeps the goal from being met (one line), or None: every task handed in done."""
+        due = [h for h in run.handovers if not h.done]
+        if due:
+            return f"{sum(len(h.items) for h in due)} task(s) not handed in yet (next at {min(h.at for h in due):g} s)"
+        ours = {tid for h in run.handovers for tid in h.task_ids}
+        open_ = [label for h in run.handovers for label, tid in zip(h.labels, h.task_ids)
+                 if tid is None or run.task_state(tid) != DONE]
+        open_ += [f"{tid >> 16}.{tid & 0xFFFF}" for tid, rec in sorted(run.table().items())
+                  if tid not in ours and rec.state == OPEN]          # handed in by another ground station
+        return f"{', '.join(open_)} not done" if open_ else None
+
+    def unreachable(self, run) -> str | None:
+        return None                       # a lost robot's tasks go to the others: only a refusal ends it early
 
     def summary(self, run) -> dict:
         """Every task: the scenario's, then any an operator handed in from another ground station."""

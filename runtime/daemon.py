@@ -263,8 +263,12 @@ class _Stop(Exception):
     """SIGTERM or SIGINT arrived: leave the loop wherever it is, then stop the motors."""
 
 
-def run(daemon: Daemon, clock: Clock, duration: float | None = None, stats_path: str | None = None) -> None:
-    """Run ``daemon`` at its control rate until ``duration`` (clock seconds) or SIGTERM/SIGINT."""
+def run(daemon: Daemon, clock: Clock, duration: float | None = None, stats_path: str | None = None) -> int:
+    """Run ``daemon`` at its control rate until ``duration`` (clock seconds) or SIGTERM/SIGINT; 0, or 3 when the
+    base's device vanished.  Whatever ends the loop (a signal, an exception, a lost device), the base is told to
+    stop and the final status snapshot is written."""
+    from runtime.drivers.base import DeviceLost
+
     def _stop(signum, frame):
         raise _Stop(signal.Signals(signum).name)
 
@@ -274,13 +278,14 @@ def run(daemon: Daemon, clock: Clock, duration: float | None = None, stats_path:
     wall0, cpu0 = time.monotonic(), time.process_time()
     next_t = t0
     last_dump = t0
+    code = 0
     try:
         daemon.open(t0)
         while duration is None or clock.now() - t0 < duration:
             now = clock.now()
             late = now - next_t
-            if late > daemon.period:       # the cycle that was due is a whole period late
-                daemon.stats.missed_deadlines += 1
+            if late > daemon.period:       # whole periods late: every cycle that should have run is missed
+                daemon.stats.missed_deadlines += int(late // daemon.period)
                 next_t = now
             daemon.stats.worst_lateness = max(daemon.stats.worst_lateness, late)
             daemon.step(now)
@@ -297,6 +302,9 @@ def run(daemon: Daemon, clock: Clock, duration: float | None = None, stats_path:
                 break
     except _Stop as exc:
         daemon.log.info("%s: stopping", exc)
+    except DeviceLost as exc:
+        daemon.log.error("%s: stopping (the base cannot be told to stop any more)", exc)
+        code = 3
     finally:
         signal.signal(signal.SIGTERM, signal.SIG_IGN)     # a second signal must not cut the clean-up short
         signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -307,6 +315,7 @@ def run(daemon: Daemon, clock: Clock, duration: float | None = None, stats_path:
             _dump(stats_path, daemon.snapshot())
         daemon.log.info("stopped after %d cycles, %d missed deadlines", daemon.stats.cycles,
                         daemon.stats.missed_deadlines)
+    return code
 
 
 def _dump(path: str, data: dict) -> None:
@@ -358,5 +367,4 @@ def _main(args) -> int:
     if cfg.comms.signing_key is None:
         daemon.log.warning("MAVLink signing is off (comms.signing_key is not set): any host on the network can "
                            "command this robot")
-    run(daemon, clock, args.duration, args.stats)
-    return 0
+    return run(daemon, clock, args.duration, args.stats)

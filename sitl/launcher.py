@@ -18,7 +18,6 @@ import argparse
 import json
 import math
 import os
-import secrets
 import signal
 import subprocess
 import sys
@@ -64,7 +63,8 @@ class Fleet:
     run_dir: Path
     manifest_path: Path
     scenario: object = None
-    key: bytes | None = None
+    key: bytes | None = None            # the fleet's signing key (None: an unsigned fleet)
+    fresh_key: Path | None = None       # a key made for this run: removed by close() unless keep_key
     device_period: float = 0.005
     events: list[str] = field(default_factory=list)
     device_hook: object = None          # called with the sim time after every device service
@@ -89,7 +89,7 @@ class Fleet:
     def true_pose(self, rid: int) -> tuple[float, float, float]:
         return self.robots[rid].body.pose()
 
-    def close(self) -> None:
+    def close(self, keep_key: bool = False) -> None:
         for r in self.robots.values():
             if r.daemon is not None:
                 r.daemon.close()
@@ -106,15 +106,43 @@ class Fleet:
                 if hasattr(dev, "close"):
                     dev.close()
         self.world.close()
+        if self.fresh_key is not None and not keep_key:
+            self.fresh_key.unlink(missing_ok=True)
+
+
+INSTANCE_STRIDE = 100      # ports an --instance moves a fleet by (as ArduPilot's SITL does, by 10 per vehicle)
+
+
+def claim_ports(fleet: C.FleetConfig, instance: int = 0) -> C.FleetConfig:
+    """The fleet moved to instance ``instance`` (its ground-station and robot ports + INSTANCE_STRIDE x N), once
+    every robot's MAVLink port is checked free: a busy one is an InputError naming it (another fleet runs)."""
+    import dataclasses
+    import socket
+
+    host, gcs_port = C.parse_hostport(fleet.gcs, fleet.source, "gcs")
+    shift = INSTANCE_STRIDE * instance
+    fleet = dataclasses.replace(fleet, base_port=fleet.base_port + shift, gcs=f"{host}:{gcs_port + shift}")
+    for r in fleet.robots:
+        port = fleet.base_port + r.id
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError as e:
+            raise C.ConfigError(fleet.source, "base_port",
+                                f"free UDP ports: 127.0.0.1:{port} (robot {r.id}'s MAVLink port) is in use "
+                                f"({e.strerror}); another fleet? run this one with --instance N") from None
+        finally:
+            s.close()
+    return fleet
 
 
 def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: str | Path | None = None,
-          seed: int | None = None, signing: bool = False, method: str | None = None,
-          speedup: float | None = None) -> Fleet:
+          seed: int | None = None, signing: bool = True, method: str | None = None,
+          speedup: float | None = None, instance: int = 0) -> Fleet:
     """Load the fleet, build the world and devices, write robot configs and the manifest."""
     from sitl import scenarios
 
-    fleet = C.load_fleet(fleet_path)
+    fleet = claim_ports(C.load_fleet(fleet_path), instance)
     world_cfg = C.load_world(fleet.world)
     templates = {}
     for r in fleet.robots:
@@ -133,14 +161,13 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
     seed = fleet.seed if seed is None else seed
     run_dir = Path(run_dir or tempfile.mkdtemp(prefix="mrta-sitl-"))
     run_dir.mkdir(parents=True, exist_ok=True)
-    key_path, key = None, None
+    key_path, key, fresh_key = None, None, False
     if signing or fleet.signing_key:
-        key_path = Path(fleet.signing_key) if fleet.signing_key else run_dir / "fleet.key"
-        if not fleet.signing_key:
-            fd = os.open(key_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-            with os.fdopen(fd, "w") as fh:
-                fh.write(secrets.token_hex(32) + "\n")
-        from runtime.comms.link import load_key
+        from runtime.comms.link import load_key, new_key
+        if fleet.signing_key:
+            key_path = Path(fleet.signing_key)
+        else:                          # a fresh fleet key for this run, removed at the end unless kept
+            key_path, fresh_key = new_key(run_dir / "fleet.key"), True
         key = load_key(key_path)
 
     world = World(world_cfg, seed=seed)
@@ -176,7 +203,8 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
                                 float(body.radius))
 
     manifest_path = Path(manifest) if manifest else run_dir / "manifest.json"
-    out = Fleet(fleet, world_cfg, robots, world, run_dir, manifest_path, key=key)
+    out = Fleet(fleet, world_cfg, robots, world, run_dir, manifest_path, key=key,
+                fresh_key=key_path if fresh_key else None)
     out.scenario = scenarios.module(fleet.scenario.type).Scenario(fleet, world_cfg)
     write_manifest(out, speedup if speedup is not None else fleet.speedup, seed, key_path)
     return out
@@ -283,7 +311,7 @@ class Lockstep:
         for r in f.robots.values():
             r.daemon = self.daemons[r.id] = Daemon(C.load_robot(r.config_path))
             r.daemon.open(self.clock.now())
-        self.op = Operator(f, f.scenario, f.key)
+        self.op = Operator(f)
         self.period = min(d.period for d in self.daemons.values())
         self.stopped: set[int] = set()          # robots whose daemon no longer runs (killed by a test)
         self._preroll()
@@ -376,7 +404,7 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
                "--stats", str(f.run_dir / f"robot_{r.id}.stats.json")]
         with open(f.run_dir / f"robot_{r.id}.log", "w") as log_fh:
             r.proc = subprocess.Popen(cmd, stdout=log_fh, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent)
-    op = Operator(f, f.scenario, f.key)
+    op = Operator(f)
     # start barrier: the sim clock starts once every daemon is built (imports take seconds)
     deadline = time.monotonic() + 120
     while not all((f.run_dir / f"clock.ready.{rid}").exists() for rid in f.robots):
@@ -495,7 +523,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--speedup", type=float, default=None, help="sim seconds per wall second")
     r.add_argument("--lockstep", action="store_true", help="daemons in-process on a simulated clock")
     r.add_argument("--devices-only", action="store_true", help="world and devices only, no daemons")
-    r.add_argument("--signing", action="store_true", help="sign MAVLink with a fresh fleet key")
+    r.add_argument("--instance", type=int, default=0, metavar="N",
+                   help=f"run beside other fleets: every port + {INSTANCE_STRIDE} x N (ground station and robots)")
+    r.add_argument("--no-signing", dest="signing", action="store_false",
+                   help="an unsigned fleet (default: every frame signed with a fresh fleet key, or the fleet's "
+                        "signing_key)")
+    r.add_argument("--keep-key", action="store_true",
+                   help="keep the run's fresh fleet key (RUN_DIR/fleet.key) for a ground station after the run")
     r.add_argument("--method", choices=registry.names(), default=None, help="allocation method")
     r.add_argument("--timeout", type=float, default=None, help="sim seconds before giving up")
     r.add_argument("--json", default=None, help="write the result here as JSON")
@@ -503,7 +537,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args) -> int:
-    f = build(args.fleet, args.run_dir, args.manifest, args.seed, args.signing, args.method, args.speedup)
+    if not 0 <= args.instance <= 400:
+        raise C.ConfigError("--instance", "", "an integer 0..400", args.instance)
+    f = build(args.fleet, args.run_dir, args.manifest, args.seed, args.signing, args.method, args.speedup,
+              args.instance)
     speedup = args.speedup or f.fleet.speedup
     stop = {"flag": False}
 
@@ -522,15 +559,16 @@ def _main(args) -> int:
                 time.sleep(0.002)
             return 0
         if getattr(f.fleet.scenario, "wait", False):
+            key = f" --key {f.fresh_key or f.fleet.signing_key}" if f.key else ""
             print(f"waiting for an operator: upload missions to the robots' MAVLink ports in {f.manifest_path} "
-                  f"(mrta mission upload 127.0.0.1:{f.robots[min(f.robots)].udp_port} FILE); Ctrl-C to stop",
+                  f"(mrta mission upload 127.0.0.1:{f.robots[min(f.robots)].udp_port} FILE{key}); Ctrl-C to stop",
                   flush=True)
         if args.lockstep:
             res = run_lockstep(f, args.timeout, progress=_progress)
         else:
             res = run_processes(f, speedup, args.timeout, progress=_progress, stop_flag=lambda: stop["flag"])
     finally:
-        f.close()
+        f.close(keep_key=args.keep_key)
     print_summary(f, res)
     if args.json:
         Path(args.json).write_text(json.dumps(res, indent=2, default=str))

@@ -27,9 +27,11 @@ RELEASE_GRACE = 2.5         # s a task a robot stopped holding may take to show 
 
 
 class Operator:
-    def __init__(self, fleet, scenario, signing_key: bytes | None = None):
+    def __init__(self, fleet):
+        """The operator of ``fleet`` (a launcher Fleet): its scenario's hand-overs, signed with the fleet's key."""
         self.fleet = fleet
-        self.scenario = scenario
+        self.scenario = scenario = fleet.scenario
+        signing_key = fleet.key
         self.addresses = {rid: ("127.0.0.1", r.udp_port) for rid, r in fleet.robots.items()}
         self.gcs = GroundStation(robots=self.addresses, signing_key=signing_key)
         self.handovers = scenario.handovers()

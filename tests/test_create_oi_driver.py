@@ -363,3 +363,46 @@ def test_no_recovery_when_the_base_was_never_in_safe_mode(rig):
     r.dev.mode = P.MODE_PASSIVE                        # e.g. someone sent Start from another program
     _run_for(r, 5.0)
     assert r.drv.stats.extra["mode_recoveries"] == 0 and r.dev.mode_name == "passive"
+
+
+def test_a_vanished_device_is_reported_lost_after_a_run_of_failed_reads():
+    """The pty's far end closes (a USB serial adapter pulled, the SITL gone): reads fail with EIO; after
+    LOST_AFTER of them in a row the driver raises DeviceLost, one line naming the port."""
+    import os
+
+    from runtime.drivers.base import LOST_AFTER, DeviceLost
+    master, slave = os.openpty()
+    name = os.ttyname(slave)
+    base = CreateOI(name)
+    base.open(0.0)
+    os.close(master)
+    for k in range(LOST_AFTER - 1):
+        base.poll(k * 0.05)
+    with pytest.raises(DeviceLost, match=f"Create OI port {name}: {LOST_AFTER} reads in a row failed"):
+        base.poll(LOST_AFTER * 0.05)
+    base.close()                                   # closing a lost base does not raise
+    os.close(slave)
+
+
+def test_the_daemon_stops_on_a_lost_device_and_writes_its_final_snapshot(tmp_path):
+    """`mrta daemon` whose serial device vanishes exits with code 3, no traceback, its snapshot written."""
+    import json
+    import os
+    import threading
+
+    import yaml
+
+    from runtime import config as C
+    from runtime.clock import ScaledClock
+    from runtime.daemon import Daemon, run
+    master, slave = os.openpty()
+    cfg = C.from_dict(C.RobotConfig, {"base": {"port": os.ttyname(slave)}, "gps": {"enabled": False},
+                                      "comms": {"listen": "127.0.0.1:0", "gcs": None},
+                                      "localization": {"initial_pose": [0, 0, 0]}})
+    d = Daemon(cfg)
+    threading.Timer(0.3, os.close, (master,)).start()
+    stats = tmp_path / "stats.json"
+    code = run(d, ScaledClock(4.0), duration=30.0, stats_path=str(stats))
+    os.close(slave)
+    assert code == 3
+    assert json.loads(stats.read_text())["cycles"] > 0

@@ -94,7 +94,7 @@ def test_a_robot_that_never_comes_up_is_treated_as_lost_and_the_rest_converge(tm
     from sitl.operator import Operator
     f = launcher.build(_fleet_copy(tmp_path), tmp_path / "run", seed=3)
     daemons = {}
-    op = Operator(f, f.scenario)              # hands the formation to robot 1 over MAVLink
+    op = Operator(f)              # hands the formation to robot 1 over MAVLink
     try:
         daemons = {rid: Daemon(C.load_robot(r.config_path)) for rid, r in f.robots.items() if rid != 4}
         grace = daemons[1].cfg.comms.startup_grace

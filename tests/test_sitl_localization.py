@@ -61,7 +61,7 @@ def test_fused_pose_beats_gps_and_odometry(tmp_path):
                 return fixes
             d.gps.poll = tapped
         starts = {r.id: r.start for r in f.fleet.robots}
-        op = Operator(f, f.scenario)              # hands the formation in over MAVLink
+        op = Operator(f)              # hands the formation in over MAVLink
         while f.world.t < 60.0:
             f.advance_to(f.world.t + 0.05)
             clock.sleep_until(f.world.t)

@@ -54,7 +54,7 @@ def _table(run):
 def test_bad_uploads_are_refused_and_the_tasks_stay_as_they_were(tmp_path):
     f = launcher.build(shipped_fleet(tmp_path, "operator_4.yaml"), tmp_path / "run")
     run = launcher.Lockstep(f)
-    gcs = StockGcs(f.robots[1].udp_port, 1)
+    gcs = StockGcs(f.robots[1].udp_port, 1, f.key)
     try:
         gcs.heartbeat()
         ack = stock_upload(gcs, _items(gcs.mav, 1, [(-3.0, -3.0), (3.0, 3.0)]), run.step)
@@ -110,7 +110,7 @@ def test_disarm_stops_the_robot_within_a_cycle_and_its_task_is_done_by_another(t
                            math.hypot(*d._velocity()) > 0.1), None)
         assert holder is not None, "nobody took the task"
         task = run.daemons[holder].agent.commitments[0].task_id
-        gcs = StockGcs(f.robots[holder].udp_port, holder)
+        gcs = StockGcs(f.robots[holder].udp_port, holder, f.key)
         gcs.mav.command_long_send(holder, 1, MAV.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 0, 0, 0, 0, 0, 0)
         sent_at = f.world.t
         acks = gcs.wait(lambda m: m.get_type() == "COMMAND_ACK", 5.0, run.step)
@@ -149,6 +149,8 @@ class _Fleet:
             time.sleep(0.05)
         self.manifest = json.loads((self.run_dir / "manifest.json").read_text())
         self.ports = {r["id"]: int(r["mavlink_udp"].rsplit(":", 1)[1]) for r in self.manifest["robots"]}
+        from runtime.comms.link import load_key
+        self.key = load_key(self.manifest["signing_key"])          # signed by default: the run's fresh key
 
     def daemon_pid(self, rid: int) -> int:
         for p in os.listdir("/proc"):
@@ -177,9 +179,9 @@ class _Fleet:
             self.proc.wait()
 
 
-def _fleet_tasks(port: int, system: int, timeout: float = 10.0):
+def _fleet_tasks(port: int, system: int, key: bytes, timeout: float = 10.0):
     from runtime.comms.mission_cli import status
-    return status(f"127.0.0.1:{port}", system=system, timeout=timeout)
+    return status(f"127.0.0.1:{port}", system=system, timeout=timeout, key=key)
 
 
 @pytest.mark.slow
@@ -192,15 +194,15 @@ def test_an_operator_mission_is_done_waypoint_by_waypoint_even_when_the_robot_it
                                         dialect="common")              # the fleet's ground-station port
     g1 = g2 = None
     try:
-        g1 = StockGcs(fleet.ports[1], 1)
+        g1 = StockGcs(fleet.ports[1], 1, fleet.key)
         g1.heartbeat()
         first = [(-3.0, -3.0), (0.0, -3.5), (3.0, -3.0), (3.0, 3.0), (0.0, 3.5), (-3.0, 3.0)]
         ack = stock_upload(g1, _items(g1.mav, 1, first))
         assert ack is not None and ack.type == MAV.MAV_MISSION_ACCEPTED
-        mine = [r.task for r in _fleet_tasks(fleet.ports[3], 3)]          # robot 3 has robot 1's tasks
+        mine = [r.task for r in _fleet_tasks(fleet.ports[3], 3, fleet.key)]          # robot 3 has robot 1's tasks
         assert len(mine) == 6 and all(t >> 16 == 1 for t in mine)
         time.sleep(1.0)
-        g2 = StockGcs(fleet.ports[2], 2)
+        g2 = StockGcs(fleet.ports[2], 2, fleet.key)
         g2.heartbeat()
         ack = stock_upload(g2, _items(g2.mav, 2, [(-1.5, 0.5), (1.5, -0.5)]))
         assert ack is not None and ack.type == MAV.MAV_MISSION_ACCEPTED
@@ -213,7 +215,7 @@ def test_an_operator_mission_is_done_waypoint_by_waypoint_even_when_the_robot_it
             while (m := listen.recv_match(type="MISSION_ITEM_REACHED", blocking=False)) is not None:
                 reached.setdefault(m.seq, set()).add(m.get_srcSystem())
             if time.monotonic() - killed > 5:
-                records = _fleet_tasks(fleet.ports[2], 2)
+                records = _fleet_tasks(fleet.ports[2], 2, fleet.key)
                 if len(records) == 8 and all(r.state == 1 for r in records):
                     break
             time.sleep(0.2)
@@ -242,7 +244,7 @@ def test_a_ground_station_connects_and_the_cruise_speed_it_sets_is_driven(tmp_pa
     fleet = _Fleet(tmp_path, shipped_fleet(tmp_path, "operator_4.yaml"), speedup=2)
     listen = mavutil.mavlink_connection(f"udpin:{fleet.manifest['ground_station']}", source_system=254,
                                         dialect="common")
-    g = StockGcs(fleet.ports[1], 1)
+    g = StockGcs(fleet.ports[1], 1, fleet.key)
     answered = {}
 
     def ask(what, send, pred):
@@ -306,7 +308,7 @@ def test_a_ground_station_connects_and_the_cruise_speed_it_sets_is_driven(tmp_pa
         while time.monotonic() < deadline:
             while (m := listen.recv_match(type="LOCAL_POSITION_NED", blocking=False)) is not None:
                 speeds.setdefault(m.get_srcSystem(), []).append(math.hypot(m.vx, m.vy))
-            records = _fleet_tasks(fleet.ports[2], 2) if len(speeds.get(1, ())) > 100 else []
+            records = _fleet_tasks(fleet.ports[2], 2, fleet.key) if len(speeds.get(1, ())) > 100 else []
             if records and all(r.state == 1 for r in records):
                 break
             time.sleep(0.2)
@@ -330,7 +332,7 @@ def test_any_robot_gives_the_fleet_mission_and_an_empty_upload_withdraws_what_is
                           {"kind": "goto", "x": -3.5, "y": 3.5}]}
     f = launcher.build(shipped_fleet(tmp_path, "operator_4.yaml", scenario=scenario), tmp_path / "run")
     run = launcher.Lockstep(f)
-    g = StockGcs(f.robots[4].udp_port, 4)
+    g = StockGcs(f.robots[4].udp_port, 4, f.key)
     try:
         run.step()
         # downloading from robot 4 (the tasks went to robot 1): the fleet's three tasks, in the frame sent

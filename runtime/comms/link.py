@@ -26,6 +26,7 @@ frame cannot advance pymavlink's per-stream replay window (see :class:`_SigningG
 from __future__ import annotations
 
 import ipaddress
+import os
 import socket
 import time
 from dataclasses import dataclass, fields
@@ -48,6 +49,27 @@ _IFLAG_SIGNED = 0x01
 def signing_timestamp(unix_time: float) -> int:
     """MAVLink 2 signing timestamp: 10 us units since 2015-01-01 00:00 UTC."""
     return max(0, int((unix_time - SIGNING_EPOCH) * 100_000))
+
+
+def new_key(path: str | Path) -> Path:
+    """Write a fresh 32-byte signing key (64 hex characters) to ``path``: created with mode 0600 under a
+    temporary name and renamed into place, so the key is never readable by others, not even for a moment, and
+    a reader never sees half a key.  Refuses to replace an existing file."""
+    import secrets
+
+    path = Path(path)
+    if path.exists():
+        raise InputError(f"{path}: a file is already there (a signing key is never overwritten)")
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(fd, "w") as fh:
+            fh.write(secrets.token_hex(32) + "\n")
+        os.replace(tmp, path)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        raise InputError(f"{path}: cannot write a signing key ({e.strerror})") from None
+    return path
 
 
 def load_key(path: str | Path) -> bytes:

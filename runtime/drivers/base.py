@@ -28,6 +28,14 @@ from dataclasses import dataclass, field
 from runtime.errors import InputError
 
 
+class DeviceLost(RuntimeError):
+    """The base's link is gone (the serial device vanished, the bus went down): nothing can be sent or read any
+    more.  ``str()`` is one line; the daemon stops on it."""
+
+
+LOST_AFTER = 20             # consecutive failed reads (one per poll) before a driver reports its device lost
+
+
 @dataclass(frozen=True)
 class Footprint:
     """A differential-drive base's size and limits, in metres, m/s and rad/s.

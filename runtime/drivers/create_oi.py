@@ -17,7 +17,7 @@ import serial
 
 from runtime.config.build import rng
 from runtime.drivers import create_oi_protocol as P
-from runtime.drivers.base import Footprint, MobileBase
+from runtime.drivers.base import LOST_AFTER, DeviceLost, Footprint, MobileBase
 from runtime.errors import InputError
 from runtime.log import get_logger
 
@@ -70,6 +70,7 @@ class CreateOI(MobileBase):
                                  "read_errors": 0, "mode_recoveries": 0})
         self.parser = P.StreamParser(model)
         self.values: dict = {}               # latest named values from the stream
+        self._failed_reads = 0               # reads in a row that raised (DeviceLost at LOST_AFTER)
         self.ser = None
         self._counts: tuple[int, int] | None = None
         self._reached_mode = False           # the base has reported self.mode since open()
@@ -102,8 +103,11 @@ class CreateOI(MobileBase):
         self._write(P.stop() if self.model == "create2" else P.start())
         try:
             self.ser.flush()
+        except Exception as exc:          # SerialException, OSError, termios.error (a vanished tty): closing goes on
+            self.log.warning("close %s: %s", self.port, exc)
+        try:
             self.ser.close()
-        except (serial.SerialException, OSError) as exc:
+        except Exception as exc:
             self.log.warning("close %s: %s", self.port, exc)
         self.ser = None
 
@@ -170,8 +174,13 @@ class CreateOI(MobileBase):
                 chunks.append(chunk)
         except (serial.SerialException, OSError) as exc:
             self.stats.extra["read_errors"] += 1
+            self._failed_reads += 1
+            if self._failed_reads >= LOST_AFTER:
+                raise DeviceLost(f"Create OI port {self.port}: {self._failed_reads} reads in a row failed ({exc})")
             if self.stats.extra["read_errors"] in (1, 10, 100) or self.stats.extra["read_errors"] % 1000 == 0:
                 self.log.warning("read %s: %s", self.port, exc)
+        else:
+            self._failed_reads = 0
         data = b"".join(chunks)
         self.stats.extra["bytes_in"] += len(data)
         return data

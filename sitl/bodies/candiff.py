@@ -1,0 +1,149 @@
+"""A simulated small industrial AMR with two CAN wheel drives: a dynamic pybullet multibody.
+
+Body kind ``"candiff"`` (:mod:`sitl.bodies.registry`); the CiA 402 device (:mod:`sitl.devices.cia402`) drives
+it.  The dimensions are our own choice for a small indoor AMR of the class of a cart-pulling or shelf robot
+(no vendor's drawing): a box chassis 0.44 m long, 0.38 m wide and 0.20 m high with 30 mm ground clearance,
+18 kg; two driven wheels of 150 mm diameter (0.075 m radius) on a 0.34 m track at the chassis' centre, each
+behind a 24:1 gearbox (the motor and encoder are the drive's, :mod:`sitl.devices.cia402`); a caster 0.16 m
+ahead of and behind the axle.  The footprint circle is 0.30 m (the chassis' half diagonal, 0.291 m, rounded
+up).  It has no bumpers and no range sensors: industrial bases carry safety scanners, which this one leaves
+out.
+
+The device works in wheel joint terms, as a motor encoder does: :meth:`SimCanDiff.set_wheel_rates` (rad/s,
+positive rolls forward), :meth:`wheel_angles` and :meth:`wheel_rates`.  Each tyre's rolling radius is off
+the nominal by the world's ``wheel_radius_sigma``, so odometry from the encoders drifts as on a real robot.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pybullet as p
+
+from runtime.errors import InputError
+
+LENGTH, WIDTH, HEIGHT, CLEARANCE = 0.44, 0.38, 0.20, 0.03      # m
+RADIUS = 0.30                 # m: the circle holding the chassis (half diagonal 0.291 m)
+WHEEL_RADIUS = 0.075          # m nominal
+TRACK = 0.34                  # m between the wheels' contact points
+CASTER_RADIUS = 0.03          # m
+CASTER_X = 0.16               # m ahead of / behind the axle
+MASS_CHASSIS, MASS_WHEEL, MASS_CASTER = 18.0, 0.8, 0.2   # kg
+MAX_WHEEL_RATE = 1.5 / WHEEL_RADIUS     # rad/s: 1.5 m/s at the rim, above what the drives are asked for
+MAX_WHEEL_TORQUE = 4.0        # N m at the wheel (traction limit ~5 N m with mu = 1)
+WHEEL_FRICTION = 1.0
+CHASSIS_FRICTION = 0.3
+
+CENTRE_Z = CLEARANCE + HEIGHT / 2         # base frame height above the floor
+LEFT, RIGHT = 0, 1
+CASTERS = (2, 3)
+
+
+def build_body(client: int, start: tuple[float, float, float], gui: bool, wheel_radii: tuple[float, float]) -> int:
+    """Create the multibody at ``start`` = (x, y, yaw) on the floor and return its id."""
+    kw = {"physicsClientId": client}
+    half = (LENGTH / 2, WIDTH / 2, HEIGHT / 2)
+    chassis = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, **kw)
+    wheels = [p.createCollisionShape(p.GEOM_SPHERE, radius=r, **kw) for r in wheel_radii]
+    caster = p.createCollisionShape(p.GEOM_SPHERE, radius=CASTER_RADIUS, **kw)
+    vis = [-1, -1, -1]
+    if gui:
+        vis = [p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=(0.9, 0.55, 0.1, 1), **kw),
+               p.createVisualShape(p.GEOM_SPHERE, radius=WHEEL_RADIUS, rgbaColor=(0.1, 0.1, 0.1, 1), **kw),
+               p.createVisualShape(p.GEOM_SPHERE, radius=CASTER_RADIUS, rgbaColor=(0.6, 0.6, 0.6, 1), **kw)]
+    x, y, yaw = start
+    body = p.createMultiBody(
+        baseMass=MASS_CHASSIS, baseCollisionShapeIndex=chassis, baseVisualShapeIndex=vis[0],
+        basePosition=(x, y, CENTRE_Z), baseOrientation=p.getQuaternionFromEuler((0, 0, yaw)),
+        linkMasses=[MASS_WHEEL, MASS_WHEEL, MASS_CASTER, MASS_CASTER],
+        linkCollisionShapeIndices=[wheels[0], wheels[1], caster, caster],
+        linkVisualShapeIndices=[vis[1], vis[1], vis[2], vis[2]],
+        linkPositions=[(0, TRACK / 2, wheel_radii[0] - CENTRE_Z), (0, -TRACK / 2, wheel_radii[1] - CENTRE_Z),
+                       (CASTER_X, 0, CASTER_RADIUS - CENTRE_Z), (-CASTER_X, 0, CASTER_RADIUS - CENTRE_Z)],
+        linkOrientations=[(0, 0, 0, 1)] * 4,
+        linkInertialFramePositions=[(0, 0, 0)] * 4,
+        linkInertialFrameOrientations=[(0, 0, 0, 1)] * 4,
+        linkParentIndices=[0, 0, 0, 0],
+        linkJointTypes=[p.JOINT_REVOLUTE, p.JOINT_REVOLUTE, p.JOINT_FIXED, p.JOINT_FIXED],
+        linkJointAxis=[(0, 1, 0), (0, 1, 0), (0, 0, 1), (0, 0, 1)],
+        **kw)
+    p.changeDynamics(body, -1, lateralFriction=CHASSIS_FRICTION, restitution=0.0, contactProcessingThreshold=0.0,
+                     activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING, **kw)
+    for link in (LEFT, RIGHT):
+        p.changeDynamics(body, link, lateralFriction=WHEEL_FRICTION, spinningFriction=0.0, rollingFriction=0.0,
+                         restitution=0.0, jointDamping=0.0, contactProcessingThreshold=0.0, **kw)
+    for link in CASTERS:
+        p.changeDynamics(body, link, lateralFriction=0.0, spinningFriction=0.0, rollingFriction=0.0,
+                         restitution=0.0, contactProcessingThreshold=0.0, **kw)
+    p.setJointMotorControlArray(body, [LEFT, RIGHT], p.VELOCITY_CONTROL, targetVelocities=[0.0, 0.0],
+                                forces=[MAX_WHEEL_TORQUE] * 2, **kw)
+    return body
+
+
+class SimCanDiff:
+    """One CAN differential base in a :class:`sitl.world.World`; the CiA 402 device calls these methods."""
+
+    radius = RADIUS
+
+    def __init__(self, client: int, robot_id: int, start: tuple[float, float, float], rng: np.random.Generator,
+                 gui: bool = False, wheel_radius_sigma: float = 0.004):
+        self.robot_id = robot_id
+        self._kw = {"physicsClientId": client}
+        sigma = wheel_radius_sigma
+        scale = np.clip(rng.normal(1.0, sigma, size=2), 1 - 3 * sigma, 1 + 3 * sigma) if sigma > 0 else (1.0, 1.0)
+        self.wheel_radii = (WHEEL_RADIUS * float(scale[0]), WHEEL_RADIUS * float(scale[1]))
+        self.body_id = build_body(client, start, gui, self.wheel_radii)
+        self._targets = (0.0, 0.0)
+
+    # -------------------------------------------------------------- commands
+    def set_wheel_rates(self, left: float, right: float) -> None:
+        """Wheel motor targets in rad/s (positive rolls forward), clipped to MAX_WHEEL_RATE."""
+        for name, v in (("left", left), ("right", right)):
+            if not math.isfinite(v):
+                raise InputError(f"robot {self.robot_id}: {name} wheel rate: expected a finite number, got {v!r}")
+        targets = tuple(max(-MAX_WHEEL_RATE, min(MAX_WHEEL_RATE, float(v))) for v in (left, right))
+        if targets == self._targets:
+            return
+        self._targets = targets
+        p.setJointMotorControlArray(self.body_id, [LEFT, RIGHT], p.VELOCITY_CONTROL, targetVelocities=list(targets),
+                                    forces=[MAX_WHEEL_TORQUE] * 2, **self._kw)
+
+    def wheel_targets(self) -> tuple[float, float]:
+        return self._targets
+
+    # -------------------------------------------------------------- physics hooks
+    def stepped(self) -> None:
+        """The world stepped (nothing cached here)."""
+
+    def after_step(self, dt: float) -> None:
+        """Motor-load sample (no battery model on this body)."""
+
+    # -------------------------------------------------------------- sensors
+    def wheel_angles(self) -> tuple[float, float]:
+        """Cumulative wheel joint angles (rad), as the motor encoders see them through the gearbox."""
+        left, right = p.getJointStates(self.body_id, [LEFT, RIGHT], **self._kw)
+        return left[0], right[0]
+
+    def wheel_rates(self) -> tuple[float, float]:
+        """Wheel joint rates (rad/s)."""
+        left, right = p.getJointStates(self.body_id, [LEFT, RIGHT], **self._kw)
+        return left[1], right[1]
+
+    def pose(self) -> tuple[float, float, float]:
+        """Ground truth x, y (m) and yaw (rad), ENU."""
+        pos, orn = p.getBasePositionAndOrientation(self.body_id, **self._kw)
+        return pos[0], pos[1], p.getEulerFromQuaternion(orn)[2]
+
+    def velocity(self) -> tuple[float, float]:
+        """Ground truth vx, vy (m/s), ENU."""
+        lin, _ = p.getBaseVelocity(self.body_id, **self._kw)
+        return lin[0], lin[1]
+
+    def yaw_rate(self) -> float:
+        return p.getBaseVelocity(self.body_id, **self._kw)[1][2]
+
+    def place(self, x: float, y: float, yaw: float) -> None:
+        """Teleport the body (tests only; zeroes its velocity)."""
+        p.resetBasePositionAndOrientation(self.body_id, (x, y, CENTRE_Z), p.getQuaternionFromEuler((0, 0, yaw)),
+                                          **self._kw)
+        p.resetBaseVelocity(self.body_id, (0, 0, 0), (0, 0, 0), **self._kw)

@@ -21,9 +21,15 @@ must equal ``< ok >``), so frames for a client that has just entered raw mode wa
 or ``RAW_GRACE`` seconds have passed, lest they arrive in the same read as its ``< ok >``.  Malformed input is
 counted and skipped (no ``< error >`` reply: the stock client would take it for an error frame).
 
+Frames move in :meth:`CanHub.pump`: clients' input to the channel's virtual bus, the channel's ``on_input``
+hook (the emulated drives read their buses there), then whatever is on the channel's bus to the clients.  The
+hub's thread pumps whenever a client sends (clients in other processes, and a driver blocked on SDO in this
+one); the SITL device pumps its channel in every ``service`` call, so in lock-step everything a daemon sent
+before the world moves on has reached the drives, and everything the drives sent is in the daemon's socket
+before its next cycle: no frame is late by a thread's turn, and runs stay repeatable.
+
 The SITL's CAN devices share one hub per process (:func:`acquire` / :func:`release`): the first device starts
-it on a free port, the last one to close stops it.  One thread serves the sockets; each channel's virtual bus
-has a python-can ``Notifier`` thread that writes the drives' frames straight to the clients' sockets.
+it on a free port, the last one to close stops it.
 """
 from __future__ import annotations
 
@@ -71,22 +77,13 @@ class _Client:
 
 
 class _Channel:
-    def __init__(self, hub: "CanHub", name: str):
+    def __init__(self, hub: "CanHub", name: str, on_input):
         self.name = name
         self.virtual = f"mrta-can-hub-{hub.port}-{name}"
-        self.clients: set[_Client] = set()
+        self.clients: set[_Client] = set()         # raw mode: they get every frame
+        self.members: set[_Client] = set()         # opened this channel (any mode)
+        self.on_input = on_input
         self.bus = can.Bus(interface="virtual", channel=self.virtual)
-        self.notifier = can.Notifier(self.bus, [_Forward(hub, self)], timeout=0.1)
-
-
-class _Forward(can.Listener):
-    """Frames the emulated drives send on a channel's virtual bus -> its raw-mode clients."""
-
-    def __init__(self, hub: "CanHub", channel: _Channel):
-        self.hub, self.channel = hub, channel
-
-    def on_message_received(self, msg: can.Message) -> None:
-        self.hub._broadcast(self.channel, msg, None)
 
 
 class CanHub:
@@ -99,7 +96,9 @@ class CanHub:
         self.host, self.port = self._listen.getsockname()[:2]
         self._channels: dict[str, _Channel] = {}
         self._lock = threading.Lock()              # channels, their client sets, flush requests
+        self._pump_lock = threading.RLock()        # one pump at a time: frames keep their order
         self._flush: set[_Client] = set()
+        self._clients: set[_Client] = set()
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)
         self._wake_w.setblocking(False)
@@ -112,24 +111,53 @@ class CanHub:
         log.info("socketcand hub on %s:%d", self.host, self.port)
 
     # ------------------------------------------------------------------ channels
-    def add_channel(self, name: str) -> str:
-        """Serve channel ``name``; returns the python-can ``virtual`` channel the drives join."""
+    def add_channel(self, name: str, on_input=None) -> str:
+        """Serve channel ``name``; returns the python-can ``virtual`` channel the drives join.  ``on_input()`` is
+        called in :meth:`pump` after clients' frames were put on that bus (the drives read them there)."""
         with self._lock:
             if name not in self._channels:
-                self._channels[name] = _Channel(self, name)
+                self._channels[name] = _Channel(self, name, on_input)
             return self._channels[name].virtual
 
     def remove_channel(self, name: str) -> None:
         """Stop serving ``name``; its clients are disconnected."""
-        with self._lock:
-            ch = self._channels.pop(name, None)
-            clients = list(ch.clients) if ch else []
-        if ch is None:
-            return
-        ch.notifier.stop(1.0)
-        ch.bus.shutdown()
-        for c in clients:
-            self._request_close(c)
+        with self._pump_lock:
+            with self._lock:
+                ch = self._channels.pop(name, None)
+            if ch is None:
+                return
+            ch.bus.shutdown()
+            for c in list(ch.members):
+                self._request_close(c)
+
+    def pump(self, name: str | None = None) -> int:
+        """Move frames now: clients' input (of channel ``name``, or all), the channels' ``on_input`` hooks, then
+        every frame on the channels' buses to their raw-mode clients.  Returns the frames moved.  Safe from any
+        thread."""
+        with self._pump_lock:
+            with self._lock:
+                chans = [self._channels[name]] if name in self._channels else \
+                    ([] if name is not None else list(self._channels.values()))
+                readers = [c for ch in chans for c in ch.members] if name is not None else list(self._clients)
+            touched = set()
+            for c in readers:
+                if self._read_client(c) and c.channel is not None:
+                    touched.add(c.channel)
+            for ch in touched:
+                if ch.on_input is not None:
+                    ch.on_input()
+            moved = 0
+            for ch in chans:
+                while True:
+                    try:
+                        msg = ch.bus.recv(0)
+                    except can.CanError:              # removed meanwhile
+                        break
+                    if msg is None:
+                        break
+                    moved += 1
+                    self._broadcast(ch, msg, None)
+            return moved
 
     @property
     def channels(self) -> list[str]:
@@ -152,8 +180,9 @@ class CanHub:
                         self._accept()
                     elif key.data == "wake":
                         self._drain_wake()
-                    else:
-                        self._serve(key.data, events)
+                    elif events & selectors.EVENT_WRITE:
+                        self._flush_client(key.data)
+                self.pump()                       # input from any client, and what the drives sent meanwhile
                 self._flush_due()
         finally:
             for key in list(self._sel.get_map().values()):
@@ -170,31 +199,34 @@ class CanHub:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         c = _Client(sock, addr)
         self.stats.clients += 1
+        with self._lock:
+            self._clients.add(c)
         self._sel.register(sock, selectors.EVENT_READ, c)
         self._reply(c, "< hi >")
 
-    def _serve(self, c: _Client, events: int) -> None:
+    def _read_client(self, c: _Client) -> bool:
+        """Take everything client ``c`` has sent; True if it sent frames."""
+        frames = self.stats.frames_in
         try:
-            if events & selectors.EVENT_WRITE:
-                self._flush_client(c)
-            if events & selectors.EVENT_READ:
+            while not c.closed:
                 try:
                     data = c.sock.recv(65536)
                 except (BlockingIOError, InterruptedError):
-                    return
+                    break
                 if not data:
-                    self._close_client(c)
-                    return
+                    self._request_close(c)
+                    break
                 before = c.splitter.stats.dropped_bytes
                 for text in c.splitter.feed(data):
                     self._command(c, text)
                 self.stats.dropped_bytes += c.splitter.stats.dropped_bytes - before
         except OSError:
-            self._close_client(c)
+            self._request_close(c)
         except Exception as exc:       # noqa: BLE001 - one client's trouble never stops the hub
             self.stats.errors += 1
             log.warning("client %s: %s: closed", c.addr, exc)
-            self._close_client(c)
+            self._request_close(c)
+        return self.stats.frames_in != frames
 
     def _command(self, c: _Client, text: str) -> None:
         verb, args = S.command(text)
@@ -203,6 +235,7 @@ class CanHub:
                 ch = self._channels.get(args[0])
                 if ch is not None:
                     c.channel, c.mode = ch, "bcm"
+                    ch.members.add(c)
             self.stats.commands += 1
             self._reply(c, "< ok >" if ch is not None else "< error could not open bus >")
         elif verb == "rawmode" and c.mode == "bcm" and not args:
@@ -331,7 +364,9 @@ class CanHub:
         with self._lock:
             if c.channel is not None:
                 c.channel.clients.discard(c)
+                c.channel.members.discard(c)
             self._flush.discard(c)
+            self._clients.discard(c)
         try:
             self._sel.unregister(c.sock)
         except (KeyError, ValueError):

@@ -13,7 +13,9 @@ velocity mode.  :meth:`Cia402Base._open` (blocking, once; SDO needs the drives' 
 3. per drive: NMT start; ``state = 'OPERATION ENABLED'`` (the library's state setter: controlword 0x06, 0x07,
    0x0F, each confirmed by the statusword TPDO).
 
-Then :meth:`_read` (non-blocking, every cycle, time injected): this master's heartbeat (0x700 + ``master_node``,
+Then :meth:`_read` (non-blocking, every cycle, time injected) reads every frame waiting on the bus and hands it
+to ``canopen`` -- the driver is polled like every base; python-can's receive thread runs only while
+:meth:`_open` and :meth:`_close` block on SDO answers -- then sends this master's heartbeat (0x700 + ``master_node``,
 state 5) every ``heartbeat`` seconds; odometry from the position actual values (velocities from velocity actual);
 and the heartbeat consumer ``canopen`` lacks: a drive not heard for 3 heartbeat periods, or reporting FAULT
 (statusword), an EMCY, or an NMT state other than operational, is a fault.  On a fault the other drive gets a
@@ -26,6 +28,7 @@ without blocking; the faults clear when both drives are enabled and healthy, or 
 """
 from __future__ import annotations
 
+import contextlib
 import math
 from dataclasses import dataclass, field
 from typing import Literal, Optional
@@ -45,7 +48,8 @@ from runtime.log import get_logger
 
 SILENT_PERIODS = 3             # heartbeat periods without a heartbeat before a drive counts as silent
 RESET_TIMEOUT = 2.0            # s a fault reset may take before it gives up
-NOTIFIER_CYCLE = 0.1           # s: how long closing waits at most for the receive thread
+NOTIFIER_CYCLE = 0.02          # s: how long stopping the receive thread (after open, at close) waits at most
+MAX_FRAMES_PER_POLL = 4096
 ENABLE_ATTEMPTS = 3
 _CAN_ERRORS = (can.CanError, OSError, RuntimeError, ValueError)
 
@@ -113,7 +117,7 @@ class _Drive:
         self.seen = 0                  # heartbeats counted by the last _read
         self.nmt = None                # NMT state of the last heartbeat
         self.not_operational = 0       # heartbeats in a row reporting another state than operational
-        self.last_heard = 0.0          # injected time of the last _read that found a new heartbeat
+        self.last_heard: float | None = None   # injected time of the last _read that found a new heartbeat
         self.pdos = 0                  # position/velocity TPDOs received
         self.position = 0
         self.velocity = 0
@@ -184,9 +188,10 @@ class Cia402Base(MobileBase):
                        _Drive("right", cfg.right_node, -1 if cfg.invert_right else 1))
         self.network: canopen.Network | None = None
         self.monitor = _FrameMonitor()
-        self.stats.extra.update({"frames_out": 0, "send_errors": 0, "malformed": 0, "heartbeats": 0, "emcy": 0,
+        self.stats.extra.update({"frames_out": 0, "send_errors": 0, "receive_errors": 0, "malformed": 0, "heartbeats": 0, "emcy": 0,
                                  "fault_stops": 0, "resets": 0})
         self._send_failures = 0        # in a row (DeviceLost at LOST_AFTER)
+        self._receive_failures = 0
         self._next_heartbeat = -math.inf
         self._latched: dict[str, str] = {}     # fault name -> description, until a reset clears it
         self._resetting: float | None = None   # the reset's deadline
@@ -208,19 +213,17 @@ class Cia402Base(MobileBase):
             raise InputError(f"CiA 402 base: cannot open the CAN bus {self._where()} ({exc}); expected a "
                              "python-can interface and channel that exist") from None
         net = canopen.Network(bus)
-        net.NOTIFIER_CYCLE = NOTIFIER_CYCLE
-        net.NOTIFIER_SHUTDOWN_TIMEOUT = 1.0
         net.listeners.append(self.monitor)
-        net.connect()
         self.network = net
         drive = None
         try:
-            for drive in self.drives:
-                self._add(drive)
-            for drive in self.drives:
-                self._configure(drive)
-            for drive in self.drives:
-                self._enable(drive)
+            with self._receiving():
+                for drive in self.drives:
+                    self._add(drive)
+                for drive in self.drives:
+                    self._configure(drive)
+                for drive in self.drives:
+                    self._enable(drive)
         except (SdoCommunicationError, SdoAbortedError, *_CAN_ERRORS) as exc:
             self._shutdown()
             raise InputError(f"CiA 402 base: {drive.name} on {self._where()} did not come up ({exc}); expected "
@@ -229,8 +232,7 @@ class Cia402Base(MobileBase):
             self._shutdown()
             raise
         for d in self.drives:
-            d.last_heard = now
-            d.seen = d.heartbeats
+            d.last_heard = None                # silence is counted from the first poll (open may take a while)
             d.not_operational = 0
         self._last_now = now
         self._next_heartbeat = -math.inf       # the first master heartbeat goes with the first poll
@@ -314,16 +316,29 @@ class Cia402Base(MobileBase):
 
     def _close(self) -> None:
         """Target 0 and Shutdown (power stage off), the drives' heartbeat consumer off, NMT pre-operational."""
-        for d in self.drives:
-            if d.node is None or self._silent(d):
-                continue
-            self._transmit(d, P.CW_SHUTDOWN, 0)
-            try:
-                d.node.sdo[0x1016][1].raw = 0
-                d.node.nmt.state = "PRE-OPERATIONAL"
-            except (SdoCommunicationError, SdoAbortedError, *_CAN_ERRORS) as exc:
-                self.log.warning("close %s: %s", d.name, exc)
+        with self._receiving():
+            for d in self.drives:
+                if d.node is None or self._silent(d):
+                    continue
+                self._transmit(d, P.CW_SHUTDOWN, 0)
+                try:
+                    d.node.sdo[0x1016][1].raw = 0
+                    d.node.nmt.state = "PRE-OPERATIONAL"
+                except (SdoCommunicationError, SdoAbortedError, *_CAN_ERRORS) as exc:
+                    self.log.warning("close %s: %s", d.name, exc)
         self._shutdown()
+
+    @contextlib.contextmanager
+    def _receiving(self):
+        """python-can's receive thread feeds canopen while SDO calls block for their answers."""
+        net = self.network
+        net.notifier = can.Notifier(net.bus, net.listeners, NOTIFIER_CYCLE)
+        try:
+            yield
+        finally:
+            net.notifier.stop(1.0)
+            if net.notifier.exception is None:
+                net.notifier = None
 
     def _shutdown(self) -> None:
         if self.network is not None:
@@ -335,7 +350,7 @@ class Cia402Base(MobileBase):
 
     # ------------------------------------------------------------------ polling
     def _read(self, now: float) -> bool:
-        self._check_receiver()
+        self._receive()
         if now >= self._next_heartbeat:
             self._send(P.COB_HEARTBEAT + self.cfg.master_node, bytes([P.HB_OPERATIONAL]))
             self._next_heartbeat = now + self.cfg.heartbeat
@@ -346,10 +361,24 @@ class Cia402Base(MobileBase):
         self._sync_stats()
         return fresh
 
-    def _check_receiver(self) -> None:
-        notifier = self.network.notifier
-        if notifier is not None and notifier.exception is not None:
-            raise DeviceLost(f"CiA 402 base {self._where()}: the CAN receiver stopped ({notifier.exception})")
+    def _receive(self) -> None:
+        """Every frame waiting on the bus, in order, to canopen (which catches what its callbacks raise) and the
+        frame monitor.  A bus that fails LOST_AFTER polls in a row is lost."""
+        net = self.network
+        try:
+            for _ in range(MAX_FRAMES_PER_POLL):
+                msg = net.bus.recv(0)
+                if msg is None:
+                    break
+                for listener in net.listeners:
+                    listener.on_message_received(msg)
+        except (can.CanError, OSError) as exc:
+            self.stats.extra["receive_errors"] += 1
+            self._receive_failures += 1
+            if self._receive_failures >= LOST_AFTER:
+                raise DeviceLost(f"CiA 402 base {self._where()}: {self._receive_failures} reads in a row failed ({exc})")
+            return
+        self._receive_failures = 0
 
     def _odometry(self, now: float) -> bool:
         left, right = self.drives
@@ -376,7 +405,7 @@ class Cia402Base(MobileBase):
         return True
 
     def _silent(self, d: _Drive) -> bool:
-        return self._last_now - d.last_heard > SILENT_PERIODS * self.cfg.heartbeat
+        return d.last_heard is not None and self._last_now - d.last_heard > SILENT_PERIODS * self.cfg.heartbeat
 
     def _faults_now(self, d: _Drive) -> dict[str, str]:
         """The faults drive ``d`` shows now, by name, with a line saying what was seen."""
@@ -397,7 +426,7 @@ class Cia402Base(MobileBase):
     def _watch(self, now: float) -> None:
         self._last_now = now
         for d in self.drives:
-            if d.heartbeats != d.seen:
+            if d.heartbeats != d.seen or d.last_heard is None:
                 d.seen = d.heartbeats
                 d.last_heard = now
         current: dict[str, str] = {}

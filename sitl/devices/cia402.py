@@ -23,15 +23,17 @@ real device on the wire): the library's SDO server, NMT slave, EMCY producer and
 * test hooks: :meth:`EmulatedDrive.inject_fault` (FAULT with an EMCY) and :meth:`EmulatedDrive.silence`
   (the drive neither hears nor sends, as with a cut cable; its own consumer then stops the motor).
 
-Time: frames are handled as they arrive (python-can's receive thread), so SDO works while the master blocks
-in its set-up even in lock-step; everything timed (heartbeats, event timers, ramps, the consumer) moves with
-the sim time given to :meth:`Cia402Device.service`, which also samples the body and drives its wheels.
+Time: a drive reads its bus in :meth:`EmulatedDrive.pump` (frames in order, one pump at a time): the hub pumps
+the drives as soon as a client's frames arrive (so SDO works while the master blocks in its set-up, even in
+lock-step), and :meth:`Cia402Device.service` pumps the hub and the drives before and after each step of sim
+time.  Everything timed (heartbeats, event timers, ramps, the consumer) moves with the sim time given to
+``service``, which also samples the body and drives its wheels.
 
 :class:`Cia402Device` is the SITL device (:mod:`sitl.devices.registry`, ``base.type: cia402``) on a
 ``"candiff"`` body: its drives join the robot's channel ``can<id>`` of the process's socketcand hub
 (:mod:`sitl.can_hub`, started by the first CAN device), and :meth:`Cia402Device.endpoint` names it for the
 generated robot config and the manifest.  Given ``bus=`` (python-can arguments) it uses that bus instead
-(tests: ``virtual`` in-process, ``socketcan`` on ``vcan0``).
+(tests: ``virtual`` in-process, ``socketcan`` on ``vcan0``) and a thread of its own pumps the drives.
 """
 from __future__ import annotations
 
@@ -48,7 +50,7 @@ from runtime.drivers import cia402_protocol as P
 from runtime.drivers.cia402 import Cia402Config, units
 from runtime.log import get_logger
 
-NOTIFIER_CYCLE = 0.1
+PUMP_IDLE = 0.001           # s the pump thread (no hub) sleeps when no frame waits
 ABORT_VALUE_RANGE = 0x06090030
 LIVE = (0x1001, 0x603F, 0x6041, 0x6061, 0x6064, 0x606C)   # objects whose value is the drive's state
 
@@ -82,13 +84,12 @@ def _due(nxt: float | None, now: float, period: float) -> tuple[bool, float | No
 
 
 class SimNetwork(canopen.Network):
-    """A ``canopen`` network whose periodic messages follow sim time (:meth:`tick`), and that a test can cut
-    off (``silent``: nothing in, nothing out)."""
+    """A ``canopen`` network whose periodic messages follow sim time (:meth:`tick`), that is fed by
+    :meth:`EmulatedDrive.pump` (no receive thread), and that a test can cut off (``silent``: nothing in, nothing
+    out)."""
 
     def __init__(self, bus: can.BusABC):
         super().__init__(bus)
-        self.NOTIFIER_CYCLE = NOTIFIER_CYCLE
-        self.NOTIFIER_SHUTDOWN_TIMEOUT = 1.0
         self.tasks: list[_SimTask] = []
         self.task_lock = threading.Lock()
         self.silent = False
@@ -125,33 +126,18 @@ class SimNetwork(canopen.Network):
 @dataclass
 class DriveStats:
     frames_in: dict = field(default_factory=dict)   # by CANopen kind (runtime.drivers.cia402_protocol.classify)
-    malformed: int = 0              # frames no CANopen service sends, RPDOs shorter than their map
+    malformed: int = 0              # frames no CANopen service sends, RPDOs shorter than their map, frames
+                                    # canopen could not take (an SDO request it cannot parse ...)
     controlwords: int = 0
     faults: int = 0
     consumer_timeouts: int = 0
     rpdos_ignored: int = 0          # RPDOs outside NMT operational
 
 
-class _Counter(can.Listener):
-    def __init__(self, stats: DriveStats):
-        self.stats = stats
-
-    def on_message_received(self, msg: can.Message) -> None:
-        try:
-            kind = None if msg.is_error_frame or msg.is_remote_frame else \
-                P.classify(msg.arbitration_id, bytes(msg.data), msg.is_extended_id)
-        except Exception:              # noqa: BLE001 - counting never stops the receive thread
-            kind = None
-        if kind is None:
-            self.stats.malformed += 1
-        else:
-            self.stats.frames_in[kind[0]] = self.stats.frames_in.get(kind[0], 0) + 1
-
-
 class EmulatedDrive:
-    """One CiA 402 drive: a ``LocalNode`` on its own bus.  :meth:`sample` and :meth:`service` from the sim's
-    thread; everything else arrives in python-can's receive thread.  ``wheel_rate`` is what the motor drives
-    the wheel at (rad/s, forward positive)."""
+    """One CiA 402 drive: a ``LocalNode`` on its own bus, fed by :meth:`pump`; :meth:`sample` and
+    :meth:`service` from the sim's thread.  ``wheel_rate`` is what the motor drives the wheel at (rad/s, forward
+    positive)."""
 
     def __init__(self, node_id: int, bus_kwargs: dict, cfg: Cia402Config, sign: int = 1, robot_id=None,
                  name: str = "drive"):
@@ -179,7 +165,6 @@ class EmulatedDrive:
         self._syncs = 0
         self.bus = can.Bus(**bus_kwargs)
         self.net = SimNetwork(self.bus)
-        self.net.listeners.append(_Counter(self.stats))
         self.node = self.net.create_node(node_id, P.object_dictionary(node_id))
         self.node.add_read_callback(self._on_read)
         self.node.add_write_callback(self._on_write)
@@ -187,7 +172,6 @@ class EmulatedDrive:
         self.net.subscribe(P.COB_SYNC, self._on_sync)
         for m in self.node.rpdo.map.values():
             m.add_callback(self._on_rpdo)
-        self.net.connect()
         self._boot()
 
     # ------------------------------------------------------------------ test hooks
@@ -208,6 +192,38 @@ class EmulatedDrive:
     @property
     def nmt_state(self) -> str:
         return self.node.nmt.state
+
+    # ------------------------------------------------------------------ reception
+    def pump(self) -> int:
+        """Handle every frame waiting on the bus, in order; returns how many."""
+        n = 0
+        with self.lock:
+            while True:
+                try:
+                    msg = self.bus.recv(0)
+                except can.CanError:
+                    break
+                if msg is None:
+                    break
+                n += 1
+                self._dispatch(msg)
+        return n
+
+    def _dispatch(self, msg: can.Message) -> None:
+        """Count the frame by kind, then hand it to canopen (SDO server, NMT, PDOs, our subscriptions).  Nothing
+        a frame holds gets out of here: a bad one is counted and dropped."""
+        s = self.stats
+        kind = None if msg.is_error_frame or msg.is_remote_frame else \
+            P.classify(msg.arbitration_id, bytes(msg.data), msg.is_extended_id)
+        if kind is None:
+            s.malformed += 1
+            return
+        s.frames_in[kind[0]] = s.frames_in.get(kind[0], 0) + 1
+        try:
+            self.net.notify(msg.arbitration_id, msg.data, msg.timestamp)
+        except Exception as exc:       # noqa: BLE001 - as canopen's own listener: log, count, go on
+            s.malformed += 1
+            self.log.debug("drive %d: frame 0x%03X %s: %s", self.id, msg.arbitration_id, bytes(msg.data).hex(), exc)
 
     # ------------------------------------------------------------------ boot and NMT
     def _boot(self) -> None:
@@ -441,12 +457,14 @@ class Cia402Device:
         self.log = get_logger("sitl.cia402", robot_id)
         self.hub = None
         self.channel = f"can{robot_id if robot_id is not None else 0}"
+        self.drives: dict[str, EmulatedDrive] = {}
+        self._stop = threading.Event()
+        self._thread = None
         if bus is None:
             from sitl import can_hub
             self.hub = can_hub.acquire()
-            bus = {"interface": "virtual", "channel": self.hub.add_channel(self.channel)}
+            bus = {"interface": "virtual", "channel": self.hub.add_channel(self.channel, on_input=self.pump)}
         self.bus = dict(bus)
-        self.drives = {}
         try:
             for side, node_id, invert in (("left", cfg.left_node, cfg.invert_left),
                                           ("right", cfg.right_node, cfg.invert_right)):
@@ -454,6 +472,18 @@ class Cia402Device:
         except Exception:
             self.close()
             raise
+        if self.hub is None:
+            self._thread = threading.Thread(target=self._pump_loop, name=f"cia402-{self.channel}", daemon=True)
+            self._thread.start()
+
+    def pump(self) -> int:
+        """Let both drives handle what waits on their buses."""
+        return sum(d.pump() for d in list(self.drives.values()))
+
+    def _pump_loop(self) -> None:
+        while not self._stop.is_set():
+            if not self.pump():
+                self._stop.wait(PUMP_IDLE)
 
     def endpoint(self) -> dict:
         """The ``base:`` keys that point the driver at these drives."""
@@ -462,14 +492,26 @@ class Cia402Device:
         return {k: v for k, v in self.bus.items() if k in ("interface", "channel", "host", "port", "bitrate")}
 
     def service(self, now: float) -> None:
+        """Frames sent so far reach the drives; the drives step to sim time ``now`` (what they send then goes
+        out at once); the body's wheels follow the motors."""
+        self._move_frames()
         angles, rates = self.body.wheel_angles(), self.body.wheel_rates()
         for d, angle, rate in zip(self.drives.values(), angles, rates):
             d.sample(angle, rate)
             d.service(now)
+        self._move_frames()
         left, right = self.drives["left"], self.drives["right"]
         self.body.set_wheel_rates(left.wheel_rate, right.wheel_rate)
 
+    def _move_frames(self) -> None:
+        if self.hub is not None:
+            self.hub.pump(self.channel)      # clients' frames to the drives, the drives' frames to the clients
+        self.pump()                          # what the drives sent each other
+
     def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(1.0)
         for d in self.drives.values():
             d.close()
         self.drives = {}

@@ -208,6 +208,12 @@ class MobileBase(abc.ABC):
     def stop(self, now: float) -> None:
         self.set_velocity(0.0, 0.0, now)
 
+    def reset_faults(self, now: float) -> bool:
+        """Ask the base to clear the faults it reports in ``sensors.faults`` and drive again (the operator's
+        request; it may take a few polls).  True if a reset was started; a base without resettable faults
+        returns False."""
+        return False
+
     # ------------------------------------------------------------------ driver hooks
     @abc.abstractmethod
     def _open(self, now: float) -> None:

@@ -51,6 +51,7 @@ RESET_TIMEOUT = 2.0            # s a fault reset may take before it gives up
 NOTIFIER_CYCLE = 0.02          # s: how long stopping the receive thread (after open, at close) waits at most
 MAX_FRAMES_PER_POLL = 4096
 ENABLE_ATTEMPTS = 3
+STALE_PDOS = 3                 # TPDO periods after which a drive's last speed no longer counts
 _CAN_ERRORS = (can.CanError, OSError, RuntimeError, ValueError)
 
 
@@ -119,6 +120,8 @@ class _Drive:
         self.not_operational = 0       # heartbeats in a row reporting another state than operational
         self.last_heard: float | None = None   # injected time of the last _read that found a new heartbeat
         self.pdos = 0                  # position/velocity TPDOs received
+        self.pdos_seen = 0             # ... counted by the last _read
+        self.pdo_at: float | None = None   # injected time of the last _read that found a new one
         self.position = 0
         self.velocity = 0
         self.emcy: list[int] = []      # EMCY codes received, in order
@@ -196,7 +199,6 @@ class Cia402Base(MobileBase):
         self._latched: dict[str, str] = {}     # fault name -> description, until a reset clears it
         self._resetting: float | None = None   # the reset's deadline
         self._ref: tuple[int, int] | None = None
-        self._pdos_seen = (0, 0)
         self._last_now = 0.0                   # the latest poll's time
         self._current: dict[str, str] = {}     # the faults the drives show now
 
@@ -302,6 +304,7 @@ class Cia402Base(MobileBase):
         n = d.node
         n.nmt.state = "OPERATIONAL"
         n.rpdo[1][0x60FF].raw = 0
+        n.tpdo_values[0x6041] = n.sdo[0x6041].raw      # the library starts from 0 until a TPDO came: read it
         for _ in range(ENABLE_ATTEMPTS):
             try:
                 n.state = P.ENABLED
@@ -381,11 +384,16 @@ class Cia402Base(MobileBase):
         self._receive_failures = 0
 
     def _odometry(self, now: float) -> bool:
+        """Dead reckoning from the position actual values; wheel speeds from velocity actual, taken as 0 for a
+        drive whose TPDO has not come for STALE_PDOS periods (silent or stopped sending: a stale speed would
+        move the pose estimate of a base that stands)."""
         left, right = self.drives
-        counts = (left.pdos, right.pdos)
-        if not all(counts) or counts == self._pdos_seen:
+        fresh = False
+        for d in self.drives:
+            if d.pdos != d.pdos_seen:
+                d.pdos_seen, d.pdo_at, fresh = d.pdos, now, True
+        if not fresh or not (left.pdos and right.pdos):
             return False
-        self._pdos_seen = counts
         positions = (left.position, right.position)
         previous, self._ref = self._ref, positions
         if previous is None:                   # the first pair only sets the reference
@@ -399,7 +407,8 @@ class Cia402Base(MobileBase):
         o.y += ds * math.sin(mid)
         o.theta = math.remainder(o.theta + dth, math.tau)
         o.distance += abs(ds)
-        vl, vr = (u.mps(d.velocity) * d.sign for d in self.drives)
+        stale = STALE_PDOS * self.cfg.pdo_period
+        vl, vr = (u.mps(d.velocity) * d.sign if now - d.pdo_at <= stale else 0.0 for d in self.drives)
         o.v, o.w = (vl + vr) / 2.0, (vr - vl) / self.cfg.track
         o.t = now
         return True

@@ -159,6 +159,12 @@ class CanHub:
                     self._broadcast(ch, msg, None)
             return moved
 
+    def listeners(self, name: str) -> int:
+        """Clients in raw mode on channel ``name`` (they get every frame)."""
+        with self._lock:
+            ch = self._channels.get(name)
+            return len(ch.clients) if ch else 0
+
     @property
     def channels(self) -> list[str]:
         with self._lock:

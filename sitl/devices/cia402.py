@@ -19,7 +19,7 @@ real device on the wire): the library's SDO server, NMT slave, EMCY producer and
   the motor stops when the master goes silent;
 * a motor: in OPERATION ENABLED the velocity ramps to the target at the profile acceleration/deceleration
   (0x6083/0x6084), in QUICK STOP and FAULT REACTION to zero at the quick stop deceleration (0x6085), and
-  brakes to zero in any other state; leaving NMT operational halts it;
+  brakes to zero in any other state; leaving NMT operational while enabled is a quick stop;
 * test hooks: :meth:`EmulatedDrive.inject_fault` (FAULT with an EMCY) and :meth:`EmulatedDrive.silence`
   (the drive neither hears nor sends, as with a cut cable; its own consumer then stops the motor).
 
@@ -251,8 +251,10 @@ class EmulatedDrive:
                 self.node.rpdo.read()
                 self._event_due.clear()
                 self._emit_events()
-            elif self.drive.enabled:                       # leaving operational: halt the motor
-                self.target = 0
+            elif self.drive.enabled:                       # leaving operational: quick stop (transition 11)
+                before = self.drive.state
+                self.drive.command(P.CW_QUICK_STOP)
+                self._state_changed(before)
 
     def _on_sync(self, can_id, data, timestamp) -> None:
         with self.lock:

@@ -152,3 +152,27 @@ def test_truncated_frames_are_counted_as_malformed(rig, can_id, data):
         noise.shutdown()
     assert rig.base.stats.extra["malformed"] + rig.left.stats.malformed > sum(before)
     assert rig.base.sensors.faults == () and rig.left.state == P.ENABLED
+
+
+# ----------------------------------------------------------------------------- what the ground station sees
+def test_sys_status_motor_outputs_unhealthy_while_the_base_reports_faults():
+    from runtime.comms.link import MavlinkLink
+    from runtime.comms.telemetry import GcsTelemetry
+    from runtime.drivers.base import BaseSensors
+    from tests.test_comms_telemetry import DATUM, Gcs
+
+    gcs = Gcs()
+    link = MavlinkLink(3, "127.0.0.1:0", [], gcs.address)
+    try:
+        tel = GcsTelemetry(link, 3, DATUM)
+        motor = link.module.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+        health = []
+        for t, faults in enumerate([(), ("left_drive_silent",), ()]):
+            tel.tick(float(t), (0.0, 0.0, 0.0), (0.0, 0.0), BaseSensors(faults=faults), None)
+            s = next(m for m in gcs.receive(4) if m.get_type() == "SYS_STATUS")
+            assert s.onboard_control_sensors_present & s.onboard_control_sensors_enabled & motor
+            health.append(bool(s.onboard_control_sensors_health & motor))
+        assert health == [True, False, True]
+    finally:
+        link.close()
+        gcs.sock.close()

@@ -21,6 +21,8 @@ import numpy as np
 import pybullet as p
 
 from runtime.errors import InputError
+from sitl.bodies.diffdrive import LEFT, RIGHT, Chassis, GroundTruth, tyre_radii
+from sitl.bodies.diffdrive import build_body as diff_body
 
 LENGTH, WIDTH, HEIGHT, CLEARANCE = 0.44, 0.38, 0.20, 0.03      # m
 RADIUS = 0.30                 # m: the circle holding the chassis (half diagonal 0.291 m)
@@ -35,8 +37,9 @@ WHEEL_FRICTION = 1.0
 CHASSIS_FRICTION = 0.3
 
 CENTRE_Z = CLEARANCE + HEIGHT / 2         # base frame height above the floor
-LEFT, RIGHT = 0, 1
-CASTERS = (2, 3)
+CHASSIS = Chassis(mass=MASS_CHASSIS, centre_z=CENTRE_Z, track=TRACK, wheel_mass=MASS_WHEEL,
+                  caster_radius=CASTER_RADIUS, caster_x=CASTER_X, caster_mass=MASS_CASTER, friction=CHASSIS_FRICTION,
+                  wheel_friction=WHEEL_FRICTION, max_wheel_torque=MAX_WHEEL_TORQUE)
 
 
 def build_body(client: int, start: tuple[float, float, float], gui: bool, wheel_radii: tuple[float, float]) -> int:
@@ -44,54 +47,22 @@ def build_body(client: int, start: tuple[float, float, float], gui: bool, wheel_
     kw = {"physicsClientId": client}
     half = (LENGTH / 2, WIDTH / 2, HEIGHT / 2)
     chassis = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, **kw)
-    wheels = [p.createCollisionShape(p.GEOM_SPHERE, radius=r, **kw) for r in wheel_radii]
-    caster = p.createCollisionShape(p.GEOM_SPHERE, radius=CASTER_RADIUS, **kw)
-    vis = [-1, -1, -1]
-    if gui:
-        vis = [p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=(0.9, 0.55, 0.1, 1), **kw),
-               p.createVisualShape(p.GEOM_SPHERE, radius=WHEEL_RADIUS, rgbaColor=(0.1, 0.1, 0.1, 1), **kw),
-               p.createVisualShape(p.GEOM_SPHERE, radius=CASTER_RADIUS, rgbaColor=(0.6, 0.6, 0.6, 1), **kw)]
-    x, y, yaw = start
-    body = p.createMultiBody(
-        baseMass=MASS_CHASSIS, baseCollisionShapeIndex=chassis, baseVisualShapeIndex=vis[0],
-        basePosition=(x, y, CENTRE_Z), baseOrientation=p.getQuaternionFromEuler((0, 0, yaw)),
-        linkMasses=[MASS_WHEEL, MASS_WHEEL, MASS_CASTER, MASS_CASTER],
-        linkCollisionShapeIndices=[wheels[0], wheels[1], caster, caster],
-        linkVisualShapeIndices=[vis[1], vis[1], vis[2], vis[2]],
-        linkPositions=[(0, TRACK / 2, wheel_radii[0] - CENTRE_Z), (0, -TRACK / 2, wheel_radii[1] - CENTRE_Z),
-                       (CASTER_X, 0, CASTER_RADIUS - CENTRE_Z), (-CASTER_X, 0, CASTER_RADIUS - CENTRE_Z)],
-        linkOrientations=[(0, 0, 0, 1)] * 4,
-        linkInertialFramePositions=[(0, 0, 0)] * 4,
-        linkInertialFrameOrientations=[(0, 0, 0, 1)] * 4,
-        linkParentIndices=[0, 0, 0, 0],
-        linkJointTypes=[p.JOINT_REVOLUTE, p.JOINT_REVOLUTE, p.JOINT_FIXED, p.JOINT_FIXED],
-        linkJointAxis=[(0, 1, 0), (0, 1, 0), (0, 0, 1), (0, 0, 1)],
-        **kw)
-    p.changeDynamics(body, -1, lateralFriction=CHASSIS_FRICTION, restitution=0.0, contactProcessingThreshold=0.0,
-                     activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING, **kw)
-    for link in (LEFT, RIGHT):
-        p.changeDynamics(body, link, lateralFriction=WHEEL_FRICTION, spinningFriction=0.0, rollingFriction=0.0,
-                         restitution=0.0, jointDamping=0.0, contactProcessingThreshold=0.0, **kw)
-    for link in CASTERS:
-        p.changeDynamics(body, link, lateralFriction=0.0, spinningFriction=0.0, rollingFriction=0.0,
-                         restitution=0.0, contactProcessingThreshold=0.0, **kw)
-    p.setJointMotorControlArray(body, [LEFT, RIGHT], p.VELOCITY_CONTROL, targetVelocities=[0.0, 0.0],
-                                forces=[MAX_WHEEL_TORQUE] * 2, **kw)
-    return body
+    visual = p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=(0.9, 0.55, 0.1, 1), **kw) if gui else -1
+    return diff_body(client, start, CHASSIS, chassis, visual, wheel_radii, gui)
 
 
-class SimCanDiff:
-    """One CAN differential base in a :class:`sitl.world.World`; the CiA 402 device calls these methods."""
+class SimCanDiff(GroundTruth):
+    """One CAN differential base in a :class:`sitl.world.World`; the CiA 402 device calls these methods (ground
+    truth: :class:`~sitl.bodies.diffdrive.GroundTruth`)."""
 
     radius = RADIUS
+    centre_z = CENTRE_Z
 
     def __init__(self, client: int, robot_id: int, start: tuple[float, float, float], rng: np.random.Generator,
                  gui: bool = False, wheel_radius_sigma: float = 0.004):
         self.robot_id = robot_id
         self._kw = {"physicsClientId": client}
-        sigma = wheel_radius_sigma
-        scale = np.clip(rng.normal(1.0, sigma, size=2), 1 - 3 * sigma, 1 + 3 * sigma) if sigma > 0 else (1.0, 1.0)
-        self.wheel_radii = (WHEEL_RADIUS * float(scale[0]), WHEEL_RADIUS * float(scale[1]))
+        self.wheel_radii = tyre_radii(WHEEL_RADIUS, rng, wheel_radius_sigma)
         self.body_id = build_body(client, start, gui, self.wheel_radii)
         self._targets = (0.0, 0.0)
 
@@ -128,22 +99,3 @@ class SimCanDiff:
         """Wheel joint rates (rad/s)."""
         left, right = p.getJointStates(self.body_id, [LEFT, RIGHT], **self._kw)
         return left[1], right[1]
-
-    def pose(self) -> tuple[float, float, float]:
-        """Ground truth x, y (m) and yaw (rad), ENU."""
-        pos, orn = p.getBasePositionAndOrientation(self.body_id, **self._kw)
-        return pos[0], pos[1], p.getEulerFromQuaternion(orn)[2]
-
-    def velocity(self) -> tuple[float, float]:
-        """Ground truth vx, vy (m/s), ENU."""
-        lin, _ = p.getBaseVelocity(self.body_id, **self._kw)
-        return lin[0], lin[1]
-
-    def yaw_rate(self) -> float:
-        return p.getBaseVelocity(self.body_id, **self._kw)[1][2]
-
-    def place(self, x: float, y: float, yaw: float) -> None:
-        """Teleport the body (tests only; zeroes its velocity)."""
-        p.resetBasePositionAndOrientation(self.body_id, (x, y, CENTRE_Z), p.getQuaternionFromEuler((0, 0, yaw)),
-                                          **self._kw)
-        p.resetBaseVelocity(self.body_id, (0, 0, 0), (0, 0, 0), **self._kw)

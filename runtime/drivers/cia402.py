@@ -42,7 +42,7 @@ from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
 from runtime.config.build import rng
 from runtime.drivers import cia402_protocol as P
-from runtime.drivers.base import LOST_AFTER, DeviceLost, Footprint, MobileBase
+from runtime.drivers.base import Footprint, MobileBase
 from runtime.errors import InputError
 from runtime.log import get_logger
 
@@ -193,8 +193,6 @@ class Cia402Base(MobileBase):
         self.monitor = _FrameMonitor()
         self.stats.extra.update({"frames_out": 0, "send_errors": 0, "receive_errors": 0, "malformed": 0, "heartbeats": 0, "emcy": 0,
                                  "fault_stops": 0, "resets": 0})
-        self._send_failures = 0        # in a row (DeviceLost at LOST_AFTER)
-        self._receive_failures = 0
         self._next_heartbeat = -math.inf
         self._latched: dict[str, str] = {}     # fault name -> description, until a reset clears it
         self._resetting: float | None = None   # the reset's deadline
@@ -376,12 +374,9 @@ class Cia402Base(MobileBase):
                 for listener in net.listeners:
                     listener.on_message_received(msg)
         except (can.CanError, OSError) as exc:
-            self.stats.extra["receive_errors"] += 1
-            self._receive_failures += 1
-            if self._receive_failures >= LOST_AFTER:
-                raise DeviceLost(f"CiA 402 base {self._where()}: {self._receive_failures} reads in a row failed ({exc})")
+            self._link_failed("receive_errors", exc, f"CiA 402 base: reads from {self._where()}")
             return
-        self._receive_failures = 0
+        self._link_ok("receive_errors")
 
     def _odometry(self, now: float) -> bool:
         """Dead reckoning from the position actual values; wheel speeds from velocity actual, taken as 0 for a
@@ -402,11 +397,7 @@ class Cia402Base(MobileBase):
         dl, dr = (u.metres(P.delta32(p, q)) * d.sign for p, q, d in zip(positions, previous, self.drives))
         ds, dth = (dl + dr) / 2.0, (dr - dl) / self.cfg.track
         o = self.odometry
-        mid = o.theta + dth / 2.0
-        o.x += ds * math.cos(mid)
-        o.y += ds * math.sin(mid)
-        o.theta = math.remainder(o.theta + dth, math.tau)
-        o.distance += abs(ds)
+        o.advance(ds, dth)
         stale = STALE_PDOS * self.cfg.pdo_period
         vl, vr = (u.mps(d.velocity) * d.sign if now - d.pdo_at <= stale else 0.0 for d in self.drives)
         o.v, o.w = (vl + vr) / 2.0, (vr - vl) / self.cfg.track
@@ -536,14 +527,9 @@ class Cia402Base(MobileBase):
         try:
             self.network.send_message(can_id, data)
         except _CAN_ERRORS as exc:
-            self.stats.extra["send_errors"] += 1
-            self._send_failures += 1
-            if self._send_failures >= LOST_AFTER:
-                raise DeviceLost(f"CiA 402 base {self._where()}: {self._send_failures} sends in a row failed ({exc})")
-            if self.stats.extra["send_errors"] in (1, 10, 100) or self.stats.extra["send_errors"] % 1000 == 0:
-                self.log.warning("send on %s: %s", self._where(), exc)
+            self._link_failed("send_errors", exc, f"CiA 402 base: sends on {self._where()}")
             return
-        self._send_failures = 0
+        self._link_ok("send_errors")
         self.stats.extra["frames_out"] += 1
 
     def _sync_stats(self) -> None:

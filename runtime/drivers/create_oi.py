@@ -204,11 +204,7 @@ class CreateOI(MobileBase):
 
     def _integrate(self, ds: float, dth: float, frames: int, now: float) -> None:
         o = self.odometry
-        mid = o.theta + dth / 2.0
-        o.x += ds * math.cos(mid)
-        o.y += ds * math.sin(mid)
-        o.theta = math.remainder(o.theta + dth, math.tau)
-        o.distance += abs(ds)
+        o.advance(ds, dth)
         span = frames * P.STREAM_PERIOD        # the robot sends one frame per 15 ms
         o.v, o.w = ds / span, dth / span
         o.t = now

@@ -176,3 +176,27 @@ def test_sys_status_motor_outputs_unhealthy_while_the_base_reports_faults():
     finally:
         link.close()
         gcs.sock.close()
+
+
+def test_a_vanished_hub_is_a_lost_device():
+    """The SITL (or a remote socketcand) goes away: the drives fall silent, then sends fail; after LOST_AFTER
+    failed sends in a row the driver raises DeviceLost, on which the daemon stops (exit code 3)."""
+    from runtime.drivers.base import LOST_AFTER, DeviceLost
+
+    r = Rig("socketcand")
+    try:
+        r.open()
+        r.v = 0.3
+        r.step(0.5)
+        r.dev.hub.remove_channel(r.dev.channel)
+        with pytest.raises(DeviceLost, match="sends on socketcand") as info:
+            for _ in range(10 * LOST_AFTER):
+                r.t += r.period
+                r.base.poll(r.t)
+                r.base.set_velocity(r.v, r.w, r.t)
+        assert "\n" not in str(info.value)
+        assert "left_drive_silent" in r.base.sensors.faults
+        assert r.base.stats.extra["send_errors"] >= LOST_AFTER
+    finally:
+        r.base.close()
+        r.dev.close()

@@ -192,6 +192,7 @@ class ArcosBase(MobileBase):
             self.params.subclass)
         self.state = "connected"
         self._connected_at = self._last_sip_t = now
+        self._sent_motion = (0, 0)                # the server starts still
         self._send(P.open_(), now)
         self._send(P.enable(True), now)
         self._last_enable = now
@@ -320,7 +321,7 @@ class ArcosBase(MobileBase):
     # ------------------------------------------------------------------ commands
     def _command(self, v: float, w: float, now: float) -> bool:
         """``(v, w)`` as VEL mm/s and RVEL deg/s, rounded; sent now if it is a stop or the last motion update
-        is a SIP cycle old, else at the next poll that is."""
+        is a SIP cycle old (or the robot is still), else at the next poll that is."""
         pr = self.params
         mm = max(-pr.max_vel_mm_s, min(pr.max_vel_mm_s, round(v * 1000.0)))
         deg = max(-pr.max_rvel_deg_s, min(pr.max_rvel_deg_s, round(math.degrees(w))))
@@ -333,9 +334,10 @@ class ArcosBase(MobileBase):
         target, sent = self._target, self._sent_motion
         since = now - self._last_motion_tx
         if target != sent:
-            due = target == (0, 0) or sent is None or since >= MIN_MOTION_INTERVAL
+            due = (0, 0) in (target, sent) or sent is None or since >= MIN_MOTION_INTERVAL
         else:
-            due = target != (0, 0) and since >= REFRESH
+            fresh = self._last_cmd_t is not None and now - self._last_cmd_t < self.watchdog
+            due = target != (0, 0) and since >= REFRESH and fresh     # not a refresh the watchdog would undo
         if due:
             self._send(P.vel(target[0]) + P.rvel(target[1]), now)
             self.stats.extra["motion_commands"] += 1

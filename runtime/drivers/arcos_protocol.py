@@ -19,6 +19,7 @@ Pure code, no I/O; shared by the driver (:mod:`runtime.drivers.arcos`) and the S
 """
 from __future__ import annotations
 
+import bisect
 import math
 import struct
 from dataclasses import dataclass, field
@@ -86,12 +87,16 @@ def checksum(body: bytes) -> int:
     """ArRobotPacket::calcCheckSum over ``body`` (id and arguments): big-endian 16-bit words summed
     modulo 2**16; an odd last byte is XORed in."""
     n = len(body)
-    c = 0
-    for i in range(0, n - 1, 2):
-        c = (c + (body[i] << 8 | body[i + 1])) & 0xFFFF
+    words = _WORDS.get(n >> 1)
+    if words is None:
+        words = _WORDS[n >> 1] = struct.Struct(f">{n >> 1}H")
+    c = sum(words.unpack_from(body)) & 0xFFFF
     if n & 1:
         c ^= body[-1]
     return c
+
+
+_WORDS: dict[int, struct.Struct] = {}
 
 
 def frame(body: bytes) -> bytes:
@@ -391,7 +396,12 @@ SIP_TAIL: tuple[tuple[str, str], ...] = (
 )
 
 
-@dataclass(frozen=True)
+_TAIL_NAMES = tuple(name for name, _ in SIP_TAIL)
+_TAIL_PREFIX = [struct.Struct("<" + "".join(code for _, code in SIP_TAIL[:k])) for k in range(len(SIP_TAIL) + 1)]
+_TAIL_SIZES = [st.size for st in _TAIL_PREFIX]        # bytes the first k tail fields take
+
+
+@dataclass(slots=True)
 class Sip:
     """A standard SIP in robot units: position in the robot's 15-bit counters (DistConvFactor mm), heading
     in 4096ths of a turn, wheel velocities in mm/s (VelConvFactor), battery in 0.1 V, sonar ranges in
@@ -432,19 +442,17 @@ def decode_sip(body: bytes) -> Sip:
         raise SipError(f"standard SIP of {len(body)} bytes: shorter than its {1 + _SIP_HEAD.size}-byte head")
     x, y, th, lv, rv, bat, stall, control, flags, compass, n = _SIP_HEAD.unpack_from(body, 1)
     i = 1 + _SIP_HEAD.size
-    if i + n * _SONAR.size > len(body):
+    j = i + n * _SONAR.size
+    if j > len(body):
         raise SipError(f"standard SIP says {n} sonar readings but has room for {(len(body) - i) // _SONAR.size}")
-    sonars = tuple(_SONAR.unpack_from(body, i + k * _SONAR.size) for k in range(n))
-    i += n * _SONAR.size
-    tail = {}
-    for name, code in SIP_TAIL:
-        size = struct.calcsize(code)
-        if len(body) - i < size:
-            break
-        tail[name] = struct.unpack_from("<" + code, body, i)[0]
-        i += size
-    return Sip(x & 0x7FFF, y & 0x7FFF, th, lv, rv, bat, stall, control, flags, compass, sonars,
-               body[0] == 0x33, **tail)
+    sonars = tuple(_SONAR.iter_unpack(body[i:j])) if n else ()
+    sip = Sip(x & 0x7FFF, y & 0x7FFF, th, lv, rv, bat, stall, control, flags, compass, sonars, body[0] == 0x33)
+    left = len(body) - j
+    if left:
+        k = bisect.bisect_right(_TAIL_SIZES, left) - 1        # how many tail fields fit
+        for name, v in zip(_TAIL_NAMES, _TAIL_PREFIX[k].unpack_from(body, j)):
+            setattr(sip, name, v)
+    return sip
 
 
 def encode_sip(sip: Sip) -> bytes:

@@ -30,7 +30,7 @@ import numpy as np
 import pybullet as p
 
 from runtime.drivers.arcos_protocol import P3DX_SH
-from runtime.errors import InputError
+from sitl.bodies.common import clip_wheels, touching, yaw_of
 
 PARAMS = P3DX_SH
 WHEEL_RADIUS = PARAMS.wheel_diameter_mm / 2000.0          # m
@@ -161,11 +161,7 @@ class SimPioneer3DX:
     def set_wheel_speeds(self, left_mps: float, right_mps: float) -> None:
         """Wheel motor targets (m/s at the rim), clipped to MaxVelocity.  The left wheel's joint axis points
         along the body's y axis, so forward is a negative joint rate on both (axis z of the turned cylinder)."""
-        for name, v in (("left", left_mps), ("right", right_mps)):
-            if not math.isfinite(v):
-                raise InputError(f"robot {self.robot_id}: {name} wheel speed: expected a finite number, got {v!r}")
-        left = max(-MAX_WHEEL_SPEED, min(MAX_WHEEL_SPEED, float(left_mps)))
-        right = max(-MAX_WHEEL_SPEED, min(MAX_WHEEL_SPEED, float(right_mps)))
+        left, right = clip_wheels(self.robot_id, left_mps, right_mps, MAX_WHEEL_SPEED)
         if (left, right) == self._targets:
             return
         self._targets = (left, right)
@@ -196,8 +192,7 @@ class SimPioneer3DX:
 
     def contacts(self) -> list:
         if self._contacts is None:
-            self._contacts = [cp for cp in p.getContactPoints(bodyA=self.body_id, **self._kw)
-                              if cp[2] != self.body_id and cp[8] <= CONTACT_MARGIN]
+            self._contacts = touching(self._client, self.body_id, CONTACT_MARGIN)
         return self._contacts
 
     def bumper_segments(self) -> tuple[int, int]:
@@ -281,9 +276,8 @@ class SimPioneer3DX:
 
     def pose(self) -> tuple[float, float, float]:
         """Ground truth x, y (m) and yaw (rad) of the point between the wheels, ENU."""
-        pos, (qx, qy, qz, qw) = self._frame()
-        yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-        return pos[0], pos[1], yaw
+        pos, orn = self._frame()
+        return pos[0], pos[1], yaw_of(orn)
 
     def height(self) -> float:
         """Ground truth height of the base frame (the axle) above the floor (m); ~0.0975 when resting."""

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pybullet as p
 
 from runtime.errors import InputError
@@ -26,3 +27,12 @@ def yaw_of(orn) -> float:
     """Heading (rad) of a quaternion (x, y, z, w)."""
     qx, qy, qz, qw = orn
     return math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+
+
+def tyre_radii(rng, nominal: float, sigma: float) -> tuple[float, float]:
+    """(left, right) rolling radii: tyre tolerance and wear put each off ``nominal`` by ``sigma`` (relative,
+    1 sigma, clipped at 3 sigma); 0 gives ideal wheels."""
+    if sigma <= 0:
+        return nominal, nominal
+    scale = np.clip(rng.normal(1.0, sigma, size=2), 1 - 3 * sigma, 1 + 3 * sigma)
+    return nominal * float(scale[0]), nominal * float(scale[1])

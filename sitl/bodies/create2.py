@@ -17,7 +17,7 @@ import numpy as np
 import pybullet as p
 
 from runtime.drivers.create_oi_protocol import GEOMETRY
-from sitl.bodies.common import clip_wheels, touching, yaw_of
+from sitl.bodies.common import clip_wheels, touching, tyre_radii, yaw_of
 
 # Size and wheels from the one geometry table the driver and the planner read; the rest from the
 # robot's published dimensions and mass.
@@ -153,9 +153,7 @@ class SimCreate2:
         self._client = client
         self._kw = {"physicsClientId": client}
         # tyre tolerance and wear: each wheel's rolling radius is off the nominal by ~0.4 % (1 sigma)
-        sigma = wheel_radius_sigma
-        scale = np.clip(rng.normal(1.0, sigma, size=2), 1 - 3 * sigma, 1 + 3 * sigma) if sigma > 0 else (1.0, 1.0)
-        self.wheel_radii = (WHEEL_RADIUS * float(scale[0]), WHEEL_RADIUS * float(scale[1]))
+        self.wheel_radii = tyre_radii(rng, WHEEL_RADIUS, wheel_radius_sigma)
         self.body_id = build_body(client, start, gui, self.wheel_radii)
         self._targets = (0.0, 0.0)
         self._torques = (0.0, 0.0)

@@ -30,7 +30,7 @@ import numpy as np
 import pybullet as p
 
 from runtime.drivers.arcos_protocol import P3DX_SH
-from sitl.bodies.common import clip_wheels, touching, yaw_of
+from sitl.bodies.common import clip_wheels, touching, tyre_radii, yaw_of
 
 PARAMS = P3DX_SH
 WHEEL_RADIUS = PARAMS.wheel_diameter_mm / 2000.0          # m
@@ -149,9 +149,7 @@ class SimPioneer3DX:
         self.robot_id = robot_id
         self._client = client
         self._kw = {"physicsClientId": client}
-        sigma = wheel_radius_sigma
-        scale = np.clip(rng.normal(1.0, sigma, size=2), 1 - 3 * sigma, 1 + 3 * sigma) if sigma > 0 else (1.0, 1.0)
-        self.wheel_radii = (WHEEL_RADIUS * float(scale[0]), WHEEL_RADIUS * float(scale[1]))
+        self.wheel_radii = tyre_radii(rng, WHEEL_RADIUS, wheel_radius_sigma)
         self.body_id = build_body(client, start, gui, self.wheel_radii)
         self._targets = (0.0, 0.0)
         self._contacts: list | None = None

@@ -6,6 +6,7 @@ import math
 import os
 
 import pytest
+from hypothesis import given, settings, strategies as st
 
 from runtime.drivers import arcos_protocol as P
 from runtime.drivers.arcos import ArcosBase, arcos_footprint
@@ -325,3 +326,33 @@ def test_a_vanished_pty_is_reported_lost():
         for k in range(100):
             drv.poll(0.01 * k)
     drv.close()
+
+
+# ----------------------------------------------------------------------------- any input
+def _noise():
+    good = st.sampled_from([P.frame(sip_body(x=3, sonars=((1, 800),))), P.frame(b"\x20abc\x00"), P.frame(b"\x00"),
+                            P.frame(P.sync2_reply("a", "b", "c"))])
+    return st.lists(st.one_of(st.binary(max_size=40), good), max_size=8)
+
+
+@settings(max_examples=60, deadline=None)
+@given(_noise(), st.booleans())
+def test_any_bytes_in_sync_or_connected_never_raise_and_are_counted(chunks, connected):
+    robot = Robot()
+    drv = ArcosBase(robot.link.path)
+    try:
+        if connected:
+            connect(robot, drv)
+        else:
+            drv.open(0.0)
+        t = 0.0
+        for c in chunks:
+            robot.link.write(c)
+            t += 0.03
+            drv.poll(t)
+        p = drv.parser
+        assert p.packet_bytes + p.dropped_bytes + p.pending == p.fed == drv.stats.extra["bytes_in"]
+        assert drv.state in ("sync", "connected")
+    finally:
+        drv.close()
+        robot.close()

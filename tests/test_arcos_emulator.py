@@ -308,3 +308,12 @@ def test_tcp_ports_from_8101_up_and_a_session_per_client():
     finally:
         dev.close()
         b.close()
+
+
+def test_setv_and_setrv_limit_motion(rig):
+    dev, body, client = rig
+    session(dev, client)
+    client.send(P.command(P.SETV, 150), P.command(P.SETRV, 20), P.vel(400), P.rvel(-90))
+    run(dev, body, 0.0, 1.5)
+    v, w = wheel_speed(body.cmd)
+    assert v == pytest.approx(0.15) and w == pytest.approx(-0.349, abs=1e-3)

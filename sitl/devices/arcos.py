@@ -9,7 +9,7 @@ facts file and MobileSim's ``EmulatePioneer.cc``:
   subclass.  OPEN (bare, as p2os sends it, or with an argument, as ARIA does) starts the session: a
   standard SIP every 100 ms of sim time with every field a P3-DX sends, the optional tail included;
 * commands: PULSE, OPEN, CLOSE (ends the session and stops), ENABLE, VEL, RVEL, VEL2 (high byte left,
-  low byte right, x Vel2Divisor), SETA/SETRA (accelerations), SONAR (bit 0 on/off, bits 1-3 the array,
+  low byte right, x Vel2Divisor), SETA/SETRA (accelerations), SETV/SETRV (speed limits), HOSTBAUD (noted), SONAR (bit 0 on/off, bits 1-3 the array,
   0 = all; FLAGS bits 1-2 report the arrays), POLLING (string), SETO, STOP (decelerates), E_STOP (at
   once), CONFIG (a CONFIGpac), SAY; strings with or without a length byte.  Others are counted;
 * motion: VEL/RVEL targets reached at the robot's accelerations (300 mm/s^2, 100 deg/s^2), converted to
@@ -130,6 +130,8 @@ class ArcosDevice:
         self.motors = False
         self.sonar_on = [True, True]            # front, rear array (ARIA assumes sonar on at start)
         self.polling: list[int] | None = None   # a POLLING sequence (0-based sonar numbers), else per array
+        self.limits = [self.params.max_vel_mm_s, self.params.max_rvel_deg_s]   # SETV, SETRV
+        self.host_baud: int | None = None
         self.trans_accel = self.trans_decel = TRANS_ACCEL
         self.rot_accel = self.rot_decel = ROT_ACCEL
         self.target = (0.0, 0.0)                # (mm/s, deg/s) asked for
@@ -290,6 +292,13 @@ class ArcosDevice:
             if value:
                 attr = ("trans" if c == P.SETA else "rot") + ("_accel" if value > 0 else "_decel")
                 setattr(self, attr, float(abs(value)))
+        elif c in (P.SETV, P.SETRV):
+            value = self._int(cmd)
+            if value is not None and value > 0:
+                top = self.params.max_vel_mm_s if c == P.SETV else self.params.max_rvel_deg_s
+                self.limits[0 if c == P.SETV else 1] = min(float(value), top)
+        elif c == P.HOSTBAUD:
+            self.host_baud = self._int(cmd)             # a pty or a socket has no baud rate to change
         elif c == P.SONAR:
             value = self._int(cmd)
             if value is not None:
@@ -322,13 +331,14 @@ class ArcosDevice:
         pr = self.params
         v, rv = self.target
         if c == P.VEL:
-            v = max(-pr.max_vel_mm_s, min(pr.max_vel_mm_s, float(value)))
+            v = float(value)
         elif c == P.RVEL:
-            rv = max(-pr.max_rvel_deg_s, min(pr.max_rvel_deg_s, float(value)))
+            rv = float(value)
         else:
             left, right = (k * pr.vel2_divisor for k in P.vel2_wheels(value))
             v, rv = (left + right) / 2.0, math.degrees((right - left) / pr.track_mm)
-        self.target = (v, rv)
+        vmax, rmax = self.limits
+        self.target = (_clamp(v, -vmax, vmax), _clamp(rv, -rmax, rmax))
 
     def _end_session(self) -> None:
         self._halt()

@@ -496,7 +496,7 @@ class RobotParams:
     ``angle_conv`` is exactly 2 pi / 4096 (the file rounds it to 0.00153; p2os uses 0.001534).  ``track_mm``
     is the wheel base implied by DiffConvFactor as ARIA uses it (rotational velocity = (right - left) / 2 *
     DiffConvFactor rad/s, i.e. DiffConvFactor = 1 / half the track: 2 / 0.0056 = 357 mm).  ``wheel_diameter_mm``
-    is not in the parameter file: 195 mm is the Pioneer 3-DX's tyre (Pioneer 3 operations manual; Webots'
+    is not in the parameter file: 195 mm (Webots' Pioneer 3-DX documentation says 19 cm wheels; a Webots
     Pioneer 3-DX model uses a 97.5 mm radius)."""
     robot_class: str
     subclass: str

@@ -12,7 +12,7 @@ number comes from:
   60 mm above the floor (chosen: clear of the caster, below the wheel hubs);
 * mass 10 kg in all (the same Webots figure), its centre 40 mm behind the axle so the rear caster carries
   a share (the batteries sit behind the axle);
-* wheels: 195 mm tyres (:attr:`runtime.drivers.arcos_protocol.RobotParams.wheel_diameter_mm`), 47.5 mm wide,
+* wheels: 195 mm tyres (:attr:`runtime.drivers.arcos_protocol.RobotParams.wheel_diameter_mm`), 47.5 mm wide (chosen),
   on a 357 mm track (DiffConvFactor 0.0056, as ARIA uses it); cylinders, velocity-controlled;
 * caster: a 37.5 mm radius frictionless sphere 211 mm behind the axle (p2os_urdf's pioneer3dx swivel at
   -185 mm and its wheel 26 mm further back, radius 37.5 mm);

@@ -15,13 +15,11 @@ the nominal by the world's ``wheel_radius_sigma``, so odometry from the encoders
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pybullet as p
 
-from runtime.errors import InputError
-from sitl.bodies.diffdrive import LEFT, RIGHT, Chassis, GroundTruth, tyre_radii
+from sitl.bodies.common import clip_wheels, tyre_radii
+from sitl.bodies.diffdrive import LEFT, RIGHT, Chassis, GroundTruth
 from sitl.bodies.diffdrive import build_body as diff_body
 
 LENGTH, WIDTH, HEIGHT, CLEARANCE = 0.44, 0.38, 0.20, 0.03      # m
@@ -62,17 +60,14 @@ class SimCanDiff(GroundTruth):
                  gui: bool = False, wheel_radius_sigma: float = 0.004):
         self.robot_id = robot_id
         self._kw = {"physicsClientId": client}
-        self.wheel_radii = tyre_radii(WHEEL_RADIUS, rng, wheel_radius_sigma)
+        self.wheel_radii = tyre_radii(rng, WHEEL_RADIUS, wheel_radius_sigma)
         self.body_id = build_body(client, start, gui, self.wheel_radii)
         self._targets = (0.0, 0.0)
 
     # -------------------------------------------------------------- commands
     def set_wheel_rates(self, left: float, right: float) -> None:
         """Wheel motor targets in rad/s (positive rolls forward), clipped to MAX_WHEEL_RATE."""
-        for name, v in (("left", left), ("right", right)):
-            if not math.isfinite(v):
-                raise InputError(f"robot {self.robot_id}: {name} wheel rate: expected a finite number, got {v!r}")
-        targets = tuple(max(-MAX_WHEEL_RATE, min(MAX_WHEEL_RATE, float(v))) for v in (left, right))
+        targets = clip_wheels(self.robot_id, left, right, MAX_WHEEL_RATE)
         if targets == self._targets:
             return
         self._targets = targets

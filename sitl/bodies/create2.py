@@ -17,8 +17,8 @@ import numpy as np
 import pybullet as p
 
 from runtime.drivers.create_oi_protocol import GEOMETRY
-from runtime.errors import InputError
-from sitl.bodies.diffdrive import LEFT, RIGHT, Chassis, GroundTruth, tyre_radii
+from sitl.bodies.common import clip_wheels, touching, tyre_radii
+from sitl.bodies.diffdrive import LEFT, RIGHT, Chassis, GroundTruth
 from sitl.bodies.diffdrive import build_body as diff_body
 
 # Size and wheels from the one geometry table the driver and the planner read; the rest from the
@@ -122,7 +122,7 @@ class SimCreate2(GroundTruth):
         self._client = client
         self._kw = {"physicsClientId": client}
         # tyre tolerance and wear: each wheel's rolling radius is off the nominal by ~0.4 % (1 sigma)
-        self.wheel_radii = tyre_radii(WHEEL_RADIUS, rng, wheel_radius_sigma)
+        self.wheel_radii = tyre_radii(rng, WHEEL_RADIUS, wheel_radius_sigma)
         self.body_id = build_body(client, start, gui, self.wheel_radii)
         self._targets = (0.0, 0.0)
         self._torques = (0.0, 0.0)
@@ -135,11 +135,7 @@ class SimCreate2(GroundTruth):
     # -------------------------------------------------------------- commands
     def set_wheel_speeds(self, left_mps: float, right_mps: float) -> None:
         """Wheel motor targets (m/s at the rim), clipped to +-0.5 m/s."""
-        for name, v in (("left", left_mps), ("right", right_mps)):
-            if not math.isfinite(v):
-                raise InputError(f"robot {self.robot_id}: {name} wheel speed: expected a finite number, got {v!r}")
-        left = max(-MAX_WHEEL_SPEED, min(MAX_WHEEL_SPEED, float(left_mps)))
-        right = max(-MAX_WHEEL_SPEED, min(MAX_WHEEL_SPEED, float(right_mps)))
+        left, right = clip_wheels(self.robot_id, left_mps, right_mps, MAX_WHEEL_SPEED)
         if (left, right) == self._targets:
             return
         self._targets = (left, right)
@@ -207,8 +203,7 @@ class SimCreate2(GroundTruth):
         (``linkIndexA`` at [3]).  Asked once per physics step: the device samples bumpers and wheel drop
         every step, and contacts only change when the world steps (:meth:`stepped`)."""
         if self._contacts is None:
-            self._contacts = [cp for cp in p.getContactPoints(bodyA=self.body_id, **self._kw)
-                              if cp[2] != self.body_id and cp[8] <= CONTACT_MARGIN]
+            self._contacts = touching(self._client, self.body_id, CONTACT_MARGIN)
         return self._contacts
 
     def stepped(self) -> None:

@@ -1,5 +1,5 @@
-"""What every two-wheel body of the SITL shares: the pybullet multibody of a chassis on two driven wheels and
-two casters (ahead of and behind the axle), the tyres' rolling-radius spread, and the ground-truth readings.
+"""Two-wheel bodies with a caster ahead of and behind the axle: the pybullet multibody of a chassis on two driven
+wheels and two casters, and the ground-truth readings (the per-wheel helpers are in :mod:`sitl.bodies.common`).
 
 Wheels are velocity-controlled revolute joints with sphere collision shapes (cheap, one contact on the floor);
 casters are frictionless spheres on fixed joints.  A body module gives its own chassis shape and numbers
@@ -7,11 +7,11 @@ casters are frictionless spheres on fixed joints.  A body module gives its own c
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
-import numpy as np
 import pybullet as p
+
+from sitl.bodies.common import yaw_of
 
 LEFT, RIGHT = 0, 1            # link indices of the wheel joints
 CASTERS = (2, 3)
@@ -30,12 +30,6 @@ class Chassis:
     wheel_friction: float
     max_wheel_torque: float   # N m the wheel motors hold
     colour: tuple = (0.2, 0.2, 0.2, 1)
-
-
-def tyre_radii(nominal: float, rng: np.random.Generator, sigma: float) -> tuple[float, float]:
-    """Left and right rolling radii: ``nominal`` off by a relative ``sigma`` (1 sigma, clipped at 3)."""
-    scale = np.clip(rng.normal(1.0, sigma, size=2), 1 - 3 * sigma, 1 + 3 * sigma) if sigma > 0 else (1.0, 1.0)
-    return nominal * float(scale[0]), nominal * float(scale[1])
 
 
 def build_body(client: int, start: tuple[float, float, float], c: Chassis, shape: int, visual: int,
@@ -94,9 +88,7 @@ class GroundTruth:
     def pose(self) -> tuple[float, float, float]:
         """Ground truth x, y (m) and yaw (rad), ENU."""
         pos, orn = p.getBasePositionAndOrientation(self.body_id, **self._kw)
-        qx, qy, qz, qw = orn
-        yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-        return pos[0], pos[1], yaw
+        return pos[0], pos[1], yaw_of(orn)
 
     def height(self) -> float:
         """Ground truth height of the base frame above the floor (m)."""

@@ -20,9 +20,9 @@ Reports: the robot's :class:`~runtime.fleet.messages.RobotState` at 1 Hz (the fl
 MISSION_CURRENT at 1 Hz (the seq of the task it works on, or the task count when idle),
 MISSION_ITEM_REACHED when it arrives at a task, and one STATUSTEXT per task awarded, done or failed.
 
-Base faults (``base.sensors.faults``, e.g. ``left_drive_silent``): a STATUSTEXT (CRITICAL) naming each new one,
-and the robot disarms (it cannot drive: its tasks go back to the fleet); SYS_STATUS shows MOTOR_OUTPUTS unhealthy
-meanwhile (:mod:`runtime.comms.telemetry`).  MAV_CMD_COMPONENT_ARM_DISARM with param1 = 1 while the base reports
+Base faults (``base.sensors.faults``, e.g. ``left_drive_silent``): a STATUSTEXT (CRITICAL) naming each new one;
+a base that latches its faults (``latches_faults``: it stands until reset) also disarms the robot, so its tasks go
+back to the fleet; SYS_STATUS shows MOTOR_OUTPUTS unhealthy meanwhile (:mod:`runtime.comms.telemetry`).  MAV_CMD_COMPONENT_ARM_DISARM with param1 = 1 while the base reports
 faults is the fault reset: the base is asked to reset (``reset_faults``) and the robot arms once the faults have
 cleared (a STATUSTEXT says so).
 """
@@ -195,7 +195,8 @@ class GroundServices:
         self._faults = faults
         if new:
             self._text(2, "base fault: " + ", ".join(new))                          # MAV_SEVERITY_CRITICAL
-            self._out += self.d.node.set_armed(False, now)
+            if getattr(self.d.base, "latches_faults", False):      # it stands until reset: its tasks go back
+                self._out += self.d.node.set_armed(False, now)
         elif not faults:
             self._text(5, "base faults cleared")
             if self._arm_after_reset:

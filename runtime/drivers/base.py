@@ -144,6 +144,7 @@ class MobileBase(abc.ABC):
     odometry: Odometry
     sensors: BaseSensors
     stats: LinkStats
+    latches_faults = False     # True: ``sensors.faults`` stay, and the base stands, until reset_faults() clears them
 
     def __init__(self, footprint: Footprint, watchdog: float, log):
         if not (isinstance(watchdog, (int, float)) and math.isfinite(watchdog) and watchdog > 0):

@@ -172,6 +172,7 @@ class Cia402Base(MobileBase):
     """Two CiA 402 drives in profile velocity mode; non-blocking after :meth:`open`, polled with ``now``."""
 
     Config = Cia402Config
+    latches_faults = True
 
     @classmethod
     def from_config(cls, cfg: Cia402Config, robot_id=None) -> "Cia402Base":

@@ -134,6 +134,36 @@ def test_garbage_frames_never_stop_a_loop_and_are_counted(rig, junk):
     assert sum(left.stats.frames_in.values()) + left.stats.malformed >= drive_seen + len(junk)
 
 
+TRAFFIC = [(0x000, bytes([0x01, 0x01])), (0x701, bytes([0x05])), (0x77F, bytes([0x05])),
+           (0x181, bytes([0x37, 0x06, 0x03])), (0x281, bytes.fromhex("00100000c0090000")),
+           (0x201, bytes.fromhex("0f00c0090000" "03")), (0x601, bytes.fromhex("4041600000000000")),
+           (0x581, bytes.fromhex("4b41600037060000")), (0x081, bytes.fromhex("1023030000000000"))]
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.tuples(st.integers(0, len(TRAFFIC) - 1), st.integers(0, 74)), min_size=1, max_size=20))
+def test_bit_flipped_frames_never_stop_a_loop_and_are_counted(rig, flips):
+    """Frames of this base's own traffic with one bit flipped in the 11-bit id or the data."""
+    base, right = rig.base, rig.right
+    seen = base.stats.frames + base.stats.extra["malformed"]
+    drive_seen = sum(right.stats.frames_in.values()) + right.stats.malformed
+    noise = can.Bus(interface="virtual", channel=rig.driver_cfg.channel)
+    try:
+        for k, bit in flips:
+            can_id, data = TRAFFIC[k]
+            data = bytearray(data)
+            if bit < 11:
+                can_id ^= 1 << bit
+            elif (bit - 11) // 8 < len(data):
+                data[(bit - 11) // 8] ^= 1 << ((bit - 11) % 8)
+            noise.send(can.Message(arbitration_id=can_id, data=bytes(data), is_extended_id=False))
+        rig.step(0.1)
+    finally:
+        noise.shutdown()
+    assert base.stats.frames + base.stats.extra["malformed"] >= seen + len(flips)
+    assert sum(right.stats.frames_in.values()) + right.stats.malformed >= drive_seen + len(flips)
+
+
 @pytest.mark.parametrize("can_id, data", [
     (0x281, b"\x01\x02\x03"),                  # TPDO2 shorter than its map
     (0x181, b""),                              # TPDO1 empty

@@ -31,6 +31,7 @@ import pybullet as p
 
 from runtime.drivers.arcos_protocol import P3DX_SH
 from sitl.bodies.common import clip_wheels, touching, tyre_radii, yaw_of
+from sitl.bodies.diffdrive import GroundTruth
 
 PARAMS = P3DX_SH
 WHEEL_RADIUS = PARAMS.wheel_diameter_mm / 2000.0          # m
@@ -139,7 +140,7 @@ def build_body(client: int, start: tuple[float, float, float], gui: bool = False
     return body
 
 
-class SimPioneer3DX:
+class SimPioneer3DX(GroundTruth):
     """One Pioneer 3-DX body in a :class:`sitl.world.World`; the ARCOS emulator calls these methods."""
 
     radius = PARAMS.radius_mm / 1000.0     # RobotRadius: holds the chassis (0.246 m) and the wheels (0.224 m)
@@ -280,13 +281,6 @@ class SimPioneer3DX:
     def height(self) -> float:
         """Ground truth height of the base frame (the axle) above the floor (m); ~0.0975 when resting."""
         return self._frame()[0][2]
-
-    def velocity(self) -> tuple[float, float]:
-        lin, _ = p.getBaseVelocity(self.body_id, **self._kw)
-        return lin[0], lin[1]
-
-    def yaw_rate(self) -> float:
-        return p.getBaseVelocity(self.body_id, **self._kw)[1][2]
 
     def place(self, x: float, y: float, yaw: float, z: float | None = None) -> None:
         """Teleport the body (test and launcher use only; zeroes its velocity)."""

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 from runtime.comms import codec, dialect, udp
 from runtime.comms.link import (GCS_LINK, KERNEL_DROPS_PERIOD, MAX_DATAGRAMS_PER_POLL, MAX_ROBOT_ID, OPERATOR_LINK, LinkCounters, count_datagram,
-                                parse_datagram, parse_address, refusal, signing_timestamp)
+                                parse_datagram, parse_address, refusal, signing_guard, signing_timestamp)
 from runtime.comms.mission import MissionClient
 from runtime.errors import InputError
 from runtime.fleet.messages import RobotState, TableRequest, TaskRecord
@@ -49,7 +49,7 @@ def ground_mav(signing_key: bytes | None = None, link_id: int = OPERATOR_LINK):
     """The fleet dialect's module and a MAVLink encoder/parser with a ground station's ids, signing with
     ``signing_key`` (its own ``link_id``: see :mod:`runtime.comms.link`) when given."""
     module = dialect.load()
-    mav = module.MAVLink(None, srcSystem=GCS_SYSTEM, srcComponent=GCS_COMPONENT)
+    mav = signing_guard(module.MAVLink)(None, srcSystem=GCS_SYSTEM, srcComponent=GCS_COMPONENT)
     mav.robust_parsing = True
     if signing_key is not None:
         s = mav.signing

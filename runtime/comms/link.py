@@ -21,7 +21,7 @@ units since 2015-01-01 UTC, never behind the wall clock).  Incoming frames must 
 one exception: an *unsigned* HEARTBEAT whose type is MAV_TYPE_GCS is accepted, so a stock ground station without
 the key can still be seen; it never counts as peer liveness.  Unsigned robot HEARTBEATs and any wrongly signed
 frame are dropped and counted.  A refused frame cannot advance pymavlink's per-stream replay window (see
-:class:`_SigningGuard`).
+:func:`signing_guard`).
 
 Link ids (the signature's ``link_id`` byte; pymavlink keeps one replay window per link id, system and
 component): a frame's link id says where it was sent, so a signed frame cannot be replayed to another kind of
@@ -232,7 +232,7 @@ def refusal(bad) -> str:
 _guarded: dict[type, type] = {}
 
 
-def _signing_guard(base: type) -> type:
+def signing_guard(base: type) -> type:
     """Subclass of a generated ``MAVLink`` class whose refused signatures leave the replay window alone.
 
     pymavlink records a stream's timestamp before it checks the signature, so a forged frame with a
@@ -277,7 +277,7 @@ class MavlinkLink:
         codec.check(self.module)
         self._hb_id = self.module.MAVLINK_MSG_ID_HEARTBEAT
         self._gcs_type = self.module.MAV_TYPE_GCS
-        self.mav = _signing_guard(self.module.MAVLink)(None, srcSystem=self.robot_id,
+        self.mav = signing_guard(self.module.MAVLink)(None, srcSystem=self.robot_id,
                                                         srcComponent=COMPONENT_ID)
         self.mav.robust_parsing = True
         self.signing = signing_key is not None

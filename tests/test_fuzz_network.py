@@ -98,14 +98,8 @@ class Fuzzer:
         self.sock.close()
 
 
-def hostile(c) -> int:
-    return sum(getattr(c, k) for k in HOSTILE)
-
-
-@pytest.mark.slow
-def test_a_signed_fleet_under_live_fuzz_meets_its_goal_and_counts_every_datagram(tmp_path, monkeypatch):
-    f = launcher.build(shipped_fleet(tmp_path, "create2_4.yaml"), tmp_path / "run")
-    assert f.key is not None                                            # signed by default
+def recording(monkeypatch) -> list:
+    """The lock-step runs ``run_lockstep`` makes from now on (their daemons and operator), as they are made."""
     runs = []
 
     class Recording(launcher.Lockstep):
@@ -114,6 +108,18 @@ def test_a_signed_fleet_under_live_fuzz_meets_its_goal_and_counts_every_datagram
             runs.append(self)
 
     monkeypatch.setattr(launcher, "Lockstep", Recording)
+    return runs
+
+
+def hostile(c) -> int:
+    return sum(getattr(c, k) for k in HOSTILE)
+
+
+@pytest.mark.slow
+def test_a_signed_fleet_under_live_fuzz_meets_its_goal_and_counts_every_datagram(tmp_path, monkeypatch):
+    f = launcher.build(shipped_fleet(tmp_path, "create2_4.yaml"), tmp_path / "run")
+    assert f.key is not None                                            # signed by default
+    runs = recording(monkeypatch)
     fuzz = Fuzzer({rid: r.udp_port for rid, r in f.robots.items()})
     before = {}
 
@@ -167,14 +173,7 @@ def test_an_unsigned_fleet_keeps_its_verdict_under_a_flood_of_forged_status_with
     choice) the operator takes only what validates: every forged frame below is invalid or from no robot of the
     fleet, and the verdict stays true."""
     f = launcher.build(shipped_fleet(tmp_path, "create2_4.yaml"), tmp_path / "run", signing=False)
-    runs = []
-
-    class Recording(launcher.Lockstep):
-        def __init__(self, fleet):
-            super().__init__(fleet)
-            runs.append(self)
-
-    monkeypatch.setattr(launcher, "Lockstep", Recording)
+    runs = recording(monkeypatch)
     mod = dialect.load()
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rng = random.Random(5)

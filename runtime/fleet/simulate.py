@@ -13,7 +13,7 @@ timeout.  For tests and fast sweeps of every family; no physics, no sockets.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable, Mapping
 
 from runtime import tasks as T

@@ -16,7 +16,14 @@ from runtime.fleet.messages import RobotState, TaskRecord
 
 KEY = bytes(range(32))
 OTHER_KEY = bytes(range(1, 33))
-_stamp = [signing_timestamp(time.time())]
+_stamp = [0]
+
+
+def fresh_stamp() -> int:
+    """A signing timestamp after every one used so far and not behind the wall clock (a receiver refuses a new
+    stream more than a minute behind its own clock)."""
+    _stamp[0] = max(_stamp[0] + 1, signing_timestamp(time.time()))
+    return _stamp[0]
 
 
 def frame(msg, key=None, link_id=PEER_LINK, stamp=None) -> bytes:
@@ -24,9 +31,8 @@ def frame(msg, key=None, link_id=PEER_LINK, stamp=None) -> bytes:
     mod = dialect.load()
     mav = mod.MAVLink(None, srcSystem=msg.sender, srcComponent=1)
     if key is not None:
-        _stamp[0] += 1
         mav.signing.secret_key, mav.signing.sign_outgoing, mav.signing.link_id = key, True, link_id
-        mav.signing.timestamp = _stamp[0] if stamp is None else stamp
+        mav.signing.timestamp = fresh_stamp() if stamp is None else stamp
     return codec.encode(msg, mav)
 
 
@@ -34,9 +40,8 @@ def heartbeat(system: int, key=None, link_id=PEER_LINK) -> bytes:
     mod = dialect.load()
     mav = mod.MAVLink(None, srcSystem=system, srcComponent=1)
     if key is not None:
-        _stamp[0] += 1
         mav.signing.secret_key, mav.signing.sign_outgoing, mav.signing.link_id = key, True, link_id
-        mav.signing.timestamp = _stamp[0]
+        mav.signing.timestamp = fresh_stamp()
     return mav.heartbeat_encode(mod.MAV_TYPE_GROUND_ROVER, mod.MAV_AUTOPILOT_GENERIC, 0, 0, 4).pack(mav)
 
 

@@ -390,3 +390,20 @@ def test_values_the_protocol_does_not_allow_are_dropped_once_at_decode_and_count
     b.send_agent(bad + [good], 0.0)
     assert drain(a, 0.0) == [good]
     assert settle(a, 0.0, "invalid", len(bad)) == len(bad)
+
+
+def test_mrta_key_makes_a_0600_key_the_link_loads_and_never_overwrites(tmp_path, capsys):
+    import os
+    import stat
+
+    from runtime.cli import main
+    path = tmp_path / "fleet.key"
+    assert main(["key", str(path)]) == 0
+    assert stat.S_IMODE(os.stat(path).st_mode) == 0o600
+    assert len(load_key(path)) == 32
+    assert not [p for p in tmp_path.iterdir() if p.name != "fleet.key"]      # no temporary file left
+    before = path.read_bytes()
+    assert main(["key", str(path)]) == 2                                       # refuses to replace a key
+    assert path.read_bytes() == before
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and str(path) in err and "never overwritten" in err

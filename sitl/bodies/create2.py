@@ -17,7 +17,7 @@ import numpy as np
 import pybullet as p
 
 from runtime.drivers.create_oi_protocol import GEOMETRY
-from runtime.errors import InputError
+from sitl.bodies.common import clip_wheels, touching, tyre_radii, yaw_of
 
 # Size and wheels from the one geometry table the driver and the planner read; the rest from the
 # robot's published dimensions and mass.
@@ -153,9 +153,7 @@ class SimCreate2:
         self._client = client
         self._kw = {"physicsClientId": client}
         # tyre tolerance and wear: each wheel's rolling radius is off the nominal by ~0.4 % (1 sigma)
-        sigma = wheel_radius_sigma
-        scale = np.clip(rng.normal(1.0, sigma, size=2), 1 - 3 * sigma, 1 + 3 * sigma) if sigma > 0 else (1.0, 1.0)
-        self.wheel_radii = (WHEEL_RADIUS * float(scale[0]), WHEEL_RADIUS * float(scale[1]))
+        self.wheel_radii = tyre_radii(rng, WHEEL_RADIUS, wheel_radius_sigma)
         self.body_id = build_body(client, start, gui, self.wheel_radii)
         self._targets = (0.0, 0.0)
         self._torques = (0.0, 0.0)
@@ -168,11 +166,7 @@ class SimCreate2:
     # -------------------------------------------------------------- commands
     def set_wheel_speeds(self, left_mps: float, right_mps: float) -> None:
         """Wheel motor targets (m/s at the rim), clipped to +-0.5 m/s."""
-        for name, v in (("left", left_mps), ("right", right_mps)):
-            if not math.isfinite(v):
-                raise InputError(f"robot {self.robot_id}: {name} wheel speed: expected a finite number, got {v!r}")
-        left = max(-MAX_WHEEL_SPEED, min(MAX_WHEEL_SPEED, float(left_mps)))
-        right = max(-MAX_WHEEL_SPEED, min(MAX_WHEEL_SPEED, float(right_mps)))
+        left, right = clip_wheels(self.robot_id, left_mps, right_mps, MAX_WHEEL_SPEED)
         if (left, right) == self._targets:
             return
         self._targets = (left, right)
@@ -240,8 +234,7 @@ class SimCreate2:
         (``linkIndexA`` at [3]).  Asked once per physics step: the device samples bumpers and wheel drop
         every step, and contacts only change when the world steps (:meth:`stepped`)."""
         if self._contacts is None:
-            self._contacts = [cp for cp in p.getContactPoints(bodyA=self.body_id, **self._kw)
-                              if cp[2] != self.body_id and cp[8] <= CONTACT_MARGIN]
+            self._contacts = touching(self._client, self.body_id, CONTACT_MARGIN)
         return self._contacts
 
     def stepped(self) -> None:
@@ -251,9 +244,7 @@ class SimCreate2:
     def pose(self) -> tuple[float, float, float]:
         """Ground truth x, y (m) and yaw (rad), ENU."""
         pos, orn = p.getBasePositionAndOrientation(self.body_id, **self._kw)
-        qx, qy, qz, qw = orn
-        yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-        return pos[0], pos[1], yaw
+        return pos[0], pos[1], yaw_of(orn)
 
     def height(self) -> float:
         """Ground truth height of the base frame above the floor (m); ~0.051 when resting."""

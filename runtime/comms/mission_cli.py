@@ -24,7 +24,7 @@ from pathlib import Path
 
 from runtime.comms import dialect, mission_files
 from runtime.comms.gcs import GCS_SYSTEM, HEARTBEAT_PERIOD, gcs_heartbeat, ground_mav
-from runtime.comms.link import load_key, parse_address, signing_timestamp
+from runtime.comms.link import MISSION_LINK, load_key, parse_address, signing_timestamp
 from runtime.comms.mission import ACCEPTED, MISSION, TIMEOUT, MissionClient, MissionItem
 from runtime.errors import InputError
 from runtime.log import get_logger
@@ -48,7 +48,7 @@ class UdpTarget:
             family, _, _, _, self.addr = socket.getaddrinfo(host, port, 0, socket.SOCK_DGRAM)[0]
         except socket.gaierror as e:
             raise InputError(f"TARGET: cannot resolve {target!r} ({e.strerror})") from None
-        self.mod, self.mav = ground_mav(key, link_id=0)
+        self.mod, self.mav = ground_mav(key, link_id=MISSION_LINK)
         self.sock = socket.socket(family, socket.SOCK_DGRAM)
         self.sock.bind(("::", 0) if family == socket.AF_INET6 else ("0.0.0.0", 0))
         self._next_heartbeat = -float("inf")

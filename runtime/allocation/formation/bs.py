@@ -13,7 +13,9 @@ Wire use of the shared messages (``runtime.allocation.formation.messages``):
   ``reserve`` = -inf offers the task to robots that hold none (see below).
 * ``Bid`` (to the auctioneer): ``cost`` = the bid; +inf means "cannot do this task" (or, to a -inf
   offer, "I hold a task").
-* ``Award`` (to the winner): ``cost`` = the winning bid, ``mean`` = mean of all bids heard.
+* ``Award`` (to the winner): ``cost`` = the winning bid, ``mean`` = mean of all bids heard.  A winner takes
+  an award only for an auction it bid in, at exactly the bid it sent (both travel as float32); anything else
+  is dropped and counted.
 * ``Status`` to an auctioneer: "I hold that task", with ``auction`` = the id of the auction it
   answers - the winner's reply to an ``Award`` (sent again for every duplicate), or a holder's reply
   to an ``Announce`` for a task it already holds (the auction is then cancelled).  The auctioneer
@@ -354,6 +356,9 @@ class BSAgent:
         sent = self._bids_sent.get(key)
         if sent is None or sent.task != m.task:
             self.dropped["award without bid"] += 1
+            return []
+        if m.cost != sent.cost:                    # an auctioneer awards the winner's own bid, as it heard it
+            self.dropped["award at a cost I did not bid"] += 1
             return []
         self._awards_seen[key] = m.task
         return [ack] + self._win(m.task, sent.cost, float(m.mean), now)

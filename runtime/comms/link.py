@@ -223,7 +223,7 @@ def refusal(bad) -> str:
     """The counter for a pymavlink BAD_DATA message: its frame's signature (unsigned or bad), CRC, or junk."""
     reason = str(getattr(bad, "reason", ""))
     if "signature" in reason:
-        return "bad_signature_dropped" if _was_signed(getattr(bad, "data", b"")) else "unsigned_dropped"
+        return "bad_signature_dropped" if was_signed(getattr(bad, "data", b"")) else "unsigned_dropped"
     if "CRC" in reason:
         return "bad_crc"
     return "parse_errors"
@@ -534,6 +534,7 @@ class MavlinkLink:
         self.sock.close()
 
 
-def _was_signed(frame) -> bool:
-    """True if a raw frame is MAVLink 2 with the 'signed' incompat flag set."""
+def was_signed(frame) -> bool:
+    """True if a raw frame is MAVLink 2 with the 'signed' incompat flag set (a parser without the key does not
+    say so)."""
     return len(frame) > 2 and frame[0] == 0xFD and bool(frame[2] & _IFLAG_SIGNED)

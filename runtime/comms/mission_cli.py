@@ -24,7 +24,7 @@ from pathlib import Path
 
 from runtime.comms import dialect, mission_files
 from runtime.comms.gcs import GCS_SYSTEM, HEARTBEAT_PERIOD, gcs_heartbeat, ground_mav
-from runtime.comms.link import MISSION_LINK, load_key, parse_address, signing_timestamp
+from runtime.comms.link import MISSION_LINK, load_key, parse_address, signing_timestamp, was_signed
 from runtime.comms.mission import ACCEPTED, MISSION, TIMEOUT, MissionClient, MissionItem
 from runtime.errors import InputError
 from runtime.log import get_logger
@@ -91,9 +91,8 @@ class UdpTarget:
             except Exception as e:
                 log.debug("unparsable datagram: %r", e)
                 continue
-            good = [m for m in msgs if m.get_type() != "BAD_DATA"]
-            self.signed_peer |= any(m.get_signed() for m in good)
-            out += good
+            self.signed_peer |= was_signed(data)
+            out += [m for m in msgs if m.get_type() != "BAD_DATA"]
 
     def close(self) -> None:
         self.sock.close()

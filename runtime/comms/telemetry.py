@@ -179,7 +179,7 @@ class GcsTelemetry:
             if _critical(remaining):
                 failing |= m.MAV_SYS_STATUS_SENSOR_BATTERY
         health = _all_sensor_bits(m) & ~failing
-        dropped = c.bad_crc + c.parse_errors + c.unsigned_dropped + c.bad_signature_dropped
+        dropped = c.bad_crc + c.parse_errors + c.unsigned_dropped + c.bad_signature_dropped + c.replayed_dropped
         total = dropped + c.received
         return self.mav.sys_status_encode(
             present, enabled, health,

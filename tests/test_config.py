@@ -299,3 +299,49 @@ def test_a_world_too_large_for_its_grid_names_size_and_resolution(tmp_path):
     assert C.load_world(_write(tmp_path, {"size": [100.0, 100.0], "resolution": 0.05}, "ok.yaml")).size == (100, 100)
     msg = _one_config_error(_write(tmp_path, {"size": [-1.0, 5.0]}, "neg.yaml"), C.load_world)
     assert "size[0]: expected a number in [0.01, 100000]" in msg
+
+
+# --------------------------------------------------------------------------- what start-up checks (daemon --check)
+
+def _robot(tmp_path, **sections):
+    data = {"robot": {"id": 1}, "base": {"port": "loop://"}, "gps": {"port": "loop://"},
+            "comms": {"listen": "127.0.0.1:14601", "gcs": "127.0.0.1:14550", "peers": []}}
+    for k, v in sections.items():
+        data[k] = {**data.get(k, {}), **v}
+    return _write(tmp_path, data)
+
+
+@pytest.mark.parametrize("sections, key, expected", [
+    ({"comms": {"listen": "nohost"}}, "comms.listen", "host:port"),
+    ({"comms": {"listen": "127.0.0.1:99999"}}, "comms.listen", "port in 1..65535"),
+    ({"comms": {"gcs": "127.0.0.1:99999"}}, "comms.gcs", "port in 1..65535"),
+    ({"comms": {"gcs": "224.0.0.1:14550"}}, "comms.gcs", "a unicast address"),
+    ({"comms": {"peers": [{"id": 2, "address": "no.such.host.invalid:14602"}]}}, "comms.peers[0].address",
+     "an address that resolves"),
+    ({"comms": {"peers": [{"id": 1, "address": "127.0.0.1:14602"}]}}, "comms.peers[0].id", "another robot's id"),
+    ({"comms": {"peers": [{"id": 2, "address": "127.0.0.1:14602"}, {"id": 2, "address": "127.0.0.1:14603"}]}},
+     "comms.peers[1].id", "a peer id listed once"),
+    ({"planning": {"map": "nowhere.yaml"}}, "planning.map", "a world YAML file"),
+    ({"comms": {"signing_key": "/nonexistent/fleet.key"}}, "comms.signing_key", "signing key file not found"),
+    ({"base": {"baudrate": -1}}, "base", "baud rate -1: expected one of"),
+    ({"base": {"baudrate": 12345}}, "base", "baud rate 12345"),
+])
+def test_check_runs_every_start_up_check(tmp_path, capsys, sections, key, expected):
+    """`mrta daemon CONFIG --check` refuses what the daemon would refuse, in one line naming file and key."""
+    from runtime.cli import main
+    path = _robot(tmp_path, **sections)
+    assert main(["daemon", str(path), "--check"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"mrta: {path}: {key}: ") and expected in err, err
+
+
+def test_check_says_ok_for_a_config_the_daemon_takes(tmp_path, capsys):
+    from runtime.cli import main
+    world = _write(tmp_path, {"size": [10.0, 10.0]}, "map.yaml")
+    key = tmp_path / "fleet.key"
+    key.write_text("ab" * 32)
+    path = _robot(tmp_path, planning={"map": "map.yaml"}, comms={"signing_key": str(key), "peers": [
+        {"id": 2, "address": "localhost:14602"}, {"id": 3, "address": "[::1]:14603"}]})
+    assert world.exists()
+    assert main(["daemon", str(path), "--check"]) == 0
+    assert capsys.readouterr().out.startswith(f"{path}: ok (robot 1")

@@ -4,4 +4,5 @@ from runtime.config.build import (ConfigError, Tagged, deep_merge, from_dict, lo
 from runtime.config.fleet import FleetConfig, FleetRobot, load_fleet  # noqa: F401
 from runtime.config.robot import (CommsConfig, ControlConfig, GpsConfig, LocalizationConfig, Peer,  # noqa: F401
                                   PlanningConfig, RobotConfig, RobotIdentity, load_robot)
+from runtime.config.validate import validate as validate_robot  # noqa: F401
 from runtime.config.world import Box, Datum, WorldConfig, load_world  # noqa: F401

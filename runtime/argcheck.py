@@ -15,8 +15,8 @@ def number(value: float | None, option: str, lo: float | None = None, hi: float 
     """``value`` (None: not given) is a finite number in ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``)."""
     if value is None:
         return
-    if (math.isfinite(value) and (lo is None or value > lo or (value == lo and not lo_open))
-            and (hi is None or value <= hi)):
+    finite = isinstance(value, int) or math.isfinite(value)         # an int may be too large for a float
+    if finite and (lo is None or value > lo or (value == lo and not lo_open)) and (hi is None or value <= hi):
         return
     show = lambda x: str(x) if isinstance(x, int) else f"{x:g}"        # noqa: E731
     if lo is not None and hi is not None:
@@ -25,7 +25,9 @@ def number(value: float | None, option: str, lo: float | None = None, hi: float 
         want = f"a number {'>' if lo_open else '>='} {show(lo)}"
     else:
         want = "a finite number" + (f" <= {show(hi)}" if hi is not None else "")
-    raise InputError(f"{option}: expected {want}, got {value!r}")
+    shown = (f"an integer of {int(value.bit_length() * math.log10(2)) + 1} digits"
+             if isinstance(value, int) and abs(value) > 10**20 else repr(value))
+    raise InputError(f"{option}: expected {want}, got {shown}")
 
 
 def _probe(folder: Path, option: str, shown: str) -> None:

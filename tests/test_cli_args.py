@@ -149,3 +149,5 @@ def test_argcheck_numbers():
             argcheck.number(bad, "--x", 0, 1)
     with pytest.raises(InputError, match=r"--x: expected a number > 0, got 0"):
         argcheck.number(0, "--x", 0, lo_open=True)
+    with pytest.raises(InputError, match=r"--n: expected a number in \[0, 400\], got an integer of 401 digits"):
+        argcheck.number(10 ** 400, "--n", 0, 400)          # found by the fuzz suite: was an OverflowError

@@ -298,8 +298,9 @@ def _read_yaml(path: str | Path) -> Any:
     except UnicodeDecodeError as exc:
         line = raw[:exc.start].count(b"\n") + 1
         raise ConfigError(path, f"line {line}", f"UTF-8 text (byte {raw[exc.start]:#04x} is not)") from None
-    loader = _BoundedLoader(text)
+    loader = None
     try:
+        loader = _BoundedLoader(text)          # checks the characters at once: a NUL is a YAMLError here
         node = loader.get_single_node()
         return (loader.construct_document(node) if node is not None else None) or {}
     except _Refused as exc:
@@ -309,7 +310,8 @@ def _read_yaml(path: str | Path) -> Any:
         where = f"line {mark.line + 1}" if mark else "document"
         raise ConfigError(path, where, "valid YAML") from None
     finally:
-        loader.dispose()
+        if loader is not None:
+            loader.dispose()
 
 
 def from_dict(tp: type, data: Any, file: str = "<dict>") -> Any:

@@ -210,6 +210,7 @@ def _one_config_error(path, loader=C.load_robot) -> str:
     ("robot: " + "{a: " * 3000 + "1" + "}" * 3000 + "\n", "line 1", "levels of nesting"),
     ("robot:\n  name: &a [*a]\n", "line 2", "a recursive alias"),
     ("robot:\n  name: 2020-13-45\n", "line 2", "a value its tag allows"),
+    (b"\x00robot: {}\n", "document", "valid YAML"),            # found by the fuzz suite
 ])
 def test_hostile_yaml_is_one_line_naming_file_and_line_or_key(tmp_path, text, where, expected):
     path = tmp_path / "robot.yaml"

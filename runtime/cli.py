@@ -20,7 +20,8 @@ COMMANDS = (
     "runtime.allocation.formation.assign_cli",     # mrta assign PROBLEM.json
     "runtime.allocation.coalition.wdp_cli",        # mrta wdp BIDS.json
     "sitl.experiments.cli",              # mrta experiment NAME
-    "runtime.comms.mission_cli",         # mrta mission upload|download TARGET [FILE]
+    "runtime.comms.mission_cli",         # mrta mission upload|download|status TARGET ...
+    "runtime.comms.key_cli",             # mrta key FILE
 )
 
 

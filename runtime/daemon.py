@@ -87,7 +87,7 @@ class Daemon:
         self.method = registry.method(cfg.allocation.method)
         self.agent = self.method.make(AgentContext(self.id, tuple(p.id for p in cfg.comms.peers), self.estimator,
                                                    cfg.allocation))
-        self.node = FleetNode(self.id, self.agent, armed=cfg.robot.armed)
+        self.node = FleetNode(self.id, self.agent, armed=cfg.robot.armed, peers=[p.id for p in cfg.comms.peers])
         self.executive = Executive(ExecContext(self.planner, Tunables(c.cruise_speed, c.lookahead, c.max_turn_rate,
                                                                       c.goal_tolerance), self.log, radius))
         self.ground = GroundServices(self)
@@ -249,7 +249,15 @@ class Daemon:
             "gps_rejected": getattr(self.ekf, "gps_rejected", 0),
             "plan_fallbacks": p.plan_fallbacks, "plan_failures": p.plan_failures, "bid_fallbacks": p.bid_fallbacks,
             "table": len(self.node.table.entries),
+            "fleet_dropped": dict(self.node.dropped),
+            "agent_dropped": _drops(self.agent),
         }
+
+
+def _drops(agent) -> dict:
+    """What the allocation agent dropped, by reason (a family without reasons: its total)."""
+    d = getattr(agent, "dropped", {})
+    return dict(d) if isinstance(d, dict) else {"dropped": d}
 
 
 def _for_agent(msg) -> bool:

@@ -82,6 +82,13 @@ class World:
         p.changeDynamics(body, -1, lateralFriction=OBSTACLE_FRICTION, restitution=0.0, **self._kw)
         return body
 
+    def add_box(self, center: tuple[float, float], size: tuple[float, float], height: float = 0.5,
+                yaw: float = 0.0) -> int:
+        """A static box that is not in the world config, so in no robot's map (an unmapped obstacle)."""
+        bid = self._box(center, size, height, yaw)
+        self.obstacle_ids.append(bid)
+        return bid
+
     def add_body(self, robot_id: int, start: tuple[float, float, float], kind: str):
         """Put a body of ``kind`` (:data:`sitl.bodies.registry.BODIES`) on the floor at ``start`` = (x, y, yaw)
         and return it."""

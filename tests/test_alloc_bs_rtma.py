@@ -236,6 +236,7 @@ def test_an_offer_nobody_free_takes_is_left_unallocated():
 @pytest.mark.parametrize("method", METHODS)
 @settings(max_examples=25, deadline=None)
 @given(seed=st.integers(0, 2 ** 32 - 1), n=st.integers(3, 10))
+@example(seed=1206, n=7)             # RTMA left a task unallocated beside a free robot whose answers were lost
 def test_valid_permutation_when_heavy_loss_outlasts_the_retries(method, seed, n):
     """30 % loss and two re-announces: auctions close with bids missing, so resales skip robots."""
     c = instance(seed, n, integer=False)

@@ -25,12 +25,14 @@ f32 = st.floats(width=32, allow_nan=False)       # float32 values survive the wi
 
 task = st.integers(0, 0xFFFE)                    # valid task ids (0xFFFF: "none", only in Status)
 finite = st.floats(width=32, allow_nan=False, allow_infinity=False)
+value = st.floats(-M.MAX_VALUE, M.MAX_VALUE, width=32)          # costs, bids, prices: seconds
+inf = st.sampled_from([math.inf, -math.inf])
 MESSAGES = st.one_of(                            # values the protocol allows (the codec refuses the others)
     st.builds(M.TaskInfo, robot, dest, task, finite, finite, st.integers(1, 0xFFFF), u32),
-    st.builds(M.Announce, robot, dest, u32, task, finite, finite, f32, u32),
-    st.builds(M.Bid, robot, dest, u32, task, f32, u32),
-    st.builds(M.Award, robot, dest, u32, task, robot, f32, f32, u32),
-    st.builds(M.Price, robot, dest, task, robot, finite, u16, u32),
+    st.builds(M.Announce, robot, dest, u32, task, finite, finite, value | inf, u32),
+    st.builds(M.Bid, robot, dest, u32, task, value | st.just(math.inf), u32),
+    st.builds(M.Award, robot, dest, u32, task, robot, value, value, u32),
+    st.builds(M.Price, robot, dest, task, robot, st.floats(0, M.MAX_VALUE, width=32), u16, u32),
     st.builds(M.Status, robot, dest, u32, u16, st.booleans(), u32),
     st.builds(lambda s, d, r, t, rs: M.RoundStart(s, d, r, t, tuple(dict.fromkeys((s, *rs)))), robot, dest, u32,
               st.lists(st.integers(1, 0xFFFFFFFF), min_size=1, max_size=40, unique=True).map(tuple),

@@ -47,7 +47,7 @@ def test_an_unknown_base_type_is_one_line_naming_the_known_ones(tmp_path):
     with pytest.raises(ConfigError) as info:
         C.load_robot(path)
     assert str(info.value) == f"{path}: base.type: expected one of {'|'.join(drivers.BASES)}, got 'nope'"
-    assert str(info.value).endswith("base.type: expected one of create_oi, got 'nope'")
+    assert "\n" not in str(info.value) and "create_oi" in str(info.value)
 
 
 @pytest.mark.parametrize("name", BASE_TYPES)

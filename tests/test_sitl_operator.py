@@ -194,6 +194,10 @@ def test_an_operator_mission_is_done_waypoint_by_waypoint_even_when_the_robot_it
                                         dialect="common")              # the fleet's ground-station port
     g1 = g2 = None
     try:
+        from runtime.comms.mission_cli import NoAnswer, upload
+        from runtime.comms.mission import MissionItem
+        with pytest.raises(NoAnswer, match="the robot signs its MAVLink .a signed fleet.: pass --key FILE"):
+            upload(f"127.0.0.1:{fleet.ports[1]}", [MissionItem(0, ENU, WAYPOINT, x=1.0, y=1.0)], timeout=3.0)
         g1 = StockGcs(fleet.ports[1], 1, fleet.key)
         g1.heartbeat()
         first = [(-3.0, -3.0), (0.0, -3.5), (3.0, -3.0), (3.0, 3.0), (0.0, 3.5), (-3.0, 3.0)]

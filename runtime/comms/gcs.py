@@ -7,16 +7,33 @@ it listens on a port of its own, leaving the fleet's configured ground-station p
 positions, :class:`~runtime.fleet.messages.RobotState`, MISSION_ITEM_REACHED, MISSION_CURRENT, STATUSTEXT)
 and a copy of the fleet's task table from the robots' answers to its table requests; it runs the mission
 protocol's ground side (:class:`~runtime.comms.mission.MissionClient`) for uploads, one per robot at a
-time.  Every message a robot sends it is checked once by the codec; what does not decode is counted.
+time.
+
+What it reads it validates, counting every datagram once in :attr:`GroundStation.counters` (a
+:class:`~runtime.comms.link.LinkCounters`: ``datagrams == received + dropped``, ``kernel_dropped`` for what a
+flood made the kernel drop) and every refused frame in ``frames_dropped``:
+
+* frames that do not decode (junk, bad CRC, cut short) or whose values the protocol does not allow (the codec's
+  ``invalid()``; task ids whose origin robot, and holders, are no robot of the fleet) are ``parse_errors``,
+  ``bad_crc``, ``invalid``;
+* frames from a system that is no robot of the fleet (when it was given its robots) are ``not_for_us``;
+* with a signing key, robot frames count only if signed with the key on the robots' ground-station link id
+  (:data:`~runtime.comms.link.GCS_LINK`): unsigned, wrongly signed and replayed frames (an old timestamp, or a
+  frame a robot sent to its peers) are ``unsigned_dropped``, ``bad_signature_dropped``, ``replayed_dropped``.
+  So the status a verdict is built on is authenticated.  Without a key anyone who can reach the port can
+  forge a fleet robot's status within the protocol's ranges: an unsigned fleet is an explicit choice.
 """
 from __future__ import annotations
 
 import math
 import socket
+import time
+from collections import deque
 from dataclasses import dataclass, field
 
-from runtime.comms import codec, dialect
-from runtime.comms.link import parse_address
+from runtime.comms import codec, dialect, udp
+from runtime.comms.link import (GCS_LINK, KERNEL_DROPS_PERIOD, MAX_DATAGRAMS_PER_POLL, MAX_ROBOT_ID, OPERATOR_LINK, LinkCounters, count_datagram,
+                                parse_datagram, parse_address, refusal, signing_guard, signing_timestamp)
 from runtime.comms.mission import MissionClient
 from runtime.errors import InputError
 from runtime.fleet.messages import RobotState, TableRequest, TaskRecord
@@ -24,17 +41,15 @@ from runtime.log import get_logger
 
 GCS_SYSTEM, GCS_COMPONENT = 255, 190      # MAVProxy's and QGC's ground-station ids
 HEARTBEAT_PERIOD = 1.0
+MAX_TEXTS = 1000          # STATUSTEXT lines kept per robot
+MAX_CHUNKED = 8           # chunked STATUSTEXT lines being reassembled per robot
 
 
-def ground_mav(signing_key: bytes | None = None, link_id: int = 1):
+def ground_mav(signing_key: bytes | None = None, link_id: int = OPERATOR_LINK):
     """The fleet dialect's module and a MAVLink encoder/parser with a ground station's ids, signing with
-    ``signing_key`` (its own ``link_id``) when given."""
-    import time
-
-    from runtime.comms.link import signing_timestamp
-
+    ``signing_key`` (its own ``link_id``: see :mod:`runtime.comms.link`) when given."""
     module = dialect.load()
-    mav = module.MAVLink(None, srcSystem=GCS_SYSTEM, srcComponent=GCS_COMPONENT)
+    mav = signing_guard(module.MAVLink)(None, srcSystem=GCS_SYSTEM, srcComponent=GCS_COMPONENT)
     mav.robust_parsing = True
     if signing_key is not None:
         s = mav.signing
@@ -62,7 +77,7 @@ class RobotView:
     heard: float = -math.inf           # when its last RobotState came
     messages: int = 0
     reached: list[int] = field(default_factory=list)
-    texts: list[tuple[float, str]] = field(default_factory=list)
+    texts: deque = field(default_factory=lambda: deque(maxlen=MAX_TEXTS))      # (time, line)
     chunks: dict[int, dict[int, str]] = field(default_factory=dict)   # STATUSTEXT id -> chunk_seq -> text
     current: int | None = None         # MISSION_CURRENT.seq
 
@@ -90,18 +105,29 @@ class GroundStation:
         self.targets: dict[int, tuple] = dict(robots or {})     # robot -> its MAVLink address (heartbeats)
         self._next_heartbeat = -math.inf
         self.sock.setblocking(False)
+        self._overflows = udp.count_overflows(self.sock)
+        self._next_kernel_check = -math.inf
         self.module, self.mav = ground_mav(signing_key)
+        self.signing = signing_key is not None
         self.robots: dict[int, RobotView] = {}
         self.table: dict[int, TaskRecord] = {}       # fleet task id -> the latest record heard
         self.uploads: dict[int, Upload] = {}         # robot -> its upload in flight
         self.finished: list[Upload] = []
-        self.bad_frames = 0
+        self.counters = LinkCounters()
         self.now = 0.0
+
+    @property
+    def bad_frames(self) -> int:
+        """Frames (and runs of junk) refused so far."""
+        return self.counters.frames_dropped
 
     # ------------------------------------------------------------------ sending
     def send(self, msg, address: tuple) -> None:
         if not hasattr(msg, "pack"):
             msg = codec.to_mavlink(msg, self.module)
+        s = self.mav.signing
+        if s.sign_outgoing:              # never behind the wall clock, as the robots' links
+            s.timestamp = max(s.timestamp, signing_timestamp(time.time()))
         try:
             self.sock.sendto(msg.pack(self.mav), address)
         except OSError as e:
@@ -135,27 +161,21 @@ class GroundStation:
             for address in self.targets.values():
                 self.send(hb, address)
         n = 0
-        while True:
-            try:
-                data, _ = self.sock.recvfrom(65535)
-            except (BlockingIOError, InterruptedError):
-                break
-            except OSError:
-                break
-            try:
-                msgs = self.mav.parse_buffer(data) or []
-            except Exception:        # pymavlink raises on some malformed frames: count, go on
-                self.bad_frames += 1
-                continue
+        c = self.counters
+        for data, _ in udp.datagrams(self.sock, self._overflows, c, MAX_DATAGRAMS_PER_POLL):
+            msgs, refused = parse_datagram(self.mav, self.module, data)
+            taken = False
             for m in msgs:
-                if m.get_type() == "BAD_DATA":
-                    self.bad_frames += 1
-                    continue
-                n += 1
-                try:
-                    self._on(m)
-                except (codec.InvalidMessage, ValueError, TypeError, AttributeError):
-                    self.bad_frames += 1
+                why = self._take(m)
+                if why is None:
+                    taken = True
+                    n += 1
+                else:
+                    refused.append(why)
+            count_datagram(c, taken, refused)
+        if self.now >= self._next_kernel_check:
+            self._next_kernel_check = self.now + KERNEL_DROPS_PERIOD
+            c.kernel_dropped = max(c.kernel_dropped, udp.proc_drops(self.sock) or 0)
         for up in list(self.uploads.values()):
             for m in up.client.tick(self.now):
                 self.send(m, up.address)
@@ -170,6 +190,8 @@ class GroundStation:
         if not key:
             view.texts.append((self.now, text))
             return
+        if key not in view.chunks and len(view.chunks) >= MAX_CHUNKED:
+            del view.chunks[next(iter(view.chunks))]          # the oldest line never finished
         parts = view.chunks.setdefault(key, {})
         parts[getattr(m, "chunk_seq", 0)] = text
         if len(text) < 50:
@@ -181,11 +203,48 @@ class GroundStation:
             del self.uploads[up.robot]
             self.finished.append(up)
 
+    def _take(self, m) -> str | None:
+        """One decoded frame: None if taken, else the counter of why not."""
+        kind = m.get_type()
+        if kind == "BAD_DATA":
+            return refusal(m)
+        if kind.startswith("UNKNOWN"):
+            return "unknown"
+        src = m.get_srcSystem()
+        if not 1 <= src <= MAX_ROBOT_ID:
+            return "ignored"                     # another ground station, or our own echo
+        if self.targets and src not in self.targets:
+            return "not_for_us"                  # no robot of this fleet
+        if self.signing and m.get_link_id() != GCS_LINK:
+            return "replayed_dropped"            # signed for the robot's peers (pymavlink refused unsigned ones)
+        try:
+            self._on(m)
+        except (codec.InvalidMessage, ValueError, TypeError, AttributeError, KeyError, IndexError):
+            return "invalid"
+        return None
+
+    def _fleet_task(self, task: int) -> bool:
+        """A fleet task id minted by a robot of the fleet (any robot id when the fleet is not known)."""
+        origin = task >> 16
+        return origin in self.targets if self.targets else 1 <= origin <= MAX_ROBOT_ID
+
+    def _check(self, msg) -> None:
+        """Values the codec cannot judge alone: task ids and holders must belong to this fleet."""
+        tasks = msg.tasks if isinstance(msg, RobotState) else (msg.task,)
+        if not all(self._fleet_task(t) for t in tasks):
+            raise codec.InvalidMessage(f"task ids {list(tasks)}: expected tasks of this fleet's robots")
+        holders = getattr(msg, "holders", ())
+        if self.targets and not set(holders) <= set(self.targets):
+            raise codec.InvalidMessage(f"holders {list(holders)}: expected robots of this fleet")
+
     def _on(self, m) -> None:
         src = m.get_srcSystem()
+        kind = m.get_type()
+        msg = codec.from_mavlink(m) if codec.is_agent(m) else None
+        if isinstance(msg, (RobotState, TaskRecord)):
+            self._check(msg)
         view = self.robots.setdefault(src, RobotView())
         view.messages += 1
-        kind = m.get_type()
         if kind == "HEARTBEAT":
             view.heartbeats += 1
             view.mav_type, view.base_mode = m.type, m.base_mode
@@ -204,8 +263,7 @@ class GroundStation:
             for reply in up.client.handle(m, self.now):
                 self.send(reply, up.address)
             self._settle(up)
-        elif codec.is_agent(m):
-            msg = codec.from_mavlink(m)
+        elif msg is not None:
             if isinstance(msg, RobotState):
                 view.state, view.tasks, view.heard = msg.state, tuple(msg.tasks), self.now
             elif isinstance(msg, TaskRecord):

@@ -19,6 +19,12 @@ MAV_FRAME_LOCAL_NED (x north, y east).  Positions are metres in the fleet frame 
 Reports: the robot's :class:`~runtime.fleet.messages.RobotState` at 1 Hz (the fleet tasks it holds),
 MISSION_CURRENT at 1 Hz (the seq of the task it works on, or the task count when idle),
 MISSION_ITEM_REACHED when it arrives at a task, and one STATUSTEXT per task awarded, done or failed.
+
+Base faults (``base.sensors.faults``, e.g. ``left_drive_silent``): a STATUSTEXT (CRITICAL) naming each new one;
+a base that latches its faults (``latches_faults``: it stands until reset) also disarms the robot, so its tasks go
+back to the fleet; SYS_STATUS shows MOTOR_OUTPUTS unhealthy meanwhile (:mod:`runtime.comms.telemetry`).  MAV_CMD_COMPONENT_ARM_DISARM with param1 = 1 while the base reports
+faults is the fault reset: the base is asked to reset (``reset_faults``) and the robot arms once the faults have
+cleared (a STATUSTEXT says so).
 """
 from __future__ import annotations
 
@@ -63,6 +69,8 @@ class GroundServices:
         self._next_report = -math.inf
         self.reached: list[int] = []           # seqs reported reached (for tests and the trace)
         self._text_id = 0
+        self._faults: tuple[str, ...] = ()     # the base's faults as last reported
+        self._arm_after_reset = False
 
     # ------------------------------------------------------------------ requests
     def serve(self, now: float) -> list:
@@ -171,12 +179,34 @@ class GroundServices:
         p1 = float(msg.param1)
         if p1 not in (0.0, 1.0):
             return MAV_RESULT_DENIED
-        self._out += self.d.node.set_armed(p1 == 1.0, now)
+        reset = getattr(self.d.base, "reset_faults", None)
+        self._arm_after_reset = p1 == 1.0 and reset is not None and reset(now)    # arms once the faults clear
+        if self._arm_after_reset:
+            self._text(4, "base fault reset requested")
+        else:
+            self._out += self.d.node.set_armed(p1 == 1.0, now)
         return MAV_RESULT_ACCEPTED
+
+    def _base_faults(self, now: float) -> None:
+        faults = tuple(getattr(self.d.base.sensors, "faults", ()))
+        if faults == self._faults:
+            return
+        new = [f for f in faults if f not in self._faults]
+        self._faults = faults
+        if new:
+            self._text(2, "base fault: " + ", ".join(new))                          # MAV_SEVERITY_CRITICAL
+            if getattr(self.d.base, "latches_faults", False):      # it stands until reset: its tasks go back
+                self._out += self.d.node.set_armed(False, now)
+        elif not faults:
+            self._text(5, "base faults cleared")
+            if self._arm_after_reset:
+                self._arm_after_reset = False
+                self._out += self.d.node.set_armed(True, now)
 
     # ------------------------------------------------------------------ reports
     def report(self, now: float) -> None:
         link, node = self.d.link, self.d.node
+        self._base_faults(now)
         for n in node.pop_notices():
             if n.reached_seq is not None:
                 self.reached.append(n.reached_seq)

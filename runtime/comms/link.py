@@ -16,16 +16,40 @@ Liveness: :meth:`MavlinkLink.poll` sends a HEARTBEAT to every peer once per ``he
 records the HEARTBEATs it hears; :meth:`MavlinkLink.peers_lost` names peers silent for more than
 ``heartbeat_timeout`` (once per silence).
 
-Signing (MAVLink 2, pymavlink's implementation): with a key, every frame sent is signed (link id 0,
-timestamp in 10 us units since 2015-01-01 UTC, never behind the wall clock).  Incoming frames must be
-signed with the same key, with one exception: an *unsigned* HEARTBEAT whose type is MAV_TYPE_GCS is
-accepted, so a stock ground station without the key can still be seen; it never counts as peer
-liveness.  Unsigned robot HEARTBEATs and any wrongly signed frame are dropped and counted.  A refused
-frame cannot advance pymavlink's per-stream replay window (see :class:`_SigningGuard`).
+Signing (MAVLink 2, pymavlink's implementation): with a key, every frame sent is signed (timestamp in 10 us
+units since 2015-01-01 UTC, never behind the wall clock).  Incoming frames must be signed with the same key, with
+one exception: an *unsigned* HEARTBEAT whose type is MAV_TYPE_GCS is accepted, so a stock ground station without
+the key can still be seen; it never counts as peer liveness.  Unsigned robot HEARTBEATs and any wrongly signed
+frame are dropped and counted.  A refused frame cannot advance pymavlink's per-stream replay window (see
+:func:`signing_guard`).
+
+Link ids (the signature's ``link_id`` byte; pymavlink keeps one replay window per link id, system and
+component): a frame's link id says where it was sent, so a signed frame cannot be replayed to another kind of
+destination.
+
+* ``PEER_LINK`` (0): a robot to its peers (agent messages, peer HEARTBEATs);
+* ``GCS_LINK`` (1): a robot to ground stations (telemetry, HEARTBEAT, RobotState, STATUSTEXT, answers);
+* ``OPERATOR_LINK`` (2): the SITL operator's ground station (:class:`runtime.comms.gcs.GroundStation`);
+* ``MISSION_LINK`` (3): ``mrta mission``.  Stock ground stations choose their own (pymavlink counts from 0).
+
+A robot takes a frame from a robot system id (1..250) only if it is signed on ``PEER_LINK``: a frame a robot
+sent to a ground station and replayed to its peers is dropped and counted (``replayed_dropped``); so is a
+peer frame replayed to :class:`~runtime.comms.gcs.GroundStation`, which takes robot frames on ``GCS_LINK``
+only.  Frames from ground-station system ids (above 250) are taken on any link id: each ground station
+program signs with its own, so two of them never share a replay window.
+
+Counters (:class:`LinkCounters`): every datagram read ends in exactly one outcome, ``received`` (it gave at
+least one frame that was taken: an agent message for us, a HEARTBEAT, a ground-station request) or one drop
+reason (:data:`DROP_REASONS`, the reason of its first refused frame or run of junk), so
+``datagrams == received + sum of the drop counters`` at any time.  Datagrams the kernel dropped before we read
+them (receive buffer full under a flood) are ``kernel_dropped`` (:mod:`runtime.comms.udp`).  The frame
+counters (``agent_received``, ``heartbeats``, ``gcs_requests``, ``frames_dropped``) count frames: a datagram
+may carry several.
 """
 from __future__ import annotations
 
 import ipaddress
+import math
 import os
 import socket
 import time
@@ -33,7 +57,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Callable, Iterable
 
-from runtime.comms import codec, dialect
+from runtime.comms import codec, dialect, udp
 from runtime.errors import InputError
 from runtime.log import get_logger
 
@@ -43,6 +67,8 @@ MAX_DATAGRAMS_PER_POLL = 1024          # bounds one poll's work under a flood
 MAX_ROBOT_ID = 250                     # system ids above are ground stations (QGC, MAVProxy use 255)
 MAX_GCS_INBOX = 256                    # ground-station requests kept between two daemon cycles
 GCS_TIMEOUT = 10.0                     # s a ground station that talked to us keeps getting telemetry
+PEER_LINK, GCS_LINK, OPERATOR_LINK, MISSION_LINK = 0, 1, 2, 3       # signing link ids (module docstring)
+KERNEL_DROPS_PERIOD = 1.0              # s between reads of the kernel's drop count when no datagram brings it
 _IFLAG_SIGNED = 0x01
 
 
@@ -123,22 +149,32 @@ def _resolve(text: str, what: str, family: int | None = None, *, listen: bool = 
     return fam, sockaddr
 
 
+DROP_REASONS = ("parse_errors", "bad_crc", "unsigned_dropped", "bad_signature_dropped", "replayed_dropped",
+                "unknown", "invalid", "not_for_us", "ignored", "gcs_overflow")
+
+
 @dataclass
 class LinkCounters:
     datagrams: int = 0              # UDP datagrams read
-    received: int = 0               # frames accepted (good CRC and, with a key, good signature)
+    # the outcome of each datagram: received, or the first reason one of its frames was refused (DROP_REASONS)
+    received: int = 0               # datagrams that gave at least one frame taken
+    parse_errors: int = 0           # nothing but junk bytes, bad lengths or flags, a frame cut short
+    bad_crc: int = 0                # a frame with a wrong checksum
+    unsigned_dropped: int = 0       # an unsigned frame, refused because signing is on
+    bad_signature_dropped: int = 0  # a signed frame whose signature is wrong or whose timestamp is old (a replay)
+    replayed_dropped: int = 0       # a robot's frame signed for another kind of destination (see Link ids)
+    unknown: int = 0                # a message id the dialect does not define
+    invalid: int = 0                # one of our messages with values the protocol does not allow
+    not_for_us: int = 0             # an agent message for another robot, or claiming our own id
+    ignored: int = 0                # a valid frame of a message the link has no use for
+    gcs_overflow: int = 0           # a ground-station request dropped: the inbox was full
+    kernel_dropped: int = 0         # datagrams the kernel dropped before we read them (receive buffer full)
+    # frames (a datagram may carry several)
     agent_received: int = 0         # agent messages returned by poll
-    heartbeats: int = 0             # HEARTBEATs accepted (peers and ground station)
-    bad_crc: int = 0                # frames with a wrong checksum
-    parse_errors: int = 0           # runs of junk bytes, bad lengths or flags, truncated frames
-    unsigned_dropped: int = 0       # unsigned frames refused because signing is on
-    bad_signature_dropped: int = 0  # signed frames whose signature or timestamp is wrong
-    not_for_us: int = 0             # agent messages addressed to another robot, or our own echo
-    invalid: int = 0                # our messages with values the protocol does not allow
+    heartbeats: int = 0             # HEARTBEATs taken (peers and ground stations)
     gcs_requests: int = 0           # ground-station frames queued for the services
-    gcs_overflow: int = 0           # ground-station frames dropped: the inbox was full
-    unknown: int = 0                # frames with a message id the dialect does not define
-    ignored: int = 0                # valid frames of messages the link has no use for
+    frames_dropped: int = 0         # frames and runs of junk refused, in any datagram
+    # sending
     sent: int = 0                   # datagrams sent (one per message and destination)
     send_errors: int = 0
     encode_errors: int = 0          # agent messages whose values do not fit the wire types
@@ -146,11 +182,57 @@ class LinkCounters:
     def as_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
+    @property
+    def dropped(self) -> int:
+        """Datagrams read and dropped, whatever the reason: ``datagrams == received + dropped``."""
+        return sum(getattr(self, k) for k in DROP_REASONS)
+
+
+def parse_datagram(mav, module, data: bytes) -> tuple[list, list[str]]:
+    """The frames of one datagram (pymavlink's robust parser, its state reset before and after, so nothing
+    carries over between datagrams), and the refusals met outside frames: the parser raising, a frame cut
+    short at the end."""
+    mav.buf, mav.buf_index = bytearray(), 0
+    mav.expected_length = module.HEADER_LEN_V1 + 2
+    refused = []
+    try:
+        msgs = mav.parse_buffer(data) or []
+    except Exception:                     # robust parsing should not raise; count it if it does
+        refused.append("parse_errors")
+        msgs = []
+    if mav.buf_len() > 0:
+        refused.append("parse_errors")
+    mav.buf, mav.buf_index = bytearray(), 0
+    mav.expected_length = module.HEADER_LEN_V1 + 2
+    return msgs, refused
+
+
+def count_datagram(c: LinkCounters, taken: bool, refused: list[str]) -> None:
+    """One datagram's outcome into ``c``: ``received`` if a frame of it was taken, else the first reason in
+    ``refused`` (junk, if nothing at all was parsed); every refused frame also counts in ``frames_dropped``."""
+    c.datagrams += 1
+    c.frames_dropped += len(refused)
+    if taken:
+        c.received += 1
+    else:
+        why = refused[0] if refused else "parse_errors"
+        setattr(c, why, getattr(c, why) + 1)
+
+
+def refusal(bad) -> str:
+    """The counter for a pymavlink BAD_DATA message: its frame's signature (unsigned or bad), CRC, or junk."""
+    reason = str(getattr(bad, "reason", ""))
+    if "signature" in reason:
+        return "bad_signature_dropped" if was_signed(getattr(bad, "data", b"")) else "unsigned_dropped"
+    if "CRC" in reason:
+        return "bad_crc"
+    return "parse_errors"
+
 
 _guarded: dict[type, type] = {}
 
 
-def _signing_guard(base: type) -> type:
+def signing_guard(base: type) -> type:
     """Subclass of a generated ``MAVLink`` class whose refused signatures leave the replay window alone.
 
     pymavlink records a stream's timestamp before it checks the signature, so a forged frame with a
@@ -195,7 +277,7 @@ class MavlinkLink:
         codec.check(self.module)
         self._hb_id = self.module.MAVLINK_MSG_ID_HEARTBEAT
         self._gcs_type = self.module.MAV_TYPE_GCS
-        self.mav = _signing_guard(self.module.MAVLink)(None, srcSystem=self.robot_id,
+        self.mav = signing_guard(self.module.MAVLink)(None, srcSystem=self.robot_id,
                                                         srcComponent=COMPONENT_ID)
         self.mav.robust_parsing = True
         self.signing = signing_key is not None
@@ -203,7 +285,7 @@ class MavlinkLink:
             s = self.mav.signing
             s.secret_key = bytes(signing_key)
             s.sign_outgoing = True
-            s.link_id = 0
+            s.link_id = PEER_LINK
             s.timestamp = signing_timestamp(self._wallclock())
             s.allow_unsigned_callback = self._allow_unsigned
 
@@ -217,6 +299,8 @@ class MavlinkLink:
             self.sock.close()
             raise InputError(f"comms.listen: cannot bind {listen!r} ({e.strerror})") from None
         self.sock.setblocking(False)
+        self._overflows = udp.count_overflows(self.sock)
+        self._next_kernel_check = -math.inf
 
         # what the peer HEARTBEAT says; GcsTelemetry keeps these current
         self.base_mode = self.module.MAV_MODE_FLAG_AUTO_ENABLED
@@ -242,13 +326,14 @@ class MavlinkLink:
         return list(self._peers)
 
     # ------------------------------------------------------------------ sending
-    def _stamp(self) -> None:
+    def _stamp(self, link_id: int) -> None:
         if self.signing:
             s = self.mav.signing
             s.timestamp = max(s.timestamp, signing_timestamp(self._wallclock()))
+            s.link_id = link_id
 
-    def _pack(self, mavmsg) -> bytes:
-        self._stamp()
+    def _pack(self, mavmsg, link_id: int) -> bytes:
+        self._stamp(link_id)
         frame = mavmsg.pack(self.mav)
         self.mav.seq = (self.mav.seq + 1) % 256
         return frame
@@ -266,7 +351,7 @@ class MavlinkLink:
     def send_agent(self, msgs: Iterable, now: float) -> None:
         """Encode each agent message once and send it to every peer (the wire sender is our id)."""
         for msg in msgs:
-            self._stamp()
+            self._stamp(PEER_LINK)
             try:
                 frame = codec.encode(msg, self.mav)
             except (ValueError, TypeError) as e:
@@ -304,7 +389,7 @@ class MavlinkLink:
         try:
             if not hasattr(mavmsg, "pack"):
                 mavmsg = codec.to_mavlink(mavmsg, self.module)
-            return self._pack(mavmsg)
+            return self._pack(mavmsg, GCS_LINK)
         except Exception as e:            # struct.error / ValueError: a value outside its wire type
             self.counters.encode_errors += 1
             self.log.error("not sent: %s %s", getattr(mavmsg, "get_type", lambda: type(mavmsg).__name__)(), e)
@@ -319,7 +404,7 @@ class MavlinkLink:
     def _heartbeat_peers(self, now: float) -> None:
         if self._next_heartbeat is not None and now < self._next_heartbeat:
             return
-        frame = self._pack(self.heartbeat())
+        frame = self._pack(self.heartbeat(), PEER_LINK)
         for addr in self._peers:
             self._sendto(frame, addr)
         nxt = (now if self._next_heartbeat is None else self._next_heartbeat) + self.heartbeat_period
@@ -332,119 +417,103 @@ class MavlinkLink:
         self._now = max(self._now, now)
         self._heartbeat_peers(now)
         out: list = []
-        for _ in range(MAX_DATAGRAMS_PER_POLL):
-            try:
-                data, addr = self.sock.recvfrom(65535)
-            except (BlockingIOError, InterruptedError):
-                break
-            except OSError as e:          # e.g. ICMP errors reported on some platforms
-                self.log.debug("recv: %s", e)
-                continue
+        for data, addr in udp.datagrams(self.sock, self._overflows, self.counters, MAX_DATAGRAMS_PER_POLL):
             out += self.feed(data, now, addr)
+        if now >= self._next_kernel_check:
+            self._next_kernel_check = now + KERNEL_DROPS_PERIOD
+            self.check_kernel_drops()
         return out
 
-    def feed(self, data: bytes, now: float, addr: tuple | None = None) -> list:
-        """Parse one datagram; return the agent messages addressed to us.  Never raises."""
+    def check_kernel_drops(self) -> int:
+        """Bring ``kernel_dropped`` up to the kernel's count now (datagrams carry it only once more arrive)."""
         c = self.counters
-        c.datagrams += 1
-        mav = self.mav
-        mav.buf, mav.buf_index = bytearray(), 0
-        mav.expected_length = self.module.HEADER_LEN_V1 + 2
-        try:
-            msgs = mav.parse_buffer(data) or []
-        except Exception as e:            # robust parsing should not raise; count it if it does
-            self.log.debug("parser raised: %r", e)
-            c.parse_errors += 1
-            msgs = []
-        if mav.buf_len() > 0:             # a frame cut short at the end of the datagram
-            c.parse_errors += 1
-        mav.buf, mav.buf_index = bytearray(), 0
-        mav.expected_length = self.module.HEADER_LEN_V1 + 2
+        c.kernel_dropped = max(c.kernel_dropped, udp.proc_drops(self.sock) or 0)
+        return c.kernel_dropped
+
+    def feed(self, data: bytes, now: float, addr: tuple | None = None) -> list:
+        """Parse one datagram; return the agent messages addressed to us.  Never raises.  The datagram is
+        counted once: ``received`` if a frame in it was taken, else the first reason a frame was refused."""
+        msgs, after = parse_datagram(self.mav, self.module, data)
+        refused: list[str] = []
         out: list = []
+        taken = False
         for m in msgs:
             try:
-                agent = self._dispatch(m, now, addr)
+                why, agent = self._dispatch(m, now, addr)
             except codec.InvalidMessage as e:
-                c.invalid += 1
+                why, agent = "invalid", None
                 self.log.debug("dropped: %s", e)
-                continue
             except Exception as e:        # a field that will not convert; count, keep going
+                why, agent = "parse_errors", None
                 self.log.debug("dropped %s: %r", m.get_type(), e)
-                c.parse_errors += 1
-                continue
+            if why is None:
+                taken = True
+            else:
+                refused.append(why)
             if agent is not None:
                 out.append(agent)
+        count_datagram(self.counters, taken, refused + after)
         return out
 
     def _allow_unsigned(self, mav, msg_id: int) -> bool:
         # only HEARTBEAT gets past pymavlink unsigned; _dispatch keeps it only if it is a GCS's
         return msg_id == self._hb_id
 
-    def _dispatch(self, m, now: float, addr=None):
+    def _dispatch(self, m, now: float, addr=None) -> tuple[str | None, object]:
+        """One decoded frame: (None if taken, else the counter of why it was refused; the agent message for us)."""
         c = self.counters
         kind = m.get_type()
         if kind == "BAD_DATA":
-            reason = str(getattr(m, "reason", ""))
-            if "signature" in reason:
-                if _was_signed(m.data):
-                    c.bad_signature_dropped += 1
-                else:
-                    c.unsigned_dropped += 1
-            elif "CRC" in reason:
-                c.bad_crc += 1
-            else:
-                c.parse_errors += 1
-            return None
+            return refusal(m), None
         if kind.startswith("UNKNOWN"):
-            c.unknown += 1
-            return None
+            return "unknown", None
+        src = m.get_srcSystem()
+        if self.signing and m.get_signed() and 1 <= src <= MAX_ROBOT_ID and m.get_link_id() != PEER_LINK:
+            return "replayed_dropped", None       # a robot's frame to a ground station, replayed to us
         if kind == "HEARTBEAT":
-            if self._on_heartbeat(m, now) and addr is not None:
+            why = self._on_heartbeat(m, now)
+            if why is None and m.type == self._gcs_type and addr is not None:
                 self._gcs_seen[addr] = now
-            return None
-        c.received += 1
+            return why, None
         agent = codec.from_mavlink(m)
         if agent is None or agent.sender > MAX_ROBOT_ID:
             # a ground station's request: a standard message, or one of ours from a system id that is no robot's
             if addr is None:
-                c.ignored += 1
-            elif len(self.gcs_inbox) >= MAX_GCS_INBOX:
-                c.gcs_overflow += 1
-            else:
-                c.gcs_requests += 1
-                self._gcs_seen[addr] = now
-                self.gcs_inbox.append((m if agent is None else agent, addr))
-            return None
+                return "ignored", None
+            if len(self.gcs_inbox) >= MAX_GCS_INBOX:
+                return "gcs_overflow", None
+            c.gcs_requests += 1
+            self._gcs_seen[addr] = now
+            self.gcs_inbox.append((m if agent is None else agent, addr))
+            return None, None
         if agent.sender == self.robot_id or agent.dest not in (0, self.robot_id):
-            c.not_for_us += 1
-            return None
+            return "not_for_us", None
         c.agent_received += 1
-        return agent
+        return None, agent
 
-    def _on_heartbeat(self, m, now: float) -> bool:
-        """Record a HEARTBEAT; True if it is a ground station's."""
+    def _on_heartbeat(self, m, now: float) -> str | None:
+        """Record a HEARTBEAT: None if taken, else why not."""
         c = self.counters
         is_gcs = m.type == self._gcs_type
         if self.signing and not m.get_signed():
             if m.get_header().incompat_flags & _IFLAG_SIGNED:
-                c.bad_signature_dropped += 1
-                return False
+                return "bad_signature_dropped"
             if not is_gcs:
-                c.unsigned_dropped += 1
-                return False
-        c.received += 1
-        c.heartbeats += 1
+                return "unsigned_dropped"
+        src = m.get_srcSystem()
         if is_gcs:
             self.gcs_last_heartbeat = now
-            return True
-        src = m.get_srcSystem()
-        if src == self.robot_id or not 1 <= src <= 250:
-            return False
-        self._last_seen[src] = max(now, self._last_seen.get(src, now))
-        if src in self._lost:
-            self._lost.discard(src)
-            self.log.info("peer %d is back", src)
-        return False
+        elif src == self.robot_id:
+            return "not_for_us"
+        elif not 1 <= src <= MAX_ROBOT_ID:
+            return "ignored"
+        else:
+            self._last_seen[src] = max(now, self._last_seen.get(src, now))
+            if src in self._lost:
+                self._lost.discard(src)
+                self.log.info("peer %d is back", src)
+        c.heartbeats += 1
+        return None
 
     # ------------------------------------------------------------------ liveness
     def peers_lost(self, now: float) -> list[int]:
@@ -465,6 +534,7 @@ class MavlinkLink:
         self.sock.close()
 
 
-def _was_signed(frame) -> bool:
-    """True if a raw frame is MAVLink 2 with the 'signed' incompat flag set."""
+def was_signed(frame) -> bool:
+    """True if a raw frame is MAVLink 2 with the 'signed' incompat flag set (a parser without the key does not
+    say so)."""
     return len(frame) > 2 and frame[0] == 0xFD and bool(frame[2] & _IFLAG_SIGNED)

@@ -24,8 +24,8 @@ from pathlib import Path
 
 from runtime.comms import dialect, mission_files
 from runtime.comms.gcs import GCS_SYSTEM, HEARTBEAT_PERIOD, gcs_heartbeat, ground_mav
-from runtime.comms.link import load_key, parse_address, signing_timestamp
-from runtime.comms.mission import ACCEPTED, MISSION, MissionClient, MissionItem
+from runtime.comms.link import MISSION_LINK, load_key, parse_address, signing_timestamp, was_signed
+from runtime.comms.mission import ACCEPTED, MISSION, TIMEOUT, MissionClient, MissionItem
 from runtime.errors import InputError
 from runtime.log import get_logger
 
@@ -48,10 +48,12 @@ class UdpTarget:
             family, _, _, _, self.addr = socket.getaddrinfo(host, port, 0, socket.SOCK_DGRAM)[0]
         except socket.gaierror as e:
             raise InputError(f"TARGET: cannot resolve {target!r} ({e.strerror})") from None
-        self.mod, self.mav = ground_mav(key, link_id=0)
+        self.mod, self.mav = ground_mav(key, link_id=MISSION_LINK)
         self.sock = socket.socket(family, socket.SOCK_DGRAM)
         self.sock.bind(("::", 0) if family == socket.AF_INET6 else ("0.0.0.0", 0))
         self._next_heartbeat = -float("inf")
+        self.keyless = key is None
+        self.signed_peer = False                 # the robot signs its frames: a signed fleet
 
     def send(self, msg) -> None:
         if self.mav.signing.sign_outgoing:
@@ -89,6 +91,7 @@ class UdpTarget:
             except Exception as e:
                 log.debug("unparsable datagram: %r", e)
                 continue
+            self.signed_peer |= was_signed(data)
             out += [m for m in msgs if m.get_type() != "BAD_DATA"]
 
     def close(self) -> None:
@@ -105,6 +108,11 @@ def find_system(link: UdpTarget, deadline: float) -> int:
     raise NoAnswer(f"{link.target}: no HEARTBEAT from a robot (is it running? --system skips the wait)")
 
 
+def _hint(link: UdpTarget) -> str:
+    """Why a robot may ignore us: it signs its frames and we have no key."""
+    return "; the robot signs its MAVLink (a signed fleet): pass --key FILE" if link.keyless and link.signed_peer else ""
+
+
 def run(link: UdpTarget, client: MissionClient, first: list, deadline: float) -> MissionClient:
     """Drive ``client`` over ``link`` until it is done; NoAnswer unless it ends with MAV_MISSION_ACCEPTED."""
     out, started = first, time.monotonic()
@@ -116,14 +124,14 @@ def run(link: UdpTarget, client: MissionClient, first: list, deadline: float) ->
         now = time.monotonic()
         if now >= deadline:
             raise NoAnswer(f"{link.target}: mission {client.op} unfinished after {now - started:.1f} s "
-                           f"(system {client.target_system}; --timeout reached)")
+                           f"(system {client.target_system}; --timeout reached){_hint(link)}")
         link.heartbeat(now)
         out = []
         for m in link.recv(POLL):
             out += client.handle(m, time.monotonic())
         out += client.tick(time.monotonic())
     if client.result != ACCEPTED:
-        raise NoAnswer(f"{link.target}: {client.error}")
+        raise NoAnswer(f"{link.target}: {client.error}{_hint(link) if client.result == TIMEOUT else ''}")
     return client
 
 
@@ -156,7 +164,7 @@ def status(target: str, *, system: int | None = None, timeout: float = 10.0, key
                     known = msg.known
             if known is not None and len(records) >= known:
                 return [records[t] for t in sorted(records)]
-        raise NoAnswer(f"{target}: no task table from system {sysid} within {timeout:g} s "
+        raise NoAnswer(f"{target}: no task table from system {sysid} within {timeout:g} s{_hint(link)} "
                        f"(got {len(records)} of {'?' if known is None else known} tasks)")
     finally:
         link.close()

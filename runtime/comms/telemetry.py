@@ -29,7 +29,7 @@ SYS_STATUS sensor bits: present = MOTOR_OUTPUTS, AHRS (the pose estimate) and BA
 reports a voltage); enabled = AHRS, BATTERY, and MOTOR_OUTPUTS only while armed (MAVProxy's console
 and ``arm safetystatus`` read enabled motor outputs as "safety off, vehicle dangerous").  health = every
 bit of MAV_SYS_STATUS_SENSOR except what is actually failing -- AHRS without a pose, BATTERY when
-critical -- since MAVLink's health bit means "no error" and MAVProxy alarms on missing health bits
+critical, MOTOR_OUTPUTS while the base reports faults (``sensors.faults``) -- since MAVLink's health bit means "no error" and MAVProxy alarms on missing health bits
 of sensors that are not even present: its fence module starts ``healthy=True`` and says "fence breach"
 on the first SYS_STATUS without the GEOFENCE health bit (the false breach seen before), and its
 warning module flags any of AS/MAG/INS/AHRS/TERR/LOG/FEN unhealthy.  ArduPilot sets GEOFENCE health
@@ -171,13 +171,15 @@ class GcsTelemetry:
         failing = 0 if localized else m.MAV_SYS_STATUS_AHRS
         if self.armed:
             enabled |= m.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+        if getattr(battery, "faults", ()):              # the base reports a fault (a drive silent, in FAULT ...)
+            failing |= m.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
         if _finite(voltage):
             present |= m.MAV_SYS_STATUS_SENSOR_BATTERY
             enabled |= m.MAV_SYS_STATUS_SENSOR_BATTERY
             if _critical(remaining):
                 failing |= m.MAV_SYS_STATUS_SENSOR_BATTERY
         health = _all_sensor_bits(m) & ~failing
-        dropped = c.bad_crc + c.parse_errors + c.unsigned_dropped + c.bad_signature_dropped
+        dropped = c.bad_crc + c.parse_errors + c.unsigned_dropped + c.bad_signature_dropped + c.replayed_dropped
         total = dropped + c.received
         return self.mav.sys_status_encode(
             present, enabled, health,

@@ -94,6 +94,14 @@ class Odometry:
     w: float = 0.0       # rad/s counter-clockwise
     distance: float = 0.0   # total path length (m)
 
+    def advance(self, ds: float, dth: float) -> None:
+        """Dead-reckon ``ds`` metres along the mean heading of a turn by ``dth`` radians (midpoint rule)."""
+        mid = self.theta + dth / 2.0
+        self.x += ds * math.cos(mid)
+        self.y += ds * math.sin(mid)
+        self.theta = math.remainder(self.theta + dth, math.tau)
+        self.distance += abs(ds)
+
 
 @dataclass
 class BaseSensors:
@@ -136,6 +144,7 @@ class MobileBase(abc.ABC):
     odometry: Odometry
     sensors: BaseSensors
     stats: LinkStats
+    latches_faults = False     # True: ``sensors.faults`` stay, and the base stands, until reset_faults() clears them
 
     def __init__(self, footprint: Footprint, watchdog: float, log):
         if not (isinstance(watchdog, (int, float)) and math.isfinite(watchdog) and watchdog > 0):
@@ -149,6 +158,7 @@ class MobileBase(abc.ABC):
         self.is_open = False
         self._last_cmd_t: float | None = None
         self._moving = False               # the last command sent told the base to move
+        self._failures: dict[str, int] = {}    # link failures in a row, by counter (_link_failed)
 
     @property
     def footprint(self) -> Footprint:
@@ -207,6 +217,26 @@ class MobileBase(abc.ABC):
 
     def stop(self, now: float) -> None:
         self.set_velocity(0.0, 0.0, now)
+
+    def _link_failed(self, counter: str, exc: Exception, what: str) -> None:
+        """A read or write on the link failed: count it in ``stats.extra[counter]``; LOST_AFTER of one counter in
+        a row (no :meth:`_link_ok` between) raise :class:`DeviceLost` naming ``what``; the 1st, 10th, 100th and
+        every 1000th failure is logged."""
+        n = self.stats.extra[counter] = self.stats.extra.get(counter, 0) + 1
+        run = self._failures[counter] = self._failures.get(counter, 0) + 1
+        if run >= LOST_AFTER:
+            raise DeviceLost(f"{what}: {run} in a row failed ({exc})")
+        if n in (1, 10, 100) or n % 1000 == 0:
+            self.log.warning("%s: %s", what, exc)
+
+    def _link_ok(self, counter: str) -> None:
+        self._failures[counter] = 0
+
+    def reset_faults(self, now: float) -> bool:
+        """Ask the base to clear the faults it reports in ``sensors.faults`` and drive again (the operator's
+        request; it may take a few polls).  True if a reset was started; a base without resettable faults
+        returns False."""
+        return False
 
     # ------------------------------------------------------------------ driver hooks
     @abc.abstractmethod

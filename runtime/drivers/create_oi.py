@@ -13,16 +13,14 @@ import math
 from dataclasses import dataclass, field
 from typing import Literal, Optional
 
-import serial
-
 from runtime.config.build import rng
 from runtime.drivers import create_oi_protocol as P
-from runtime.drivers.base import LOST_AFTER, DeviceLost, Footprint, MobileBase
+from runtime.drivers.base import Footprint, MobileBase
+from runtime.drivers.serial_link import SerialLink
 from runtime.errors import InputError
 from runtime.log import get_logger
 
 STREAM_IDS = {"create2": (7, 35, 3, 43, 44), "create1": (7, 35, 3, 19, 20)}
-MAX_READS_PER_POLL = 64
 RECOVER_AFTER = 1.0        # s the wheels must be down again before Safe/Full is asked for again
 RECOVER_BACKOFF_MAX = 16.0  # s between attempts at most (a cliff, which is not streamed, may persist)
 
@@ -66,27 +64,26 @@ class CreateOI(MobileBase):
         self.geometry = geometry
         self.baudrate = baudrate
         self.mode = mode
-        self.stats.extra.update({"bytes_in": 0, "bytes_out": 0, "writes": 0, "malformed": 0, "write_errors": 0,
-                                 "read_errors": 0, "mode_recoveries": 0})
+        self.stats.extra.update({"malformed": 0, "mode_recoveries": 0})
+        self.link = SerialLink(port, baudrate, "Create OI", self.log, self.stats.extra)
         self.parser = P.StreamParser(model)
         self.values: dict = {}               # latest named values from the stream
-        self._failed_reads = 0               # reads in a row that raised (DeviceLost at LOST_AFTER)
-        self.ser = None
         self._counts: tuple[int, int] | None = None
         self._reached_mode = False           # the base has reported self.mode since open()
         self._passive_since: float | None = None  # in an unwanted Passive with the wheels down, since
         self._mode_since: float | None = None     # in self.mode since
         self._backoff = RECOVER_AFTER
 
+    @property
+    def ser(self):
+        """The open pyserial port (None when closed)."""
+        return self.link.ser
+
     # ------------------------------------------------------------------ lifecycle
     def _open(self, now: float) -> None:
         """Open the link; Start, Safe or Full, then Stream the packets odometry needs."""
         self._counts = None
-        try:
-            self.ser = serial.serial_for_url(self.port, self.baudrate, timeout=0)
-        except (serial.SerialException, ValueError, OSError) as exc:
-            raise InputError(f"Create OI port {self.port!r}: cannot open ({exc}); "
-                             "expected a serial device, pty or pyserial URL") from None
+        self.link.open()
         self._write(P.start())
         self._write(P.safe() if self.mode == "safe" else P.full())
         self._write(P.stream(STREAM_IDS[self.model], self.model))
@@ -101,20 +98,12 @@ class CreateOI(MobileBase):
         self._write(P.drive_direct(0, 0))
         self._write(P.pause_resume_stream(False))
         self._write(P.stop() if self.model == "create2" else P.start())
-        try:
-            self.ser.flush()
-        except Exception as exc:          # SerialException, OSError, termios.error (a vanished tty): closing goes on
-            self.log.warning("close %s: %s", self.port, exc)
-        try:
-            self.ser.close()
-        except Exception as exc:
-            self.log.warning("close %s: %s", self.port, exc)
-        self.ser = None
+        self.link.close()
 
     # ------------------------------------------------------------------ polling
     def _read(self, now: float) -> bool:
         """Decode waiting frames into odometry and sensors; ask for Safe/Full again if due."""
-        data = self._read_all()
+        data = self.link.read_all()
         moved = False
         if data:
             frames = self.parser.feed(data)
@@ -164,27 +153,6 @@ class CreateOI(MobileBase):
             self._passive_since = None
             self._backoff = min(2 * self._backoff, RECOVER_BACKOFF_MAX)
 
-    def _read_all(self) -> bytes:
-        chunks = []
-        try:
-            for _ in range(MAX_READS_PER_POLL):
-                chunk = self.ser.read(max(1, self.ser.in_waiting))
-                if not chunk:
-                    break
-                chunks.append(chunk)
-        except (serial.SerialException, OSError) as exc:
-            self.stats.extra["read_errors"] += 1
-            self._failed_reads += 1
-            if self._failed_reads >= LOST_AFTER:
-                raise DeviceLost(f"Create OI port {self.port}: {self._failed_reads} reads in a row failed ({exc})")
-            if self.stats.extra["read_errors"] in (1, 10, 100) or self.stats.extra["read_errors"] % 1000 == 0:
-                self.log.warning("read %s: %s", self.port, exc)
-        else:
-            self._failed_reads = 0
-        data = b"".join(chunks)
-        self.stats.extra["bytes_in"] += len(data)
-        return data
-
     def _odometry_step(self, frame: dict) -> tuple[float, float] | None:
         """(distance m, heading change rad) since the previous frame, or None (no motion data)."""
         if self.model == "create1":
@@ -204,11 +172,7 @@ class CreateOI(MobileBase):
 
     def _integrate(self, ds: float, dth: float, frames: int, now: float) -> None:
         o = self.odometry
-        mid = o.theta + dth / 2.0
-        o.x += ds * math.cos(mid)
-        o.y += ds * math.sin(mid)
-        o.theta = math.remainder(o.theta + dth, math.tau)
-        o.distance += abs(ds)
+        o.advance(ds, dth)
         span = frames * P.STREAM_PERIOD        # the robot sends one frame per 15 ms
         o.v, o.w = ds / span, dth / span
         o.t = now
@@ -254,15 +218,7 @@ class CreateOI(MobileBase):
         return (right_mm_s, left_mm_s) != (0, 0)
 
     def _write(self, data: bytes) -> None:
-        try:
-            self.ser.write(data)
-        except (serial.SerialException, OSError) as exc:
-            self.stats.extra["write_errors"] += 1
-            if self.stats.extra["write_errors"] in (1, 10, 100) or self.stats.extra["write_errors"] % 1000 == 0:
-                self.log.warning("write %s: %s", self.port, exc)
-            return
-        self.stats.extra["writes"] += 1
-        self.stats.extra["bytes_out"] += len(data)
+        self.link.write(data)
 
 
 def create_footprint(model: str, max_speed: float | None = None) -> Footprint:

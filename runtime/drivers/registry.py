@@ -27,6 +27,8 @@ from runtime.lazy import resolve
 
 BASES: dict[str, str] = {
     "create_oi": "runtime.drivers.create_oi:CreateOI",      # iRobot Create 2 / Create 1, Open Interface
+    "arcos": "runtime.drivers.arcos:ArcosBase",              # Pioneer 3-DX (ARCOS), serial or socket://
+    "cia402": "runtime.drivers.cia402:Cia402Base",          # two CiA 402 wheel drives on CAN (canopen)
 }
 
 

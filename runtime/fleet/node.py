@@ -7,15 +7,23 @@ task table: a task entered here or learnt from a peer is handed to the agent (``
 robot, a task done or withdrawn anywhere is taken back (``withdraw_tasks``), and a task the agent reports
 done is marked in the table and broadcast.  The same object runs in the daemon and, with a simulated
 executor, on the in-memory bus in tests.
+
+Given its configured ``peers``, it takes messages only from them, and only fleet task ids (minted by a robot of
+the fleet, upper 16 bits); a task record that contradicts the table (same id, another command, frame,
+parameters or position) is dropped: a task's content never changes once entered, only its state.  Each drop is
+counted in :attr:`FleetNode.dropped`.  So a robot drives only to tasks in its table, which only operator uploads
+and the replication of its peers' tables fill.  A record forged in a peer's name with a new id, or with a later
+state for a known task, cannot be told from the peer's own without signing (the fleet's default).
 """
 from __future__ import annotations
 
 import math
+from collections import Counter
 from dataclasses import dataclass, replace
 
 from runtime.allocation.agent import AWARDED, DONE, TaskEvent
 from runtime.fleet.messages import (ALLOCATING, BROADCAST, DISARMED, DONE as T_DONE, EXECUTING, IDLE, LOCALIZING,
-                                    MAX_HELD, OPEN, RobotState, TableRequest, TaskRecord)
+                                    MAX_HELD, OPEN, RobotState, TableRequest, TaskRecord, task_origin)
 from runtime.fleet.table import TaskTable
 from runtime.log import get_logger
 from runtime.tasks import Progress
@@ -30,8 +38,10 @@ class Notice:
 
 
 class FleetNode:
-    def __init__(self, robot_id: int, agent, *, state_period: float = 1.0, armed: bool = True):
+    def __init__(self, robot_id: int, agent, *, state_period: float = 1.0, armed: bool = True, peers=None):
         self.robot_id = int(robot_id)
+        self.peers = None if peers is None else frozenset(int(p) for p in peers) - {self.robot_id}
+        self.dropped: Counter = Counter()          # peer messages not taken, by reason
         self.agent = agent
         self.table = TaskTable(self.robot_id)
         self.state_period = float(state_period)
@@ -72,6 +82,11 @@ class FleetNode:
 
     # ------------------------------------------------------------------ peers
     def on_message(self, msg, now: float) -> list:
+        why = self._refuse(msg)
+        if why is not None:
+            self.dropped[why] += 1
+            self.log.debug("dropped %s from robot %s: %s", type(msg).__name__, getattr(msg, "sender", None), why)
+            return []
         if isinstance(msg, TaskRecord):
             task, state = self.table.merge(msg)
             if state == T_DONE:
@@ -88,6 +103,19 @@ class FleetNode:
             self.holding[msg.sender] = tuple(msg.tasks)
             return self.table.compare(msg.sender, msg.known, msg.digest, now) + self.agent.on_message(msg, now)
         return self.agent.on_message(msg, now)
+
+    def _refuse(self, msg) -> str | None:
+        """Why a peer's message cannot be taken, or None."""
+        if self.peers is None:
+            return None
+        if getattr(msg, "sender", None) not in self.peers:
+            return "not a robot of the fleet"
+        tasks = (msg.task,) if isinstance(msg, TaskRecord) else msg.tasks if isinstance(msg, RobotState) else ()
+        if any(task_origin(t) not in self.peers and task_origin(t) != self.robot_id for t in tasks):
+            return "a task no robot of the fleet minted"
+        if isinstance(msg, TaskRecord) and self.table.contradicts(msg):
+            return "contradicts the task table"
+        return None
 
     def on_peer_lost(self, robot_id: int, now: float) -> list:
         self.holding.pop(robot_id, None)

@@ -13,7 +13,7 @@ timeout.  For tests and fast sweeps of every family; no physics, no sockets.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable, Mapping
 
 from runtime import tasks as T
@@ -53,7 +53,7 @@ class SimRobot:
         self.speed, self.tolerance, self.timeout = speed, tolerance, heartbeat_timeout
         self.estimator = StraightLineEstimator(Profile(speed, radius), lambda: self.pos)
         self.agent = method.make(AgentContext(self.robot_id, self.peers, self.estimator, options))
-        self.node = FleetNode(self.robot_id, self.agent)
+        self.node = FleetNode(self.robot_id, self.agent, peers=self.peers)
         self.finished: set = set()              # commitments that reported done
         self.heard: dict[int, float] = {}
         self.lost: set[int] = set()

@@ -14,6 +14,7 @@ once per ``resync`` seconds per peer) and merges the answer.  Changes are also b
 from __future__ import annotations
 
 import math
+import struct
 import zlib
 from dataclasses import dataclass, replace
 
@@ -23,6 +24,15 @@ from runtime.log import get_logger
 
 BROADCAST = 0
 MAX_PER_ORIGIN = 0xFFFF
+
+
+def _same_f32(a: float, b: float) -> bool:
+    """Equal at float32 (how TaskRecord carries values), NaN equal to NaN (unused mission parameters)."""
+    try:
+        a, b = struct.unpack("<2f", struct.pack("<2f", a, b))
+    except OverflowError:            # beyond float32: compare as they are
+        pass
+    return a == b or (math.isnan(a) and math.isnan(b))
 
 
 @dataclass(frozen=True)
@@ -98,6 +108,16 @@ class TaskTable:
         return withdrawn, out
 
     # ------------------------------------------------------------------ replication
+    def contradicts(self, rec: TaskRecord) -> bool:
+        """A record of a task I know with other content (command, frame, parameters, position), as far as the
+        wire's float32 carries it."""
+        e = self.entries.get(rec.task)
+        if e is None:
+            return False
+        mine = (*e.params, e.x, e.y)
+        theirs = (rec.param1, rec.param2, rec.param3, rec.param4, rec.x, rec.y)
+        return (e.command, e.frame) != (rec.command, rec.frame) or not all(map(_same_f32, mine, theirs))
+
     def merge(self, rec: TaskRecord) -> tuple[T.Task | None, int | None]:
         """Merge a peer's record.  Returns (the task if it is new to me, its new state if that moved)."""
         e = self.entries.get(rec.task)

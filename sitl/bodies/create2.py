@@ -17,7 +17,9 @@ import numpy as np
 import pybullet as p
 
 from runtime.drivers.create_oi_protocol import GEOMETRY
-from runtime.errors import InputError
+from sitl.bodies.common import clip_wheels, touching, tyre_radii
+from sitl.bodies.diffdrive import LEFT, RIGHT, Chassis, GroundTruth
+from sitl.bodies.diffdrive import build_body as diff_body
 
 # Size and wheels from the one geometry table the driver and the planner read; the rest from the
 # robot's published dimensions and mass.
@@ -59,8 +61,11 @@ THERMAL_GAIN = 2.0            # K per W of battery loss at steady state
 
 SHELL_CENTRE_Z = (SHELL_CLEARANCE + SHELL_TOP) / 2      # base frame height above the floor
 SHELL_HEIGHT = SHELL_TOP - SHELL_CLEARANCE
-LEFT, RIGHT = 0, 1            # link indices of the wheel joints
-CASTERS = (2, 3)
+
+
+CHASSIS = Chassis(mass=MASS_SHELL, centre_z=SHELL_CENTRE_Z, track=WHEEL_TRACK, wheel_mass=MASS_WHEEL,
+                  caster_radius=CASTER_RADIUS, caster_x=CASTER_X, caster_mass=MASS_CASTER, friction=SHELL_FRICTION,
+                  wheel_friction=WHEEL_FRICTION, max_wheel_torque=MAX_WHEEL_TORQUE)
 
 
 def build_body(client: int, start: tuple[float, float, float], gui: bool = False,
@@ -71,47 +76,9 @@ def build_body(client: int, start: tuple[float, float, float], gui: bool = False
     work in joint angle, so a radius off the nominal 36 mm is real odometry error."""
     kw = {"physicsClientId": client}
     shell = p.createCollisionShape(p.GEOM_CYLINDER, radius=SHELL_RADIUS, height=SHELL_HEIGHT, **kw)
-    wheels = [p.createCollisionShape(p.GEOM_SPHERE, radius=r, **kw) for r in wheel_radii]
-    caster = p.createCollisionShape(p.GEOM_SPHERE, radius=CASTER_RADIUS, **kw)
-    vis_shell = vis_wheel = vis_caster = -1
-    if gui:
-        vis_shell = p.createVisualShape(p.GEOM_CYLINDER, radius=SHELL_RADIUS, length=SHELL_HEIGHT,
-                                        rgbaColor=(0.2, 0.2, 0.2, 1), **kw)
-        vis_wheel = p.createVisualShape(p.GEOM_SPHERE, radius=WHEEL_RADIUS, rgbaColor=(0.1, 0.1, 0.1, 1), **kw)
-        vis_caster = p.createVisualShape(p.GEOM_SPHERE, radius=CASTER_RADIUS, rgbaColor=(0.6, 0.6, 0.6, 1), **kw)
-    caster_z = CASTER_RADIUS - SHELL_CENTRE_Z
-    half = WHEEL_TRACK / 2
-    x, y, yaw = start
-    body = p.createMultiBody(
-        baseMass=MASS_SHELL, baseCollisionShapeIndex=shell, baseVisualShapeIndex=vis_shell,
-        basePosition=(x, y, SHELL_CENTRE_Z), baseOrientation=p.getQuaternionFromEuler((0, 0, yaw)),
-        linkMasses=[MASS_WHEEL, MASS_WHEEL, MASS_CASTER, MASS_CASTER],
-        linkCollisionShapeIndices=[wheels[0], wheels[1], caster, caster],
-        linkVisualShapeIndices=[vis_wheel, vis_wheel, vis_caster, vis_caster],
-        linkPositions=[(0, half, wheel_radii[0] - SHELL_CENTRE_Z), (0, -half, wheel_radii[1] - SHELL_CENTRE_Z),
-                       (CASTER_X, 0, caster_z), (-CASTER_X, 0, caster_z)],
-        linkOrientations=[(0, 0, 0, 1)] * 4,
-        linkInertialFramePositions=[(0, 0, 0)] * 4,
-        linkInertialFrameOrientations=[(0, 0, 0, 1)] * 4,
-        linkParentIndices=[0, 0, 0, 0],
-        linkJointTypes=[p.JOINT_REVOLUTE, p.JOINT_REVOLUTE, p.JOINT_FIXED, p.JOINT_FIXED],
-        linkJointAxis=[(0, 1, 0), (0, 1, 0), (0, 0, 1), (0, 0, 1)],
-        **kw)
-    # contactProcessingThreshold=0: only touching manifold points become solver constraints.  A rolling
-    # sphere leaves stale points behind in the manifold; solving those too costs half the step time.
-    p.changeDynamics(body, -1, lateralFriction=SHELL_FRICTION, restitution=0.0, contactProcessingThreshold=0.0,
-                     activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING, **kw)
-    for link in (LEFT, RIGHT):
-        p.changeDynamics(body, link, lateralFriction=WHEEL_FRICTION, spinningFriction=0.0,
-                         rollingFriction=0.0, restitution=0.0, jointDamping=0.0,
-                         contactProcessingThreshold=0.0, **kw)
-    for link in CASTERS:
-        p.changeDynamics(body, link, lateralFriction=0.0, spinningFriction=0.0, rollingFriction=0.0,
-                         restitution=0.0, contactProcessingThreshold=0.0, **kw)
-    # Revolute joints start with a default velocity motor of small force; replace it with ours.
-    p.setJointMotorControlArray(body, [LEFT, RIGHT], p.VELOCITY_CONTROL, targetVelocities=[0.0, 0.0],
-                                forces=[MAX_WHEEL_TORQUE] * 2, **kw)
-    return body
+    vis_shell = p.createVisualShape(p.GEOM_CYLINDER, radius=SHELL_RADIUS, length=SHELL_HEIGHT,
+                                    rgbaColor=(0.2, 0.2, 0.2, 1), **kw) if gui else -1
+    return diff_body(client, start, CHASSIS, shell, vis_shell, wheel_radii, gui)
 
 
 @dataclass
@@ -142,10 +109,12 @@ class Battery:
         self.temperature_c += (target - self.temperature_c) * min(1.0, dt / THERMAL_TAU)
 
 
-class SimCreate2:
-    """One Create 2 body in a :class:`sitl.world.World`; the device emulators call these methods."""
+class SimCreate2(GroundTruth):
+    """One Create 2 body in a :class:`sitl.world.World`; the device emulators call these methods (ground truth:
+    :class:`~sitl.bodies.diffdrive.GroundTruth`)."""
 
     radius = SHELL_RADIUS         # the world keeps starts this far inside the arena walls
+    centre_z = SHELL_CENTRE_Z
 
     def __init__(self, client: int, robot_id: int, start: tuple[float, float, float],
                  rng: np.random.Generator, gui: bool = False, wheel_radius_sigma: float = WHEEL_RADIUS_SIGMA):
@@ -153,9 +122,7 @@ class SimCreate2:
         self._client = client
         self._kw = {"physicsClientId": client}
         # tyre tolerance and wear: each wheel's rolling radius is off the nominal by ~0.4 % (1 sigma)
-        sigma = wheel_radius_sigma
-        scale = np.clip(rng.normal(1.0, sigma, size=2), 1 - 3 * sigma, 1 + 3 * sigma) if sigma > 0 else (1.0, 1.0)
-        self.wheel_radii = (WHEEL_RADIUS * float(scale[0]), WHEEL_RADIUS * float(scale[1]))
+        self.wheel_radii = tyre_radii(rng, WHEEL_RADIUS, wheel_radius_sigma)
         self.body_id = build_body(client, start, gui, self.wheel_radii)
         self._targets = (0.0, 0.0)
         self._torques = (0.0, 0.0)
@@ -168,11 +135,7 @@ class SimCreate2:
     # -------------------------------------------------------------- commands
     def set_wheel_speeds(self, left_mps: float, right_mps: float) -> None:
         """Wheel motor targets (m/s at the rim), clipped to +-0.5 m/s."""
-        for name, v in (("left", left_mps), ("right", right_mps)):
-            if not math.isfinite(v):
-                raise InputError(f"robot {self.robot_id}: {name} wheel speed: expected a finite number, got {v!r}")
-        left = max(-MAX_WHEEL_SPEED, min(MAX_WHEEL_SPEED, float(left_mps)))
-        right = max(-MAX_WHEEL_SPEED, min(MAX_WHEEL_SPEED, float(right_mps)))
+        left, right = clip_wheels(self.robot_id, left_mps, right_mps, MAX_WHEEL_SPEED)
         if (left, right) == self._targets:
             return
         self._targets = (left, right)
@@ -240,42 +203,15 @@ class SimCreate2:
         (``linkIndexA`` at [3]).  Asked once per physics step: the device samples bumpers and wheel drop
         every step, and contacts only change when the world steps (:meth:`stepped`)."""
         if self._contacts is None:
-            self._contacts = [cp for cp in p.getContactPoints(bodyA=self.body_id, **self._kw)
-                              if cp[2] != self.body_id and cp[8] <= CONTACT_MARGIN]
+            self._contacts = touching(self._client, self.body_id, CONTACT_MARGIN)
         return self._contacts
 
     def stepped(self) -> None:
         """The world stepped: contacts are stale."""
         self._contacts = None
 
-    def pose(self) -> tuple[float, float, float]:
-        """Ground truth x, y (m) and yaw (rad), ENU."""
-        pos, orn = p.getBasePositionAndOrientation(self.body_id, **self._kw)
-        qx, qy, qz, qw = orn
-        yaw = math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-        return pos[0], pos[1], yaw
-
-    def height(self) -> float:
-        """Ground truth height of the base frame above the floor (m); ~0.051 when resting."""
-        return p.getBasePositionAndOrientation(self.body_id, **self._kw)[0][2]
-
-    def velocity(self) -> tuple[float, float]:
-        """Ground truth vx, vy (m/s), ENU."""
-        lin, _ = p.getBaseVelocity(self.body_id, **self._kw)
-        return lin[0], lin[1]
-
-    def yaw_rate(self) -> float:
-        """Ground truth turn rate (rad/s, counter-clockwise)."""
-        return p.getBaseVelocity(self.body_id, **self._kw)[1][2]
-
     def battery(self) -> dict:
         """charge_mah, capacity_mah, voltage_mv, current_ma (negative discharging), temperature_c."""
         b = self._battery
         return {"charge_mah": b.charge_mah, "capacity_mah": CAPACITY_MAH, "voltage_mv": b.voltage_mv(),
                 "current_ma": b.current_ma, "temperature_c": b.temperature_c}
-
-    def place(self, x: float, y: float, yaw: float, z: float | None = None) -> None:
-        """Teleport the body (test and launcher use only; zeroes its velocity)."""
-        p.resetBasePositionAndOrientation(self.body_id, (x, y, SHELL_CENTRE_Z if z is None else z),
-                                          p.getQuaternionFromEuler((0, 0, yaw)), **self._kw)
-        p.resetBaseVelocity(self.body_id, (0, 0, 0), (0, 0, 0), **self._kw)

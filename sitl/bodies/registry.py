@@ -20,6 +20,8 @@ from runtime.lazy import resolve
 
 BODIES: dict[str, str] = {
     "create2": "sitl.bodies.create2:SimCreate2",     # iRobot Create 2 (also stands in for a Create 1)
+    "pioneer3dx": "sitl.bodies.pioneer3dx:SimPioneer3DX",   # Pioneer 3-DX with its 16-sonar ring
+    "candiff": "sitl.bodies.candiff:SimCanDiff",     # small industrial AMR, two CAN wheel drives
 }
 
 

@@ -22,6 +22,8 @@ from runtime.lazy import resolve
 
 DEVICES: dict[str, str] = {
     "create_oi": "sitl.devices.create_oi:CreateOIDevice",   # Create 2 / Create 1 Open Interface on a pty
+    "arcos": "sitl.devices.arcos:ArcosDevice",               # Pioneer 3-DX ARCOS server on a pty or TCP port
+    "cia402": "sitl.devices.cia402:Cia402Device",           # two CiA 402 drives on the socketcand hub
 }
 
 

@@ -349,7 +349,15 @@ class Auctioneer:
         return []
 
     def on_done(self, m, now: float) -> None:
-        """Another auctioneer completed a task (roles changed hands)."""
+        """Another auctioneer completed a task (roles changed hands).  Only a task this robot knows open is
+        recorded finished: a ``CoalitionDone`` naming any other (one not handed in yet) must not keep it from ever
+        being offered.  Nor is a coalition this robot runs as the auctioneer ended by another's word: its members
+        report to it, and a task really done elsewhere leaves the table as done."""
+        if m.sender == self.robot_id:
+            return                           # my own, routed back to me: _complete recorded it
+        if m.task not in self.view.tasks or (self.active and m.task in self.coalitions):
+            self.stats.ignored += 1
+            return
         c = self.coalitions.get(m.task)
         if c is not None and c.round == m.round:
             del self.coalitions[m.task]

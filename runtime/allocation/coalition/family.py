@@ -13,7 +13,12 @@ tasks.
 Messages a role addresses to this robot itself (the auctioneer bidding, being awarded, reporting) are
 handled here without touching the wire; broadcasts go to the wire and to this robot.  Every message from
 outside is checked once more (``invalid()``: in-memory tests hand over objects the codec never made) and
-counted in :attr:`CoalitionAgent.dropped` when it cannot be acted on.  See docs/coalition.md.
+counted in :attr:`CoalitionAgent.dropped` when it cannot be acted on.  The roles drop and count what does not
+fit their state (``Member.stats``, ``Auctioneer.stats``): offers of tasks not open in the table or placed
+elsewhere than the table says, awards from a robot that is not the auctioneer, a ``CoalitionDone`` for a task
+not open here, from a robot that is not an auctioneer, or ending a coalition this auctioneer runs.  A message
+within all of these in the auctioneer's or a member's name (an award, a report the auctioneer adopts) cannot
+be told from a genuine one without signing, the fleet's default.  See docs/coalition.md.
 """
 from __future__ import annotations
 

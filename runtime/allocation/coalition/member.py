@@ -24,6 +24,8 @@ from runtime.allocation.coalition.proposals import propose, travel_from
 from runtime.allocation.coalition.wdp_messages import AwardAck, AwardCancel, CoalitionBid, MemberReport
 from runtime.tasks import ARRIVED, FAILED, Commitment, Progress, Task
 
+SAME_POSITION = 1e-3        # m: an offer's position (float32 on the wire) and the table's agree within this
+
 
 @dataclass
 class Job:
@@ -42,7 +44,8 @@ class MemberStats:
     bids: int = 0
     accepted: int = 0
     declined: int = 0
-    ignored: int = 0         # offers from a robot that is not the auctioneer, stale cancels
+    ignored: int = 0         # offers from a robot that is not the auctioneer or of no open task, stale cancels
+    contradicting: int = 0   # offers placing a task elsewhere than the fleet table
 
 
 class Member:
@@ -68,8 +71,12 @@ class Member:
 
     # ------------------------------------------------------------------ bidding
     def on_offer(self, m, now: float) -> None:
-        if m.sender != self.view.auctioneer():
-            self.stats.ignored += 1
+        task = self.view.tasks.get(m.task)
+        if m.sender != self.view.auctioneer() or task is None:
+            self.stats.ignored += 1            # not the auctioneer, or no open task in my table
+            return
+        if math.dist(task.position, (m.x, m.y)) > SAME_POSITION:
+            self.stats.contradicting += 1      # the offer places the task elsewhere than the fleet table
             return
         self.offers.setdefault((m.sender, m.round), {})[m.task] = m
 
@@ -154,6 +161,10 @@ class Member:
             self.job = None
 
     def on_done(self, m, now: float) -> None:
+        job = self.job
+        if job is not None and job.task == m.task and m.sender not in (self.view.auctioneer(), job.auctioneer):
+            self.stats.ignored += 1            # only an auctioneer ends a coalition
+            return
         if self.job is not None and self.job.task == m.task:
             self.log.info("task %d complete: free again", m.task)
             self.job = None

@@ -31,7 +31,13 @@ nothing (each at most once per ``bid_timeout``); once the initial auctioneer is 
 knows the whole set serves it instead (the barrier would otherwise hold the fleet on a coarse eps).
 A robot that outbids another and hears nothing from it within ``bid_timeout / 4`` sends it the new
 entry directly (up to 3 times); a holder answers any stale ``Price`` for its task with the current
-entry; every holder rebroadcasts its entry every ``keepalive`` seconds.  Task positions and N_T come
+entry; every holder rebroadcasts its entry every ``keepalive`` seconds.
+
+Who may name a holder: a ``Price`` names its sender as the holder, except the one answer that hands a freed
+task back to a robot that still claims it (sent to that robot, naming it, for the task it holds); any other is
+dropped and counted.
+A ``Price`` from a robot with a forged id (naming itself) at a plausible price cannot be told from its own bid
+without signing: with a price far above what the others would pay it can hold the auction in a price war.  Task positions and N_T come
 from ``TaskInfo`` broadcast by ``start()``.
 
 More robots than tasks: each robot adds one zero-cost "no task" slot per surplus robot (the standard
@@ -324,6 +330,9 @@ class EpsAuctionAgent:
     def _on_price(self, m: Price, now: float) -> list:
         if self.book.complete and m.task not in self.book.positions and m.task not in self._dummies:
             self.dropped["unknown task"] += 1
+            return []
+        if m.holder != m.sender and not (m.holder == m.dest == self.robot_id and self.held == m.task):
+            self.dropped["price held by a robot other than its sender"] += 1
             return []
         if m.phase != NO_RUNG and m.sender in self.peers:
             self._peer_rung[m.sender] = min(m.phase, self._peer_rung.get(m.sender, NO_RUNG))

@@ -26,19 +26,32 @@ get lost and are disarmed.  :class:`FormationAgent` runs the solver in **rounds*
 With every robot free and the tasks handed in at once (a formation), round 1 is exactly the solver's
 problem: same robots, same tasks in the same order, started by the lowest id, so the daemons give the
 same result as the in-process solver for the same costs.
+
+What a round message says is checked against the round before its solver sees it; what does not fit is
+dropped and counted in :attr:`FormationAgent.dropped`: a sender that is not one of the round's robots, a task
+index beyond the round's task list (the epsilon auction's "no task" slots excepted), a winner or price holder
+that is not in the round, a task set (``TaskInfo``, ``Announce``) that contradicts the round's tasks in the
+fleet table (size or position), a ``RoundStart`` whose round id is not its sender's or that names robots
+outside the fleet.  A round that stays unconverged with nothing heard from its peers for ``SILENT_ROUNDS``
+bid timeouts (a forged ``RoundStart``, or an initiator that died at once) is left.  Values within all of
+these from a sender whose id is forged cannot be told from genuine ones without signing (the fleet's default):
+a forged ``Price`` from a round member at a plausible price, an ``Award`` at the winner's own bid.  For two
+robots that end up holding one task, whatever the cause, the lower id keeps it once both have settled.
 """
 from __future__ import annotations
 
 import dataclasses
 import math
+from collections import Counter
 from dataclasses import dataclass
 from typing import Sequence
 
 from runtime.allocation.agent import AWARDED, DONE, RELEASED, AgentContext, Method, TaskEvent
 from runtime.allocation.formation.bs import BSAgent
 from runtime.allocation.formation.eps_auction import EpsAuctionAgent
-from runtime.allocation.formation.messages import (AGENT_MESSAGES, BROADCAST, MAX_ROUND, ROUND_MESSAGES,
-                                                   RoundLeave, RoundStart)
+from runtime.allocation.formation.assignment import MAX_TASKS, NO_TASK
+from runtime.allocation.formation.messages import (AGENT_MESSAGES, BROADCAST, MAX_ROUND, ROUND_MESSAGES, Announce,
+                                                   Award, Price, RoundLeave, RoundStart, Status, TaskInfo)
 from runtime.allocation.formation.options import AuctionOptions, BSOptions, RTMAOptions
 from runtime.allocation.formation.rtma import RTMAAgent
 from runtime.fleet.messages import EXECUTING, IDLE, RobotState
@@ -46,6 +59,8 @@ from runtime.log import get_logger
 from runtime.tasks import DONE as P_DONE, FAILED as P_FAILED, Commitment, Progress, Task
 
 MAX_BACKOFF = 30.0
+SILENT_ROUNDS = 10          # bid timeouts an unconverged round may go without a message from a peer
+SAME_POSITION = 1e-3        # m: a task position on the wire (float32) and in the table agree within this
 
 
 @dataclass
@@ -55,6 +70,7 @@ class Round:
     robots: tuple[int, ...]
     solver: object | None = None       # None: I only know of it
     last_heard: float = 0.0            # last message of this round in or out
+    last_in: float = 0.0               # last message of this round from a peer (or when I joined it)
 
 
 @dataclass
@@ -93,6 +109,8 @@ class FormationAgent:
         self._events: list[TaskEvent] = []
         self._backoff = _Backoff()
         self._now = 0.0
+        self.dropped: Counter = Counter()             # round messages that did not fit their round, by reason
+        self._clash: dict[int, int | None] = {}       # peer -> my task its last state named too (same round)
         self.log = get_logger(f"alloc.{getattr(self.options, 'method', 'formation')}", self.robot_id)
 
     # ------------------------------------------------------------------ what the daemon reads
@@ -116,10 +134,16 @@ class FormationAgent:
     def _assigned(self) -> int | None:
         """The fleet task my solvers give me, if it is still open (my newest round first)."""
         for r in sorted(self.rounds.values(), key=lambda r: -r.id):
-            local = r.solver.assignment
-            if local is not None and 0 <= local < len(r.tasks) and r.tasks[local] in self.tasks:
-                return r.tasks[local]
+            task = self._local(r)
+            if task is not None and task in self.tasks:
+                return task
         return None
+
+    @staticmethod
+    def _local(r: Round) -> int | None:
+        """The fleet task round ``r``'s solver gives me, or None."""
+        local = r.solver.assignment
+        return r.tasks[local] if local is not None and 0 <= local < len(r.tasks) else None
 
     @property
     def free(self) -> bool:
@@ -183,7 +207,7 @@ class FormationAgent:
             r = self.rounds.get(msg.round)
             if r is None or msg.sender not in r.robots:
                 return []
-            r.last_heard = now
+            r.last_heard = r.last_in = now
             return self._from(r, r.solver.on_peer_lost(msg.sender, now), now) + self._settle(now)
         rid = getattr(msg, "round", None)
         if rid is None:
@@ -191,8 +215,33 @@ class FormationAgent:
         r = self.rounds.get(rid)
         if r is None:
             return []                             # a round I am not in (or have left): none of my business
-        r.last_heard = now
+        why = self._outside(r, msg)
+        if why is not None:
+            self.dropped[why] += 1
+            self.log.debug("dropped %s from robot %s: %s", type(msg).__name__, msg.sender, why)
+            return []
+        r.last_heard = r.last_in = now
         return self._from(r, r.solver.on_message(msg, now), now) + self._settle(now)
+
+    def _outside(self, r: Round, msg) -> str | None:
+        """Why ``msg`` cannot be a message of round ``r``, or None."""
+        if msg.sender not in r.robots:
+            return "sender not in the round"
+        n = len(r.tasks)
+        task = getattr(msg, "task", None)
+        if task is not None and not (task < n or (isinstance(msg, Status) and task == NO_TASK)
+                                     or (isinstance(msg, Price) and task >= MAX_TASKS - len(r.robots))):
+            return "task not in the round"
+        robot = msg.winner if isinstance(msg, Award) else msg.holder if isinstance(msg, Price) else None
+        if robot is not None and robot not in r.robots:
+            return "robot not in the round"
+        if isinstance(msg, (TaskInfo, Announce)):
+            if isinstance(msg, TaskInfo) and msg.n_tasks != n:
+                return "contradicts the round's task set"
+            fleet = self.tasks.get(r.tasks[task])
+            if fleet is not None and math.dist(fleet.position, (msg.x, msg.y)) > SAME_POSITION:
+                return "contradicts the round's task set"
+        return None
 
     def on_tick(self, now: float) -> list:
         self._now = now
@@ -205,17 +254,21 @@ class FormationAgent:
 
     # ------------------------------------------------------------------ rounds
     def _on_state(self, m: RobotState, now: float) -> list:
-        """A peer's state.  If it holds my task from another round (rounds that overlapped) and neither of us
-        is still allocating, the lower id keeps the task.  Inside one round the solver decides: a peer's state
-        may lag a resale there."""
+        """A peer's state.  If it holds my task and neither of us is still allocating, the lower id keeps the
+        task: at once when it comes from another round (rounds that overlapped); inside one round only when two
+        states in a row say so, since one may lag a resale there (two robots settled on one task in one round
+        is no outcome of the protocol: a lost or forged message)."""
         v = self.view.setdefault(m.sender, PeerView())
         v.state, v.tasks = m.state, tuple(m.tasks)
         mine = self._assigned()
+        twice, self._clash[m.sender] = self._clash.get(m.sender) == mine, None
         if mine is None or mine not in v.tasks or m.sender > self.robot_id or self.allocating or m.state != EXECUTING:
             return []
-        r = next(r for r in self.rounds.values() if r.solver.assignment is not None
-                 and r.tasks[r.solver.assignment] == mine)
-        if m.sender in r.robots:
+        r = next((r for r in self.rounds.values() if self._local(r) == mine), None)
+        if r is None:
+            return []
+        if m.sender in r.robots and not twice:
+            self._clash[m.sender] = mine
             return []
         self.log.warning("robot %d holds task %d too: it keeps it (lower id), I let it go", m.sender, mine)
         self._events.append(TaskEvent(mine, RELEASED, (self.robot_id,), f"robot {m.sender} holds it"))
@@ -224,9 +277,12 @@ class FormationAgent:
     def _on_round_start(self, m: RoundStart, now: float) -> list:
         if self.robot_id not in m.robots or m.round in self.rounds:
             return []
+        if m.round >> 16 != m.sender or not set(m.robots) <= {self.robot_id, *self.peers}:
+            self.dropped["round start outside the protocol"] += 1
+            return []
         if not self.free or any(t not in self.tasks for t in m.tasks):    # busy, or my table is behind
             return [RoundLeave(self.robot_id, BROADCAST, m.round)]
-        r = Round(m.round, tuple(m.tasks), tuple(m.robots), last_heard=now)
+        r = Round(m.round, tuple(m.tasks), tuple(m.robots), last_heard=now, last_in=now)
         r.solver = self._solver(r)
         self.rounds[r.id] = r
         self.log.info("joined round %s: %d tasks, robots %s", _rid(r.id), len(r.tasks), list(r.robots))
@@ -270,7 +326,7 @@ class FormationAgent:
         if key == self._backoff.key and now < self._backoff.until:
             return []
         self._count = self._count % 0xFFFF + 1
-        r = Round(self.robot_id << 16 | self._count, tuple(tasks), tuple(robots), last_heard=now)
+        r = Round(self.robot_id << 16 | self._count, tuple(tasks), tuple(robots), last_heard=now, last_in=now)
         r.solver = self._solver(r)
         self.rounds[r.id] = r
         if key == self._backoff.key:
@@ -300,12 +356,16 @@ class FormationAgent:
         """Drop rounds that are over for me; report a new commitment."""
         out = []
         for r in list(self.rounds.values()):
-            local = r.solver.assignment
-            task = r.tasks[local] if local is not None and 0 <= local < len(r.tasks) else None
+            task = self._local(r)
             if task is not None and task not in self.tasks:
                 out += self._leave(r, now, tell=False)          # done or withdrawn: I am free
             elif task is None and r.solver.converged and now - r.last_heard >= self.options.linger:
                 out += self._leave(r, now, tell=False)          # the round left me without a task
+            elif not r.solver.converged and now - r.last_in >= SILENT_ROUNDS * self.options.bid_timeout:
+                self.log.warning("round %s: nothing heard for %.1f s and not converged: leaving it", _rid(r.id),
+                                 now - r.last_in)
+                self.dropped["silent round left"] += 1
+                out += self._leave(r, now, tell=True)
         held = self._assigned()
         if held != self._held:
             if held is not None:

@@ -7,6 +7,11 @@ maps each class to one MAVLink message of the private dialect with the same fiel
 Ids: ``task`` and ``auction`` are unsigned 16/32-bit integers chosen by the sender; an auction id
 is unique per auctioneer and never 0, so (sender, auction) names one auction fleet-wide.  ``Status``
 answers an auction rather than running one: there (dest, auction) names it, and auction 0 = none.
+
+Values: costs, bids and prices are seconds of travel (the daemon's estimator); a finite one beyond
+``MAX_VALUE`` in magnitude (11.6 days) is outside the protocol, as is a negative price (prices start at 0 and
+only rise) and a bid of -inf.  What a message says about a round (its task indices, robots, task set) is
+checked by the formation family, which knows the round (:mod:`runtime.allocation.formation.family`).
 """
 from __future__ import annotations
 
@@ -16,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 BROADCAST = 0
+MAX_VALUE = 1e6          # s: the largest finite cost, bid or price the protocol carries
 
 
 @dataclass(frozen=True)
@@ -49,7 +55,8 @@ class Announce:
     round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
 
     def invalid(self) -> str | None:
-        return _bad_task(self.task) or _not_finite(x=self.x, y=self.y) or _nan(reserve=self.reserve)
+        return (_bad_task(self.task) or _not_finite(x=self.x, y=self.y) or _nan(reserve=self.reserve)
+                or _too_large(reserve=self.reserve))
 
 
 @dataclass(frozen=True)
@@ -62,7 +69,9 @@ class Bid:
     round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
 
     def invalid(self) -> str | None:
-        return _bad_task(self.task) or _nan(cost=self.cost)
+        if self.cost == -math.inf:
+            return "cost: expected a number or +inf (cannot), got -inf"
+        return _bad_task(self.task) or _nan(cost=self.cost) or _too_large(cost=self.cost)
 
 
 @dataclass(frozen=True)
@@ -78,7 +87,8 @@ class Award:
     round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
 
     def invalid(self) -> str | None:
-        return _bad_task(self.task) or _bad_robot(self.winner) or _nan(cost=self.cost, mean=self.mean)
+        return (_bad_task(self.task) or _bad_robot(self.winner) or _not_finite(cost=self.cost, mean=self.mean)
+                or _too_large(cost=self.cost, mean=self.mean))
 
 
 @dataclass(frozen=True)
@@ -95,7 +105,9 @@ class Price:
     round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
 
     def invalid(self) -> str | None:
-        return _bad_task(self.task) or _bad_robot(self.holder) or _not_finite(price=self.price)
+        if not 0.0 <= self.price <= MAX_VALUE:           # NaN fails too
+            return f"price {self.price}: expected 0..{MAX_VALUE:g}"
+        return _bad_task(self.task) or _bad_robot(self.holder)
 
 
 @dataclass(frozen=True)
@@ -148,6 +160,12 @@ def _bad_robot(robot: int) -> str | None:
 
 def _not_finite(**values: float) -> str | None:
     return next((f"{k} {v}: expected a finite number" for k, v in values.items() if not math.isfinite(v)), None)
+
+
+def _too_large(**values: float) -> str | None:
+    """A finite value beyond MAX_VALUE in magnitude (infinities are judged by each message)."""
+    return next((f"{k} {v}: expected at most {MAX_VALUE:g} in magnitude" for k, v in values.items()
+                 if math.isfinite(v) and abs(v) > MAX_VALUE), None)
 
 
 def _nan(**values: float) -> str | None:

@@ -1,0 +1,79 @@
+"""Reading a UDP socket so that nothing goes missing unseen: datagrams the kernel dropped because the socket's
+receive buffer was full (a flood, or a reader that fell behind) are counted by the kernel per socket; this module
+reads that count.
+
+Linux keeps it in ``sk_drops``.  With the ``SO_RXQ_OVFL`` socket option every datagram read carries the count at
+the time it was queued as ancillary data, so a reader learns of drops as soon as the next datagram arrives; the
+``drops`` column of ``/proc/net/udp`` (and ``udp6``) for the socket's inode gives the current count at any time.
+Elsewhere both are unavailable and the count stays 0.
+"""
+from __future__ import annotations
+
+import os
+import socket
+import struct
+import sys
+
+SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40 if sys.platform.startswith("linux") else None)
+_ANCILLARY = socket.CMSG_SPACE(4) if hasattr(socket, "CMSG_SPACE") else 0
+MAX_DATAGRAM = 65535
+
+
+def count_overflows(sock: socket.socket) -> bool:
+    """Ask the kernel to attach its drop count to every datagram read from ``sock``; False if it cannot."""
+    if SO_RXQ_OVFL is None or not hasattr(sock, "recvmsg"):
+        return False
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
+    except OSError:
+        return False
+    return True
+
+
+def receive(sock: socket.socket, counting: bool) -> tuple[bytes, tuple, int | None]:
+    """One datagram: ``(data, source address, the kernel's drop count or None)``.  Raises what ``recvfrom``
+    raises (BlockingIOError when there is nothing to read)."""
+    if not counting:
+        data, addr = sock.recvfrom(MAX_DATAGRAM)
+        return data, addr, None
+    data, ancillary, _flags, addr = sock.recvmsg(MAX_DATAGRAM, _ANCILLARY)
+    drops = None
+    for level, kind, payload in ancillary:
+        if level == socket.SOL_SOCKET and kind == SO_RXQ_OVFL and len(payload) >= 4:
+            drops = struct.unpack("=I", payload[:4])[0]
+    return data, addr, drops
+
+
+def datagrams(sock: socket.socket, counting: bool, counters, limit: int):
+    """Yield ``(data, source address)`` for up to ``limit`` datagrams waiting on the non-blocking ``sock``,
+    raising ``counters.kernel_dropped`` to the kernel's drop count whenever a datagram carries it.  Errors the
+    socket reports (an ICMP error for an earlier send) are skipped, at most ``limit`` of them."""
+    for _ in range(limit):
+        try:
+            data, addr, drops = receive(sock, counting)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError:
+            continue
+        if drops is not None:
+            counters.kernel_dropped = max(counters.kernel_dropped, drops)
+        yield data, addr
+
+
+def proc_drops(sock: socket.socket) -> int | None:
+    """The kernel's drop count for ``sock`` from /proc/net/udp(6), or None where there is no such file."""
+    try:
+        inode = str(os.fstat(sock.fileno()).st_ino)
+    except OSError:
+        return None
+    for name in ("/proc/net/udp", "/proc/net/udp6"):
+        try:
+            with open(name) as fh:
+                next(fh, None)                     # the header line
+                for line in fh:
+                    fields = line.split()
+                    if len(fields) > 12 and fields[9] == inode:
+                        return int(fields[12])
+        except (OSError, ValueError):
+            continue
+    return None

@@ -1,0 +1,309 @@
+"""Forged and replayed messages change nothing and are counted (issue 14, items 4 and 5).
+
+Unsigned fleets (a fleet can still choose so) on the in-memory bus (runtime/fleet/simulate.py), the forgeries
+going through the codec as a daemon's link would decode them: forged Prices do not livelock the epsilon auction
+nor raise its cost, a forged task set does not send a robot to an attacker's point, forged Awards do not leave
+two robots on one task under BS.  What no check can tell from a genuine message without signing (values within
+the protocol under a fleet robot's id) is dropped by signing: the wire tests at the end."""
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+
+import pytest
+
+from runtime.allocation.formation import messages as M
+from runtime.comms import codec, dialect
+from runtime.comms.link import GCS_LINK, MavlinkLink, signing_timestamp
+from runtime.fleet.messages import DONE, OPEN, RobotState, TaskRecord
+from runtime.fleet.simulate import SimFleet
+from runtime.tasks.goto import Goto
+
+STARTS = {1: (-3.0, -3.0), 2: (-3.0, 3.0), 3: (3.0, -3.0), 4: (3.0, 3.0)}
+POSITIONS = [(0.0, 1.5), (1.5, 0.0), (0.0, -1.5), (-1.5, 0.0)]
+ATTACKER_POINT = (4.5, 4.5)
+KEY = bytes(range(32))
+OTHER_KEY = bytes(range(1, 33))
+NAV_WAYPOINT, LOCAL_ENU = 16, 4
+
+
+def decoded(msg):
+    """``msg`` as a daemon's codec hands it on after decoding its frame, or None: refused at decode (``invalid``)."""
+    mod = dialect.load()
+    mav = mod.MAVLink(None, srcSystem=msg.sender, srcComponent=1)
+    frame = codec.encode(msg, mav)
+    parser = mod.MAVLink(None, srcSystem=0, srcComponent=0)
+    try:
+        return codec.from_mavlink(parser.parse_buffer(frame)[0])
+    except codec.InvalidMessage:
+        return None
+
+
+def drops(f: SimFleet) -> Counter:
+    """Every robot's drops by reason: its node, its agent, the solvers of its rounds."""
+    out: Counter = Counter()
+    for r in f.robots.values():
+        out += r.node.dropped
+        out += r.agent.dropped
+        for rnd in r.agent.rounds.values():
+            out += rnd.solver.dropped
+    return out
+
+
+class Forger:
+    """Puts forged messages on the bus as a host on the fleet's network would (they go through the codec)."""
+
+    def __init__(self, f: SimFleet):
+        self.f = f
+        self.refused_at_decode = 0
+
+    def send(self, msgs) -> None:
+        for msg in msgs:
+            got = decoded(msg)
+            if got is None:
+                self.refused_at_decode += 1
+            else:
+                self.f.bus.send([got], self.f.now)
+
+
+def formation(method: str, positions=POSITIONS) -> tuple[SimFleet, list[int]]:
+    f = SimFleet(STARTS, method=method)
+    f.run(0.5)
+    ids = f.hand_in(1, [Goto(x, y, hold=None) for x, y in positions])      # station keeping: never done
+    return f, ids
+
+
+def held(f: SimFleet) -> dict[int, tuple[int, ...]]:
+    return {rid: tuple(c.task_id for c in r.agent.commitments) for rid, r in f.robots.items()}
+
+
+def cost(f: SimFleet, ids, assignment) -> float:
+    return sum(math.dist(STARTS[r], POSITIONS[ids.index(t[0])]) for r, t in assignment.items())
+
+
+def round_of(f: SimFleet) -> int | None:
+    """The round every robot has joined, once they all have."""
+    common = set.intersection(*(set(r.agent.rounds) for r in f.robots.values()))
+    return min(common) if common else None
+
+
+def test_forged_prices_neither_livelock_the_epsilon_auction_nor_raise_its_cost():
+    base, ids = formation("auction")
+    base.run(60.0)
+    want = held(base)
+    assert all(len(t) == 1 for t in want.values()) and all(r.agent.converged for r in base.robots.values())
+
+    f, ids = formation("auction")
+    f.run(30.0, stop=lambda fl: round_of(fl) is not None)
+    rid = round_of(f)
+    assert rid is not None and any(r.agent.allocating for r in f.robots.values())   # forged mid-auction
+    unclaimed = next(t for t in range(4) if t != f.robots[1].agent.rounds[rid].solver.held)
+    before = drops(f)
+    forger = Forger(f)
+    forger.send([            # within the wire's ranges: without the checks they livelocked this auction
+        M.Price(99, 0, 0, 99, 1e5, 0, rid),          # from no robot of the fleet
+        M.Price(98, 0, 1, 98, 2e5, 0, rid),          # from no robot of the fleet
+        M.Price(2, 0, 2, 7, 3e5, 0, rid),            # held by a robot that is not in the round
+        M.Price(2, 0, 3, 3, 4e5, 0, rid),            # held by another robot than its sender
+        M.Price(3, 0, 0, 4, 5e5, 0, rid),            # held by another robot than its sender
+        M.Price(3, 0, 9, 3, 6e5, 0, rid),            # a task index beyond the round's four
+        M.Price(4, 0, 1, 4, 5e6, 0, rid),            # a price beyond the protocol's range
+        M.Price(4, 0, 2, 4, -40.0, 0, rid),          # a negative price
+        M.Price(2, 1, unclaimed, 1, 7e5, 0, rid),    # names its recipient holder of a task it does not claim
+    ])
+    f.run(f.now + 0.1)
+    got = drops(f) - before
+    assert forger.refused_at_decode == 2
+    assert got["not a robot of the fleet"] == 2 * 4                   # every robot hears robots 99 and 98
+    assert got["robot not in the round"] == 3                         # the others hear robot 2
+    assert got["price held by a robot other than its sender"] == 3 + 3 + 1
+    assert got["task not in the round"] == 3
+    f.run(60.0)
+    assert held(f) == want                                            # the same assignment, so the same cost
+    assert cost(f, ids, held(f)) == pytest.approx(cost(base, ids, want))
+    assert all(r.agent.converged for r in f.robots.values())
+    assert f.bus.stats.sent < 2 * base.bus.stats.sent                 # no price war
+
+
+def test_a_forged_task_set_does_not_send_a_robot_to_an_attackers_point():
+    """Three tasks, four robots: one robot is free and would take any task the table gained."""
+    f, ids = formation("auction", POSITIONS[:3])
+    f.run(30.0, stop=lambda fl: round_of(fl) is not None)
+    rid = round_of(f)
+    genuine = f.robots[1].node.table.entries[ids[0]]
+    x, y = ATTACKER_POINT
+    record = dict(command=NAV_WAYPOINT, frame=LOCAL_ENU, state=OPEN, param1=0.0, param2=0.0, param3=0.0,
+                  param4=math.nan, x=x, y=y)
+    before = drops(f)
+    forger = Forger(f)
+    forger.send([
+        TaskRecord(99, 0, 99 << 16 | 1, **record),                   # from no robot of the fleet
+        TaskRecord(2, 0, 77 << 16 | 1, **record),                    # a task no robot of the fleet minted
+        TaskRecord(2, 0, genuine.id, **{**record, "state": DONE}),   # a known task, elsewhere, "done"
+        TaskRecord(2, 0, 2 << 16 | 9, **{**record, "x": math.inf}),  # refused at decode
+        M.TaskInfo(1, 0, 0, x, y, 3, rid),                           # the round's task 0 somewhere else
+        M.TaskInfo(1, 0, 0, *POSITIONS[0], 9, rid),                  # a round of nine tasks?
+        M.RoundStart(2, 0, 3 << 16 | 5, (ids[0],), (2, 3)),          # a round id that is not its sender's
+        M.RoundStart(2, 0, 2 << 16 | 5, (ids[0],), (2, 3, 42)),      # robot 42 is no robot of the fleet
+    ])
+    f.run(f.now + 0.1)
+    got = drops(f) - before
+    assert forger.refused_at_decode == 1
+    assert got["not a robot of the fleet"] == 4
+    assert got["a task no robot of the fleet minted"] == 3
+    assert got["contradicts the task table"] == 3
+    assert got["contradicts the round's task set"] == 2 * 3
+    assert got["round start outside the protocol"] == 2              # robot 3 is named in both; 2 sent them
+    seen = []
+
+    def watch(fl):
+        for r in fl.robots.values():
+            for c in r.agent.commitments:
+                e = r.node.table.entries[c.task_id]
+                seen.append((c.task.position == (e.x, e.y), c.task.position))
+    f.run(60.0, observe=watch)
+    assert seen and all(ok for ok, _ in seen)
+    assert all(pos != ATTACKER_POINT for _, pos in seen)
+    assert all(set(r.node.table.entries) == set(ids) for r in f.robots.values())
+    assert all(f.table_state(t) == OPEN for t in ids)
+    assert sorted(t for h in held(f).values() for t in h) == sorted(ids)
+
+
+def test_forged_awards_do_not_put_two_robots_on_one_task_under_bs():
+    f, ids = formation("bs")
+    f.run(60.0)
+    first = held(f)
+    assert sorted(t[0] for t in first.values()) == sorted(ids)
+    rid = round_of(f)
+    # a robot that bid in an auction it did not win, for a task cheaper to it than its own (so it would keep it)
+    taker, seller, auction, bid = min(
+        (r, s, a, b) for r, robot in f.robots.items() for sol in [robot.agent.rounds[rid].solver]
+        for (s, a), b in sol._bids_sent.items()
+        if (s, a) not in sol._awards_seen and b.task != sol.assignment and b.cost < sol.won[sol.assignment])
+    task = f.robots[taker].agent.rounds[rid].tasks[bid.task]
+    holder = next(r for r, h in first.items() if h == (task,))
+    before = drops(f)
+    forger = Forger(f)
+    forger.send([
+        M.Award(seller, taker, auction, bid.task, taker, bid.cost + 1.0, bid.cost, rid),   # a cost never bid
+        M.Award(seller, taker, 98765, bid.task, taker, bid.cost, bid.cost, rid),           # an auction not bid in
+        M.Award(seller, taker, auction, bid.task, 9, bid.cost, bid.cost, rid),             # winner not in the round
+        M.Award(77, taker, auction, bid.task, taker, bid.cost, bid.cost, rid),             # no robot of the fleet
+        M.Award(seller, taker, auction, bid.task, taker, math.inf, bid.cost, rid),         # refused at decode
+    ])
+    f.run(f.now + 0.1)
+    got = drops(f) - before
+    assert forger.refused_at_decode == 1
+    assert got["award at a cost I did not bid"] == 1 and got["award without bid"] == 1
+    assert got["robot not in the round"] == 1 and got["not a robot of the fleet"] == 1
+    assert held(f) == first
+    # An award at the taker's own bid in its auctioneer's name cannot be told from a genuine one without signing:
+    # the taker keeps the cheaper task, which another robot holds.  Once both have settled, the lower id keeps it.
+    forger.send([M.Award(seller, taker, auction, bid.task, taker, bid.cost, bid.cost, rid)])
+    f.run(f.now + 0.1)
+    assert held(f)[taker] == (task,) == held(f)[holder]                # two robots on one task, for now
+    f.run(f.now + 60.0)
+    now = held(f)
+    assert all(len(h) == 1 for h in now.values())
+    assert sorted(h[0] for h in now.values()) == sorted(ids), now       # one robot per task again
+
+
+def test_forged_coalition_messages_neither_block_a_task_nor_break_a_coalition():
+    """Coalition method: a CoalitionDone for a task not handed in yet (without the check it kept that task from
+    ever being offered), or from a robot that is not the auctioneer (it broke a coalition on its way), and a
+    TaskOffer placing a task elsewhere than the fleet table: ignored and counted; the task is done."""
+    from runtime.allocation.coalition.wdp_messages import CoalitionDone, TaskOffer
+    from runtime.tasks.rendezvous import Rendezvous
+
+    f = SimFleet(STARTS, method="coalition")
+    f.run(0.5)
+
+    def ignored(fl):
+        return sum(r.agent.member.stats.ignored + r.agent.auction.stats.ignored + r.agent.member.stats.contradicting
+                   for r in fl.robots.values())
+
+    forger = Forger(f)
+    before = ignored(f)
+    forger.send([CoalitionDone(1, 0, 1 << 16 | 1, 1 << 16 | 1, (2, 3))])     # the id the next task will get
+    f.run(f.now + 0.1)
+    assert ignored(f) - before == 3
+    (task,) = f.hand_in(1, [Rendezvous(0.0, 0.0, 2, 100.0)])
+    assert task == 1 << 16 | 1
+    f.run(60.0, stop=lambda fl: sum(bool(r.agent.member.job) for r in fl.robots.values()) == 2)
+    members = {rid for rid, r in f.robots.items() if r.agent.member.job}
+    assert len(members) == 2
+    job = f.robots[min(members)].agent.member.job
+    before = ignored(f)
+    outsider = next(r for r in f.robots if r not in members and r != 1)
+    forger.send([CoalitionDone(outsider, 0, job.round, task, job.robots),             # not the auctioneer
+                 TaskOffer(1, 0, job.round + 1, task, *ATTACKER_POINT, 1, 99.0, (1, 2, 3, 4))])
+    f.run(f.now + 0.1)
+    assert all(f.robots[r].agent.member.job is not None for r in members)          # the coalition holds
+    assert ignored(f) - before >= len(members)
+    f.run(200.0, stop=lambda fl: fl.table_state(task) == DONE)
+    assert f.table_state(task) == DONE and sorted(f.done()[task]) == sorted(members)
+
+
+# ------------------------------------------------------------------------------ on the wire: signing drops them
+
+def _frame(msg, key=None, link_id=0, stamp=None) -> bytes:
+    mod = dialect.load()
+    mav = mod.MAVLink(None, srcSystem=msg.sender, srcComponent=1)
+    if key is not None:
+        mav.signing.secret_key, mav.signing.sign_outgoing, mav.signing.link_id = key, True, link_id
+        mav.signing.timestamp = stamp or signing_timestamp(time.time())
+    return codec.encode(msg, mav)
+
+
+def test_signing_drops_forgeries_in_a_fleet_robots_name_that_no_check_could_tell():
+    """Within the protocol and in a fleet robot's name: a Price at a plausible price, a task record of a new
+    task at the attacker's point, an award at the winner's own bid.  Unsigned, with the wrong key, replayed, or
+    replayed from what the robot sent its ground station: each dropped and counted; the genuine frame passes."""
+    rx = MavlinkLink(1, "127.0.0.1:0", [], signing_key=KEY)
+    try:
+        forged = [M.Price(2, 0, 1, 2, 900.0, 0, 2 << 16 | 1),
+                  TaskRecord(2, 0, 2 << 16 | 7, NAV_WAYPOINT, LOCAL_ENU, OPEN, 0, 0, 0, 0, *ATTACKER_POINT),
+                  M.Award(2, 1, 3, 0, 1, 4.25, 4.0, 2 << 16 | 1)]
+        stamp = signing_timestamp(time.time())
+        for k, msg in enumerate(forged):
+            assert rx.feed(_frame(msg), 0.0) == []                                  # unsigned
+            assert rx.feed(_frame(msg, OTHER_KEY, stamp=stamp + 10 * k), 0.0) == []  # the wrong key
+            assert rx.feed(_frame(msg, KEY, GCS_LINK, stamp + 10 * k), 0.0) == []     # signed for the GCS
+        genuine = _frame(M.Price(2, 0, 1, 2, 3.5, 0, 2 << 16 | 1), KEY, 0, stamp + 100)
+        assert [m.price for m in rx.feed(genuine, 0.0)] == [3.5]
+        assert rx.feed(genuine, 0.0) == []                                           # replayed
+        c = rx.counters
+        assert (c.unsigned_dropped, c.bad_signature_dropped, c.replayed_dropped) == (3, 3 + 1, 3)
+        assert c.received == 1 and c.datagrams == c.received + c.dropped
+    finally:
+        rx.close()
+
+
+def test_a_frame_captured_on_the_ground_station_side_and_replayed_to_a_peer_is_dropped():
+    """Robot 2 streams to a ground station (here a bare socket): its signed HEARTBEAT and RobotState replayed to
+    robot 1 neither count as robot 2's liveness nor reach robot 1's node; its peer traffic still does."""
+    import socket
+
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    gcs.bind(("127.0.0.1", 0))
+    gcs.settimeout(2.0)
+    a = MavlinkLink(1, "127.0.0.1:0", [], signing_key=KEY)
+    b = MavlinkLink(2, "127.0.0.1:0", [f"127.0.0.1:{a.address[1]}"], "127.0.0.1:%d" % gcs.getsockname()[1],
+                    signing_key=KEY)
+    try:
+        assert b.send_gcs(b.heartbeat()) and b.send_gcs(RobotState(2, 0, 1, (), 0.0, 0.0, 0, 0))
+        captured = [gcs.recvfrom(65535)[0] for _ in range(2)]
+        assert all(frame[-13] == GCS_LINK for frame in captured)
+        for frame in captured:
+            assert a.feed(frame, 1.0) == []
+        assert a.counters.replayed_dropped == 2 and a.peers_alive == []
+        b.poll(1.0)                                      # its peer HEARTBEAT (link 0)
+        b.send_agent([M.Bid(2, 1, 1, 0, 2.0)], 1.0)
+        got, t0 = [], time.monotonic()
+        while not got and time.monotonic() - t0 < 2:
+            got = a.poll(1.0)
+        assert got == [M.Bid(2, 1, 1, 0, 2.0)] and a.peers_alive == [2]
+    finally:
+        for s in (a, b, gcs):
+            s.close()

@@ -25,8 +25,23 @@ COMMANDS = (
 )
 
 
+def _one_line(text: str) -> str:
+    """``text`` with line breaks and other unprintable characters escaped (a file name may hold a newline)."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with the project's error format: one line ``mrta: COMMAND: what is wrong`` on stderr, exit 2
+    (subcommands' parsers are of the same class)."""
+
+    def error(self, message: str):
+        command = self.prog.removeprefix("mrta").strip()
+        where = f"{command}: " if command else ""
+        self.exit(2, f"mrta: {where}{_one_line(message)} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="mrta", description="Multi-robot task allocation fleet runtime")
+    parser = _Parser(prog="mrta", description="Multi-robot task allocation fleet runtime")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more logging (-vv for debug)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
@@ -50,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except InputError as exc:
-        print(f"mrta: {exc}", file=sys.stderr)
+        print(f"mrta: {_one_line(str(exc))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130

@@ -336,7 +336,9 @@ def _dump(path: str, data: dict) -> None:
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("daemon", help="run one robot's daemon from its robot config")
     p.add_argument("config", help="robot config YAML")
-    p.add_argument("--check", action="store_true", help="validate the config and exit")
+    p.add_argument("--check", action="store_true",
+                   help="run every check start-up runs (addresses, peers, map, signing key, base options) without "
+                        "opening a device or a socket, then exit: 0 ok, 2 with one line saying what is wrong")
     p.add_argument("--speedup", type=float, default=None,
                    help="SITL only: run on a scaled clock this many times faster than real time")
     p.add_argument("--epoch", type=float, default=None,
@@ -351,7 +353,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _wait_for_clock(path: str, robot_id: int, timeout: float = 120.0) -> None:
     """SITL start barrier: say we are built, then wait for the simulator to publish its clock."""
-    Path(f"{path}.ready.{robot_id}").touch()
+    try:
+        Path(f"{path}.ready.{robot_id}").touch()
+    except OSError as exc:
+        raise C.ConfigError(path, "clock", f"a folder to write {Path(path).name}.ready.{robot_id} in "
+                            f"({exc.strerror})") from None
     deadline = time.monotonic() + timeout
     while not Path(path).exists():
         if time.monotonic() > deadline:
@@ -359,8 +365,21 @@ def _wait_for_clock(path: str, robot_id: int, timeout: float = 120.0) -> None:
         time.sleep(0.01)
 
 
+def _check_args(args) -> None:
+    """The options, before anything starts: numbers in range, output files in folders that exist."""
+    from runtime import argcheck
+
+    argcheck.number(args.speedup, "--speedup", 0.0, lo_open=True)
+    argcheck.number(args.epoch, "--epoch")
+    argcheck.number(args.duration, "--duration", 0.0, lo_open=True)
+    argcheck.output_file(args.stats, "--stats")
+    argcheck.output_file(args.clock_file, "--clock-file")
+
+
 def _main(args) -> int:
+    _check_args(args)
     cfg = C.load_robot(args.config)
+    C.validate_robot(cfg)             # what start-up needs, checked before any device or socket opens
     if args.check:
         print(f"{args.config}: ok (robot {cfg.robot.id}, base {cfg.base.type}, allocation {cfg.allocation.method})")
         return 0

@@ -9,18 +9,29 @@ from typing import Any
 from runtime.errors import InputError
 
 
+MAX_BYTES = 64 << 20        # a JSON input's size
+
+
 def read_json(path: str | Path, what: str = "JSON file") -> Any:
     """Parsed JSON from ``path`` (``-`` reads stdin); ``what`` names the expected file in errors."""
-    name = str(path)
+    name = str(path) if str(path).isprintable() else repr(str(path))
     try:
-        text = sys.stdin.read() if name == "-" else Path(path).read_text()
+        if str(path) == "-":
+            text = sys.stdin.read(MAX_BYTES + 1)
+        else:
+            with open(path, "rb") as fh:
+                text = fh.read(MAX_BYTES + 1).decode("utf-8")
     except OSError as exc:
         raise InputError(f"{name}: expected a readable {what} ({exc.strerror or exc})") from None
     except UnicodeDecodeError:
         raise InputError(f"{name}: expected a {what} in UTF-8 text") from None
+    if len(text) > MAX_BYTES:
+        raise InputError(f"{name}: expected a {what} of at most {MAX_BYTES} bytes")
     try:
         return json.loads(text)
     except json.JSONDecodeError as exc:
         raise InputError(f"{name}: expected JSON ({exc.msg} at line {exc.lineno} column {exc.colno})") from None
     except RecursionError:
         raise InputError(f"{name}: expected JSON (nested too deeply)") from None
+    except ValueError as exc:           # an integer of more digits than Python converts (4300)
+        raise InputError(f"{name}: expected JSON numbers Python can read ({str(exc).split(':')[0]})") from None

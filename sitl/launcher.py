@@ -512,6 +512,7 @@ def _progress(f: Fleet, op) -> None:
 
 def register(sub: argparse._SubParsersAction) -> None:
     from runtime.allocation import registry
+    from sitl.run_args import MAX_INSTANCE, fleet_range
 
     p = sub.add_parser("sitl", help="software-in-the-loop simulation")
     s = p.add_subparsers(dest="sitl_cmd", metavar="SUBCOMMAND", required=True)
@@ -519,26 +520,30 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("fleet", help="fleet config YAML")
     r.add_argument("--manifest", default=None, help="write the ports manifest here (JSON)")
     r.add_argument("--run-dir", default=None, help="where robot configs, logs, trace and picture go (default: a temp dir)")
-    r.add_argument("--seed", type=int, default=None, help="override the fleet's seed")
-    r.add_argument("--speedup", type=float, default=None, help="sim seconds per wall second")
+    r.add_argument("--seed", type=int, default=None, help="override the fleet's seed (%d..%d)" % fleet_range("seed"))
+    r.add_argument("--speedup", type=float, default=None,
+                   help="sim seconds per wall second (%g..%g)" % fleet_range("speedup"))
     r.add_argument("--lockstep", action="store_true", help="daemons in-process on a simulated clock")
     r.add_argument("--devices-only", action="store_true", help="world and devices only, no daemons")
     r.add_argument("--instance", type=int, default=0, metavar="N",
-                   help=f"run beside other fleets: every port + {INSTANCE_STRIDE} x N (ground station and robots)")
+                   help=f"run beside other fleets: every port + {INSTANCE_STRIDE} x N (ground station and robots; "
+                        f"N 0..{MAX_INSTANCE})")
     r.add_argument("--no-signing", dest="signing", action="store_false",
                    help="an unsigned fleet (default: every frame signed with a fresh fleet key, or the fleet's "
                         "signing_key)")
     r.add_argument("--keep-key", action="store_true",
                    help="keep the run's fresh fleet key (RUN_DIR/fleet.key) for a ground station after the run")
     r.add_argument("--method", choices=registry.names(), default=None, help="allocation method")
-    r.add_argument("--timeout", type=float, default=None, help="sim seconds before giving up")
+    r.add_argument("--timeout", type=float, default=None,
+                   help="sim seconds before giving up (%g..%g)" % fleet_range("timeout"))
     r.add_argument("--json", default=None, help="write the result here as JSON")
     r.set_defaults(func=_main)
 
 
 def _main(args) -> int:
-    if not 0 <= args.instance <= 400:
-        raise C.ConfigError("--instance", "", "an integer 0..400", args.instance)
+    from sitl import run_args
+
+    run_args.check(args, INSTANCE_STRIDE)          # every option, before the world is built
     f = build(args.fleet, args.run_dir, args.manifest, args.seed, args.signing, args.method, args.speedup,
               args.instance)
     speedup = args.speedup or f.fleet.speedup
@@ -571,7 +576,10 @@ def _main(args) -> int:
         f.close(keep_key=args.keep_key)
     print_summary(f, res)
     if args.json:
-        Path(args.json).write_text(json.dumps(res, indent=2, default=str))
+        try:
+            Path(args.json).write_text(json.dumps(res, indent=2, default=str))
+        except OSError as exc:
+            raise C.ConfigError("--json", "", f"a file that can be written ({exc.strerror})", args.json) from None
     if not res["goal_met"]:
         print(f"mrta: {res['verdict']}", file=sys.stderr)
         return 1

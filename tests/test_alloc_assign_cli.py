@@ -131,3 +131,28 @@ def test_random_and_truncated_files_load_or_raise_input_error(tmp_path, data):
         assert "\n" not in str(exc) and str(exc).startswith(str(p))
     else:
         assert costs.shape[0] == costs.shape[1] >= 1
+
+
+# --------------------------------------------------------------------------- hostile input (issue 14)
+
+@pytest.mark.parametrize("data, words", [
+    ({"robots": [[i, 0] for i in range(251)], "tasks": [[i, 1] for i in range(251)]},
+     "expected at most 250 robots for --method auction"),
+    ({"robots": [[1e308, 0], [0, 0]], "tasks": [[-1e308, 0], [1, 1]]}, "robots[0]: expected finite coordinates"),
+    ({"robots": [[10 ** 400, 0]], "tasks": [[0, 0]]}, "robots[0]: expected finite coordinates"),
+    ({"costs": [[1e308, 1e308], [1e308, 1e308]]}, "costs[0][0]: expected at most 1e+30"),
+    ('{"costs": [[1' + "0" * 5000 + "]]}", "expected JSON numbers Python can read"),
+    ({"robots": [[i, 0] for i in range(4001)], "tasks": [[i, 1] for i in range(4001)]},
+     "expected at most 4000 robots and tasks"),
+])
+def test_huge_problems_and_values_exit_2_with_one_line(tmp_path, capsys, data, words):
+    p = write(tmp_path, data)
+    assert cli.main(["assign", str(p)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"mrta: {p}: ") and words in err, err
+
+
+def test_hungarian_takes_more_than_250_robots(tmp_path, capsys):
+    p = write(tmp_path, {"robots": [[i, 0] for i in range(251)], "tasks": [[i, 1] for i in range(251)]})
+    assert cli.main(["assign", str(p), "--method", "hungarian", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["cost"] == pytest.approx(251)

@@ -1,6 +1,9 @@
 """Configs: every shipped file loads; every kind of mistake is one line naming file and key."""
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -179,3 +182,168 @@ def test_an_unknown_key_with_odd_characters_is_shown_quoted_on_one_line():
     with pytest.raises(ConfigError) as info:
         C.from_dict(C.RobotConfig, {"control": {"rate\n": 1}}, "odd.yaml")
     assert str(info.value).startswith("odd.yaml: control.'rate\\n': expected no such key") and "\n" not in str(info.value)
+
+
+# --------------------------------------------------------------------------- hostile files (issue 14, item 6)
+
+def _alias_bomb(depth: int = 8, width: int = 10) -> str:
+    """``robot.name``: a list of aliases ``depth`` levels deep, ``width`` per level (width^depth values expanded)."""
+    def level(i):
+        if i == 0:
+            return "&a0 [" + ",".join(["x"] * width) + "]"
+        return f"&a{i} [" + level(i - 1) + "," + ",".join([f"*a{i - 1}"] * (width - 1)) + "]"
+    return "robot:\n  name: " + level(depth) + "\n"
+
+
+def _one_config_error(path, loader=C.load_robot) -> str:
+    with pytest.raises(ConfigError) as info:
+        loader(path)
+    msg = str(info.value)
+    assert "\n" not in msg and msg.startswith(f"{path}: "), msg
+    return msg
+
+
+@pytest.mark.parametrize("text, where, expected", [
+    (b"robot:\n  name: \xff\xfe\n", "line 2", "UTF-8 text"),
+    ("control:\n  rate: 1" + "0" * 400 + "\n", "control.rate", "a number (at most"),
+    ("control:\n  rate: 1" + "0" * 5000 + "\n", "line 2", "an integer of at most 1000 characters"),
+    ("robot:\n  name: " + "[" * 3000 + "]" * 3000 + "\n", "line 2", "levels of nesting"),
+    ("robot: " + "{a: " * 3000 + "1" + "}" * 3000 + "\n", "line 1", "levels of nesting"),
+    ("robot:\n  name: &a [*a]\n", "line 2", "a recursive alias"),
+    ("robot:\n  name: 2020-13-45\n", "line 2", "a value its tag allows"),
+    (b"\x00robot: {}\n", "document", "valid YAML"),            # found by the fuzz suite
+])
+def test_hostile_yaml_is_one_line_naming_file_and_line_or_key(tmp_path, text, where, expected):
+    path = tmp_path / "robot.yaml"
+    path.write_bytes(text if isinstance(text, bytes) else text.encode())
+    msg = _one_config_error(path)
+    assert msg.startswith(f"{path}: {where}: expected") and expected in msg, msg
+
+
+def test_a_config_file_larger_than_the_limit_is_refused_unread(tmp_path):
+    from runtime.config import build
+    path = tmp_path / "robot.yaml"
+    path.write_text("# padding\n" * (build.MAX_BYTES // 10 + 1))
+    assert "at most" in _one_config_error(path)
+
+
+def test_an_alias_bomb_fails_fast_and_small(tmp_path):
+    """600 bytes standing for 10^9 values: refused while composing, in a process with 1 GB of address space."""
+    path = tmp_path / "bomb.yaml"
+    path.write_text(_alias_bomb())
+    assert len(path.read_bytes()) < 700
+    code = ("import resource, sys; resource.setrlimit(resource.RLIMIT_AS, (1 << 30, 1 << 30)); "
+            "from runtime.cli import main; sys.exit(main(sys.argv[1:]))")
+    proc = subprocess.run([sys.executable, "-c", code, "daemon", str(path), "--check"], cwd=ROOT, timeout=60,
+                          capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert proc.returncode == 2, proc.stderr[-500:]
+    assert proc.stderr.count("\n") == 1 and "values once aliases are expanded" in proc.stderr, proc.stderr
+
+
+def test_aliases_within_the_budget_still_load(tmp_path):
+    path = _write(tmp_path, "base: &b {type: create_oi, max_speed: 0.4}\nrobot: {name: r}\n"
+                            "control: {rate: &r 20}\nlocalization: {gps_sigma: *r}\n")
+    cfg = C.load_robot(path)
+    assert cfg.base.max_speed == 0.4 and cfg.localization.gps_sigma == 20
+
+
+def test_an_error_never_formats_a_huge_value_whole():
+    shared = [0] * 10
+    for _ in range(8):
+        shared = [shared] * 10                     # 10^9 values once expanded
+    with pytest.raises(ConfigError) as info:
+        C.from_dict(C.RobotConfig, {"robot": {"name": shared}}, "huge.yaml")
+    got = str(info.value).split(", got ", 1)[1]
+    assert got == ("[" * 9 + "0, " * 9 + "0], [" + "0, " * 10)[:60] + "...", got
+    assert C.short_repr(10 ** 5000) == "<an integer of 5001 digits>"
+    assert C.short_repr({"a": (1,), "b": "x" * 100}) == repr({"a": (1,), "b": "x" * 100})[:60] + "..."
+    assert C.short_repr([1, (2,), {"k": None}, "s"]) == repr([1, (2,), {"k": None}, "s"])
+
+
+def _fleet(tmp_path, **change):
+    good = yaml.safe_load((CONFIGS / "fleets" / "create2_4.yaml").read_text())
+    data = dict(good, world=str(CONFIGS / "worlds" / "arena_10m.yaml"), robot=str(CONFIGS / "robots" / "create2.yaml"))
+    data.update(change)
+    return _write(tmp_path, data, "fleet.yaml")
+
+
+@pytest.mark.parametrize("change, key, expected", [
+    ({"robots": []}, "robots", "at least one robot"),
+    ({"seed": -1}, "seed", "[0, 4294967295]"),
+    ({"seed": 10 ** 400}, "seed", "at most"),
+    ({"gcs": "127.0.0.1:99999"}, "gcs", "port in 1..65535"),
+    ({"gcs": "127.0.0.1:0"}, "gcs", "port in 1..65535"),
+    ({"robots": [{"id": 1, "start": [9.0, 0.0, 0.0]}]}, "robots[0].start", "inside the 10 x 10 m arena"),
+    ({"scenario": {"type": "formation", "positions": [[0, 1.5], [1.5, 0], [0, -1.5], [50, 0]]}},
+     "scenario.positions[3]", "inside the 10 x 10 m arena"),
+    ({"scenario": {"type": "mission", "tasks": [{"x": 0, "y": 0}, {"x": 1e6, "y": 0}]}},
+     "scenario.tasks[1]", "inside the 10 x 10 m arena"),
+])
+def test_impossible_fleets_name_the_key(tmp_path, change, key, expected):
+    path = _fleet(tmp_path, **change)
+    msg = _one_config_error(path, C.load_fleet)
+    assert msg.startswith(f"{path}: {key}: expected") and expected in msg, msg
+
+
+def test_a_fleet_names_its_broken_robot_template(tmp_path):
+    template = _write(tmp_path, "robot: [1, 2\n", "template.yaml")
+    path = _fleet(tmp_path, robot=str(template))
+    from sitl.launcher import build
+    with pytest.raises(ConfigError) as info:
+        build(path, tmp_path / "run")
+    assert str(info.value) == f"{template}: line 2: expected valid YAML"
+
+
+def test_a_world_too_large_for_its_grid_names_size_and_resolution(tmp_path):
+    path = _write(tmp_path, {"size": [1000.0, 1000.0], "resolution": 0.005}, "world.yaml")
+    msg = _one_config_error(path, C.load_world)
+    assert msg.startswith(f"{path}: size, resolution: expected at most") and "200000 x 200000 cells" in msg
+    assert C.load_world(_write(tmp_path, {"size": [100.0, 100.0], "resolution": 0.05}, "ok.yaml")).size == (100, 100)
+    msg = _one_config_error(_write(tmp_path, {"size": [-1.0, 5.0]}, "neg.yaml"), C.load_world)
+    assert "size[0]: expected a number in [0.01, 100000]" in msg
+
+
+# --------------------------------------------------------------------------- what start-up checks (daemon --check)
+
+def _robot(tmp_path, **sections):
+    data = {"robot": {"id": 1}, "base": {"port": "loop://"}, "gps": {"port": "loop://"},
+            "comms": {"listen": "127.0.0.1:14601", "gcs": "127.0.0.1:14550", "peers": []}}
+    for k, v in sections.items():
+        data[k] = {**data.get(k, {}), **v}
+    return _write(tmp_path, data)
+
+
+@pytest.mark.parametrize("sections, key, expected", [
+    ({"comms": {"listen": "nohost"}}, "comms.listen", "host:port"),
+    ({"comms": {"listen": "127.0.0.1:99999"}}, "comms.listen", "port in 1..65535"),
+    ({"comms": {"gcs": "127.0.0.1:99999"}}, "comms.gcs", "port in 1..65535"),
+    ({"comms": {"gcs": "224.0.0.1:14550"}}, "comms.gcs", "a unicast address"),
+    ({"comms": {"peers": [{"id": 2, "address": "no.such.host.invalid:14602"}]}}, "comms.peers[0].address",
+     "an address that resolves"),
+    ({"comms": {"peers": [{"id": 1, "address": "127.0.0.1:14602"}]}}, "comms.peers[0].id", "another robot's id"),
+    ({"comms": {"peers": [{"id": 2, "address": "127.0.0.1:14602"}, {"id": 2, "address": "127.0.0.1:14603"}]}},
+     "comms.peers[1].id", "a peer id listed once"),
+    ({"planning": {"map": "nowhere.yaml"}}, "planning.map", "a world YAML file"),
+    ({"comms": {"signing_key": "/nonexistent/fleet.key"}}, "comms.signing_key", "signing key file not found"),
+    ({"base": {"baudrate": -1}}, "base", "baud rate -1: expected one of"),
+    ({"base": {"baudrate": 12345}}, "base", "baud rate 12345"),
+])
+def test_check_runs_every_start_up_check(tmp_path, capsys, sections, key, expected):
+    """`mrta daemon CONFIG --check` refuses what the daemon would refuse, in one line naming file and key."""
+    from runtime.cli import main
+    path = _robot(tmp_path, **sections)
+    assert main(["daemon", str(path), "--check"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"mrta: {path}: {key}: ") and expected in err, err
+
+
+def test_check_says_ok_for_a_config_the_daemon_takes(tmp_path, capsys):
+    from runtime.cli import main
+    world = _write(tmp_path, {"size": [10.0, 10.0]}, "map.yaml")
+    key = tmp_path / "fleet.key"
+    key.write_text("ab" * 32)
+    path = _robot(tmp_path, planning={"map": "map.yaml"}, comms={"signing_key": str(key), "peers": [
+        {"id": 2, "address": "localhost:14602"}, {"id": 3, "address": "[::1]:14603"}]})
+    assert world.exists()
+    assert main(["daemon", str(path), "--check"]) == 0
+    assert capsys.readouterr().out.startswith(f"{path}: ok (robot 1")

@@ -127,3 +127,123 @@ def test_truncated_and_garbled_files_only_ever_raise_input_error(tmp_path, cut, 
     else:                                   # the whole file, or a prefix that junk completed
         res = wd.solve(p)
         assert wd.check_feasible(p, res.winners) and res.value >= 0
+
+
+# --------------------------------------------------------------------------- hostile input, time limit (issue 14)
+
+def _one_bid(value: str) -> str:
+    return '{"robots": [1, 2], "tasks": [1, 2], "bids": [{"task": 1, "robots": [1], "value": %s}, ' \
+           '{"task": 2, "robots": [2], "value": %s}]}' % (value, value)
+
+
+@pytest.mark.parametrize("value, needle", [
+    ("1" + "0" * 400, "bid 0: value must be a finite number >= 0 and <= 1e+15, got an integer of 401 digits"),
+    ("1.7e308", "bid 0: value must be a finite number >= 0 and <= 1e+15, got 1.7e+308"),
+    ("1" + "0" * 5000, "expected JSON numbers Python can read"),
+])
+def test_huge_values_are_one_line_exit_2(tmp_path, capsys, value, needle):
+    path = _write(tmp_path, _one_bid(value))
+    assert cli.main(["wdp", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"mrta: {path}: ") and needle in err, err
+
+
+def test_ids_of_400_digits_still_work(tmp_path, capsys):
+    big = "1" + "0" * 400
+    path = _write(tmp_path, '{"robots": [%s], "tasks": [1], "bids": [{"task": 1, "robots": [%s], "value": 2}]}'
+                  % (big, big))
+    assert cli.main(["wdp", str(path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["value"] == 2
+
+
+def _hard(seed=7, robots=18, tasks=14, bids=400) -> dict:
+    """Coalitions of 1..4 of 18 robots: the numpy DP and HiGHS solve it in a tenth of a second, IDA*, the
+    plain-Python DP and BFS take far longer."""
+    import random
+    rnd = random.Random(seed)
+    return {"robots": list(range(robots)), "tasks": list(range(tasks)),
+            "bids": [{"task": rnd.randrange(tasks), "robots": rnd.sample(range(robots), rnd.randint(1, 4)),
+                      "value": rnd.randint(1, 100)} for _ in range(bids)]}
+
+
+@pytest.mark.parametrize("method", ["idastar", "sparse", "bfs"])
+def test_time_limit_exits_1_with_the_best_value_and_a_bound(tmp_path, capsys, method):
+    import re
+    import time
+    doc = _hard()
+    optimum = wd.solve(wd.parse_problem(doc), "dp").value
+    path = _write(tmp_path, doc)
+    t0 = time.monotonic()
+    assert cli.main(["wdp", str(path), "--method", method, "--time-limit", "0.3"]) == 1
+    assert time.monotonic() - t0 < 3.0
+    out = capsys.readouterr()
+    assert out.out == "" and out.err.count("\n") == 1, out
+    m = re.fullmatch(rf"mrta: {re.escape(str(path))}: (time limit of 0.3 s|the limit of \d+ open BFS nodes) reached "
+                     rf"\({method}\): best value found (\S+), optimum at most (\S+), not proven\n", out.err)
+    assert m, out.err
+    best, bound = float(m.group(2)), float(m.group(3))
+    assert 0 <= best <= optimum <= bound
+
+
+def test_every_solver_honours_a_deadline_with_a_feasible_answer():
+    """Past its deadline each searching solver stops with the best allocation it had (feasible) and, where it
+    proves one, a bound no allocation beats."""
+    import time
+    from runtime.allocation.coalition import wdp_dp, wdp_milp, wdp_search
+    from runtime.allocation.coalition.wdp_model import TimeUp, compile_problem
+    c = compile_problem(wd.parse_problem(_hard()))
+    optimum = c.total(wdp_dp.solve_dp(c).chosen)
+    gone = time.perf_counter() - 1.0
+    for solver in (wdp_search.solve_idastar, wdp_search.solve_bfs, wdp_dp.solve_dp, wdp_dp.solve_sparse):
+        with pytest.raises(TimeUp) as info:
+            solver(c, deadline=gone)
+        assert c.feasible(info.value.chosen) and c.total(info.value.chosen) <= optimum
+        assert info.value.bound is None or info.value.bound >= optimum - 1e-9
+    big = compile_problem(wd.parse_problem(_hard(seed=1, robots=300, tasks=300, bids=6000)))
+    with pytest.raises(TimeUp) as info:
+        wdp_milp.solve_milp(big, deadline=time.perf_counter() + 0.2)
+    assert big.feasible(info.value.chosen)
+    assert wdp_dp.solve_dp(c, deadline=time.perf_counter() + 60).chosen         # a deadline not reached: no change
+
+
+def test_auto_reports_parts_done_plus_the_part_it_was_in(monkeypatch):
+    """Independent parts: the time limit in the second still counts the first part's answer and bounds the rest."""
+    from runtime.allocation.coalition import wdp_dp
+    from runtime.allocation.coalition.wdp_model import TimeUp
+    doc = {"robots": [1, 2, 3, 4], "tasks": ["a", "b", "c", "d"], "bids": [
+        {"task": "a", "robots": [1], "value": 5}, {"task": "b", "robots": [1, 2], "value": 3},
+        {"task": "c", "robots": [3], "value": 7}, {"task": "d", "robots": [3, 4], "value": 4}]}
+    real, calls = wdp_dp.solve_sparse, []
+
+    def out_of_time_in_the_second_part(part, *args, **kwargs):
+        calls.append(part)
+        if len(calls) > 1:
+            raise TimeUp((), None)
+        return real(part, *args, **kwargs)
+
+    monkeypatch.setattr(wdp_dp, "solve_sparse", out_of_time_in_the_second_part)
+    with pytest.raises(wd.TimeLimit) as info:
+        wd.solve(wd.parse_problem(doc), time_limit=10)
+    assert len(calls) == 2 and info.value.method == "auto:sparse"
+    assert info.value.value in (5, 7)                # the first part's optimum, whichever part came first
+    assert info.value.bound >= 12                    # the whole optimum (5 + 7)
+
+
+@pytest.mark.parametrize("value", ["nan", "0", "-1", "inf"])
+def test_bad_time_limit(tmp_path, capsys, value):
+    assert cli.main(["wdp", str(_write(tmp_path, TABLE2)), "--time-limit", value]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("mrta: --time-limit: expected a number > 0")
+
+
+def test_many_independent_tasks_split_quickly(tmp_path, capsys):
+    """20,000 tasks in 10,000 independent pairs: split into parts in well under a second (was minutes)."""
+    import time
+    n = 20_000
+    doc = {"robots": list(range(n)), "tasks": list(range(n)),
+           "bids": [{"task": i, "robots": [i, i - 1] if i % 2 else [i], "value": 1 + i % 7} for i in range(n)]}
+    c = wd.compile_problem(wd.parse_problem(doc))
+    t0 = time.perf_counter()
+    parts = wd.components(c)
+    assert time.perf_counter() - t0 < 2.0
+    assert len(parts) == n // 2 and all(p.n_tasks == 2 for p in parts)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 import types
 import typing
 from dataclasses import dataclass, field
@@ -35,9 +36,56 @@ class ConfigError(InputError):
         self.file, self.key, self.expected = str(file), key, expected
         msg = f"{file}: {key}: expected {expected}" if key else f"{file}: expected {expected}"
         if got is not dataclasses.MISSING:
-            shown = repr(got)
-            msg += f", got {shown[:60] + '...' if len(shown) > 60 else shown}"
+            msg += f", got {short_repr(got)}"
         super().__init__(msg)
+
+
+class _Full(Exception):
+    pass
+
+
+def short_repr(value: Any, limit: int = 60) -> str:
+    """``repr(value)`` cut to ``limit`` characters (then ``...``), at a cost bounded by ``limit``: a list of a
+    billion shared elements, a self-containing list or a 5000-digit integer is never formatted whole."""
+    out: list[str] = []
+    room = limit + 1
+
+    def emit(text: str) -> None:
+        nonlocal room
+        out.append(text[:room])
+        room -= len(text)
+        if room <= 0:
+            raise _Full
+
+    def walk(v: Any) -> None:
+        if isinstance(v, (list, tuple)):
+            emit("[" if isinstance(v, list) else "(")
+            for i, e in enumerate(v):
+                if i:
+                    emit(", ")
+                walk(e)
+            emit("]" if isinstance(v, list) else ("," if len(v) == 1 else "") + ")")
+        elif isinstance(v, dict):
+            emit("{")
+            for i, (k, e) in enumerate(v.items()):
+                emit(", " if i else "")
+                walk(k)
+                emit(": ")
+                walk(e)
+            emit("}")
+        elif isinstance(v, str):
+            emit(repr(v[:room]))
+        elif isinstance(v, int) and v.bit_length() > 256:
+            emit(f"<an integer of {int(v.bit_length() * math.log10(2)) + 1} digits>")
+        else:
+            emit(repr(v))
+
+    try:
+        walk(value)
+    except _Full:
+        pass
+    shown = "".join(out)
+    return shown[:limit] + "..." if len(shown) > limit else shown
 
 
 def rng(lo: float | None = None, hi: float | None = None, **extra: Any) -> dict:
@@ -154,9 +202,12 @@ def _build(tp: Any, value: Any, file: str, key: str, meta: dict | None = None) -
         return value
     if tp in (int, float):
         ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-        if tp is int and ok and not float(value).is_integer():
-            ok = False
-        if not ok or not math.isfinite(value):
+        try:
+            if ok and (not math.isfinite(value) or (tp is int and not float(value).is_integer())):
+                ok = False
+        except OverflowError:            # an integer too large for a float
+            raise ConfigError(file, key, f"{_type_name(tp)} (at most {sys.float_info.max:.3g})", value) from None
+        if not ok:
             raise ConfigError(file, key, _type_name(tp), value)
         value = tp(value)
         lo, hi = (meta or {}).get("lo"), (meta or {}).get("hi")
@@ -170,18 +221,97 @@ def _build(tp: Any, value: Any, file: str, key: str, meta: dict | None = None) -
     raise TypeError(f"unsupported config type {tp!r} at {key}")
 
 
+MAX_BYTES = 1 << 20        # a config file's size
+MAX_DEPTH = 32             # levels of nesting
+MAX_VALUES = 500_000       # values (scalars, lists, mappings) once aliases are expanded
+MAX_INT_CHARS = 1000       # characters of an integer literal (Python refuses > 4300 digits; base 60 is slow)
+
+
+class _Refused(Exception):
+    """A document the bounded loader will not load: ``expected`` at ``mark``."""
+
+    def __init__(self, mark, expected: str):
+        super().__init__(expected)
+        self.mark, self.expected = mark, expected
+
+
+class _BoundedLoader(yaml.SafeLoader):
+    """PyYAML's safe loader with bounded cost: it counts, while composing, the values each node stands for once
+    aliases are expanded (a few hundred bytes of nested aliases can stand for 10^9 values) and refuses
+    documents above :data:`MAX_VALUES`, nested deeper than :data:`MAX_DEPTH`, with an alias to a collection
+    that contains it, or with an integer literal longer than :data:`MAX_INT_CHARS`.  Values that a tag's
+    constructor cannot build (a date 2020-13-45) are refused at their line."""
+
+    def __init__(self, stream):
+        super().__init__(stream)
+        self._depth = 0
+        self._values: dict[int, int] = {}      # id(node) -> values it stands for, once composed
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            mark = self.peek_event().start_mark
+            node = super().compose_node(parent, index)
+            if id(node) not in self._values:
+                raise _Refused(mark, "no alias inside the collection it names (a recursive alias)")
+            return node
+        self._depth += 1
+        if self._depth > MAX_DEPTH:
+            raise _Refused(self.peek_event().start_mark, f"at most {MAX_DEPTH} levels of nesting")
+        try:
+            node = super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+        if isinstance(node, yaml.SequenceNode):
+            count = 1 + sum(self._values[id(n)] for n in node.value)
+        elif isinstance(node, yaml.MappingNode):
+            count = 1 + sum(self._values[id(k)] + self._values[id(v)] for k, v in node.value)
+        else:
+            count = 1
+            if node.tag == "tag:yaml.org,2002:int" and len(node.value) > MAX_INT_CHARS:
+                raise _Refused(node.start_mark, f"an integer of at most {MAX_INT_CHARS} characters")
+        if count > MAX_VALUES:
+            raise _Refused(node.start_mark, f"at most {MAX_VALUES} values once aliases are expanded")
+        self._values[id(node)] = count
+        return node
+
+    def construct_object(self, node, deep=False):
+        try:
+            return super().construct_object(node, deep)
+        except (ValueError, OverflowError) as exc:       # e.g. a timestamp with month 13
+            raise _Refused(node.start_mark, f"a value its tag allows ({str(exc).splitlines()[0][:60]})") from None
+
+
 def _read_yaml(path: str | Path) -> Any:
+    """The YAML document in ``path`` (an empty one: ``{}``) at bounded cost, or ConfigError naming the file and
+    line: not readable, larger than :data:`MAX_BYTES`, not UTF-8, not valid YAML, or refused by
+    :class:`_BoundedLoader`."""
     path = Path(path)
     try:
-        text = path.read_text()
+        with open(path, "rb") as fh:
+            raw = fh.read(MAX_BYTES + 1)
     except OSError as exc:
         raise ConfigError(path, "", f"a readable YAML file ({exc.strerror})") from None
+    if len(raw) > MAX_BYTES:
+        raise ConfigError(path, "", f"a YAML file of at most {MAX_BYTES} bytes")
     try:
-        return yaml.safe_load(text) or {}
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise ConfigError(path, f"line {line}", f"UTF-8 text (byte {raw[exc.start]:#04x} is not)") from None
+    loader = None
+    try:
+        loader = _BoundedLoader(text)          # checks the characters at once: a NUL is a YAMLError here
+        node = loader.get_single_node()
+        return (loader.construct_document(node) if node is not None else None) or {}
+    except _Refused as exc:
+        raise ConfigError(path, f"line {exc.mark.line + 1}" if exc.mark else "document", exc.expected) from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}" if mark else "document"
         raise ConfigError(path, where, "valid YAML") from None
+    finally:
+        if loader is not None:
+            loader.dispose()
 
 
 def from_dict(tp: type, data: Any, file: str = "<dict>") -> Any:
@@ -214,6 +344,6 @@ def to_dict(cfg: Any) -> Any:
 
 def parse_hostport(text: str, file: str = "<arg>", key: str = "address") -> tuple[str, int]:
     host, sep, port = text.rpartition(":")
-    if not sep or not host or not port.isdigit() or not (0 < int(port) < 65536):
+    if not sep or not host or not (port.isascii() and port.isdigit()) or not (0 < int(port) < 65536):
         raise ConfigError(file, key, "host:port with port in 1..65535", text)
     return host, int(port)

@@ -11,7 +11,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
 
-from runtime.config.build import ConfigError, load, rng, union_field
+from runtime.config.build import ConfigError, load, parse_hostport, rng, union_field
+from runtime.config.world import check_inside, load_world
 
 
 def _scenarios():
@@ -35,7 +36,7 @@ class FleetConfig:
     gcs: str = "127.0.0.1:14550"
     base_port: int = field(default=14600, metadata=rng(1024, 65000))
     signing_key: Optional[str] = None
-    seed: int = 1
+    seed: int = field(default=1, metadata=rng(0, 2**32 - 1))
     speedup: float = field(default=1.0, metadata=rng(0.1, 100))
     timeout: float = field(default=120.0, metadata=rng(1, 36000))    # sim seconds
     gps_noise: float = field(default=0.3, metadata=rng(0.0, 50))     # m, 1-sigma
@@ -66,5 +67,9 @@ def load_fleet(path: str | Path) -> FleetConfig:
                    for i, r in enumerate(fleet.robots))
     fleet = dataclasses.replace(fleet, world=resolve(fleet.world, "world"), robot=resolve(fleet.robot, "robot"),
                                 robots=robots)
-    fleet.scenario.check(fleet, str(path))
+    parse_hostport(fleet.gcs, str(path), "gcs")
+    world = load_world(fleet.world)
+    for i, r in enumerate(fleet.robots):
+        check_inside(world, r.start, str(path), f"robots[{i}].start")
+    fleet.scenario.check(fleet, world, str(path))
     return fleet

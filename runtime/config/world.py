@@ -5,7 +5,9 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from runtime.config.build import load, rng
+from runtime.config.build import ConfigError, load, rng
+
+MAX_CELLS = 4_000_000     # occupancy grid cells a world may need (each costs ~60 bytes while a planner is built)
 
 
 @dataclass(frozen=True)
@@ -27,7 +29,7 @@ class Box:
 
 @dataclass(frozen=True)
 class WorldConfig:
-    size: tuple[float, float] = (10.0, 10.0)   # metres, x by y, centred on the origin
+    size: tuple[float, float] = field(default=(10.0, 10.0), metadata=rng(0.01, 100_000))  # m, x by y, centred on 0
     obstacles: tuple[Box, ...] = ()
     datum: Datum = Datum()
     walls: bool = True
@@ -36,4 +38,22 @@ class WorldConfig:
 
 
 def load_world(path: str | Path) -> WorldConfig:
-    return load(WorldConfig, path)
+    world: WorldConfig = load(WorldConfig, path)
+    nx, ny = (math.ceil(side / world.resolution - 1e-9) for side in world.size)
+    if nx * ny > MAX_CELLS:
+        raise ConfigError(path, "size, resolution", f"at most {MAX_CELLS} occupancy grid cells (a coarser resolution "
+                          f"or a smaller size), got {nx} x {ny} cells")
+    return world
+
+
+def inside(world: WorldConfig, x: float, y: float) -> bool:
+    """Whether (x, y) lies inside the world's arena (centred on the origin)."""
+    return abs(x) < world.size[0] / 2 and abs(y) < world.size[1] / 2
+
+
+def check_inside(world: WorldConfig, point, file: str, key: str) -> None:
+    """ConfigError naming ``key`` unless ``point`` (x, y, ...) lies inside the world's arena."""
+    if not inside(world, point[0], point[1]):
+        sx, sy = world.size
+        raise ConfigError(file, key, f"a point inside the {sx:g} x {sy:g} m arena of {world.source or 'the world'} "
+                          f"(|x| < {sx / 2:g}, |y| < {sy / 2:g})", tuple(point))

@@ -1,6 +1,6 @@
 """SITL scenarios by ``scenario.type``: the only list of them.
 
-A scenario module has ``Config`` (the fleet config's ``scenario:`` section, with a ``check(fleet, file)``
+A scenario module has ``Config`` (the fleet config's ``scenario:`` section, with a ``check(fleet, world, file)``
 that raises ConfigError) and ``Scenario`` (built from the fleet; says what the operator hands the fleet
 and when, when the run's goal is met, and prints the summary).  A new scenario is one module plus one line.
 """

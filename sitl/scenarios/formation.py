@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from typing import Literal, Optional
 
 from runtime.config.build import ConfigError, rng
+from runtime.config.world import check_inside
 
 
 @dataclass(frozen=True)
@@ -17,9 +18,11 @@ class Config:
     to: Optional[int] = None                            # robot the operator uploads to (null: the lowest id)
     tolerance: float = field(default=0.2, metadata=rng(0.01, 10.0))    # m: a robot is on its position
 
-    def check(self, fleet, file: str) -> None:
+    def check(self, fleet, world, file: str) -> None:
         if not self.positions:
             raise ConfigError(file, "scenario.positions", "at least one position")
+        for i, p in enumerate(self.positions):
+            check_inside(world, p, file, f"scenario.positions[{i}]")
         if self.to is not None and self.to not in {r.id for r in fleet.robots}:
             raise ConfigError(file, "scenario.to", "the id of a robot of the fleet", self.to)
 

@@ -12,6 +12,7 @@ from typing import Any, Literal, Optional
 
 from runtime import tasks as T
 from runtime.config.build import ConfigError, Tagged, rng
+from runtime.config.world import check_inside
 from runtime.fleet.messages import DONE, OPEN, STATE_NAMES
 
 
@@ -47,9 +48,10 @@ class Config:
     to: Optional[int] = None            # robot the operator uploads to (null: the lowest id); a task may say
     wait: bool = False                  # keep running for an operator once the listed tasks are done
 
-    def check(self, fleet, file: str) -> None:
+    def check(self, fleet, world, file: str) -> None:
         ids = {r.id for r in fleet.robots}
         for i, t in enumerate(self.tasks):
+            check_inside(world, (t.x, t.y), file, f"scenario.tasks[{i}]")
             to = t.to if t.to is not None else self.to
             if to is not None and to not in ids:
                 raise ConfigError(file, f"scenario.tasks[{i}].to", "the id of a robot of the fleet", to)

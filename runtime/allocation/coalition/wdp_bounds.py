@@ -8,6 +8,8 @@ unchanged.  Two rounds: the first cut lowers h for the second.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from runtime.allocation.coalition.wdp_model import Compiled
@@ -27,6 +29,22 @@ def greedy(c: Compiled, order: np.ndarray, full: int, n_tasks: int) -> float:
         if used == full or len(tasks) == n_tasks:
             break
     return total
+
+
+def upper_bound(c: Compiled) -> float:
+    """No allocation is worth more: the smaller of the sum over tasks of their best bid and the sum over robots
+    of their best value per coalition member."""
+    per_task: dict[int, float] = {}
+    per_robot: dict[int, float] = {}
+    for t, m, v in zip(c.task, c.mask, c.value):
+        per_task[t] = max(per_task.get(t, 0.0), v)
+        share = v / max(m.bit_count(), 1)
+        while m:
+            low = m & -m
+            r = low.bit_length() - 1
+            per_robot[r] = max(per_robot.get(r, 0.0), share)
+            m ^= low
+    return min(math.fsum(per_task.values()), math.fsum(per_robot.values()))
 
 
 def prune(c: Compiled, rounds: int = 2) -> Compiled:

@@ -18,11 +18,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from runtime.allocation.coalition.wdp_model import Compiled, SolverOutput
+from runtime.allocation.coalition.wdp_model import Compiled, SolverOutput, TimeUp, past
 
 MAX_BITS = 20          # 2^20 float64 states per layer = 8 MiB
 VIEW_MIN_FREE = 4      # bids leaving >= this many robots free update table views, not pairs
 DENSE_MAX = 1 << 18    # bids x states up to which every layer is one dense gather
+MAX_STATES = 1_000_000  # robot sets the plain-Python DP holds (~330 bytes each): then it stops as at a time limit
 
 
 def reduce(c: Compiled) -> tuple[list[int], list[int], list[float], list[int], int]:
@@ -143,10 +144,10 @@ def pairs(mask: np.ndarray, value: np.ndarray, n_bits: int) -> tuple[np.ndarray,
     return bid_of, src, tgt, add
 
 
-def _layers_dense(mask: np.ndarray, value: np.ndarray, bid_bounds: np.ndarray, size: int):
+def _layers_dense(mask: np.ndarray, value: np.ndarray, bid_bounds: np.ndarray, size: int, deadline=None):
     """Layer tables for small inputs: for every bid and every robot set T, the index of T minus
     the coalition (or of a -inf sentinel when the coalition is not inside T) is computed once;
-    a layer is then one gather and one max over its bids."""
+    a layer is then one gather and one max over its bids.  Past ``deadline``: the layers so far."""
     every = np.arange(size, dtype=np.int32)
     m32 = mask.astype(np.int32)[:, None]
     inside = (every[None, :] & m32) == m32
@@ -154,6 +155,8 @@ def _layers_dense(mask: np.ndarray, value: np.ndarray, bid_bounds: np.ndarray, s
     cur = np.zeros(size)
     layers = [cur]
     for li in range(len(bid_bounds) - 1):
+        if past(deadline):
+            break
         lo, hi = bid_bounds[li], bid_bounds[li + 1]
         ext = np.append(cur, -np.inf)
         cand = (ext[index[lo:hi]] + value[lo:hi, None]).max(axis=0)
@@ -162,10 +165,10 @@ def _layers_dense(mask: np.ndarray, value: np.ndarray, bid_bounds: np.ndarray, s
     return layers, int(inside.sum())
 
 
-def _layers_sparse(mask: np.ndarray, value: np.ndarray, bid_bounds: np.ndarray, n_bits: int):
+def _layers_sparse(mask: np.ndarray, value: np.ndarray, bid_bounds: np.ndarray, n_bits: int, deadline=None):
     """Layer tables touching only each bid's supersets: bids with many free robots update strided
     views of the table (no index arrays); the rest are batched as (S, S + coalition) pairs into
-    one scatter-max per task."""
+    one scatter-max per task.  Past ``deadline``: the layers completed so far."""
     size = 1 << n_bits
     n_layers = len(bid_bounds) - 1
     free = n_bits - np.asarray([m.bit_count() for m in mask.tolist()], dtype=np.int64)
@@ -186,6 +189,8 @@ def _layers_sparse(mask: np.ndarray, value: np.ndarray, bid_bounds: np.ndarray, 
         new = cur.copy()
         cur_v, new_v = cur.reshape(shape), new.reshape(shape)
         for j in big_of_layer[li]:
+            if past(deadline):
+                return layers, nodes
             m = mask_l[j]
             ix = views.get(m)
             if ix is None:
@@ -203,8 +208,9 @@ def _layers_sparse(mask: np.ndarray, value: np.ndarray, bid_bounds: np.ndarray, 
     return layers, nodes
 
 
-def solve_dp(c: Compiled) -> SolverOutput:
-    """Exact optimum; ``nodes`` is the number of (state, bid) transitions evaluated."""
+def solve_dp(c: Compiled, deadline: float | None = None) -> SolverOutput:
+    """Exact optimum; ``nodes`` is the number of (state, bid) transitions evaluated.  Past ``deadline``: TimeUp
+    with the best allocation of the tasks whose layers are done."""
     tasks, masks, values, keep, n_bits = reduce(c)
     if not keep:
         return SolverOutput((), 0)
@@ -220,13 +226,13 @@ def solve_dp(c: Compiled) -> SolverOutput:
     task_starts = np.flatnonzero(np.r_[True, task[1:] != task[:-1]])
     bid_bounds = np.r_[task_starts, len(mask)]
     if len(mask) * size <= DENSE_MAX:
-        layers, nodes = _layers_dense(mask, value, bid_bounds, size)
+        layers, nodes = _layers_dense(mask, value, bid_bounds, size, deadline)
     else:
-        layers, nodes = _layers_sparse(mask, value, bid_bounds, n_bits)
+        layers, nodes = _layers_sparse(mask, value, bid_bounds, n_bits, deadline)
     # walk back from the full robot set
     chosen = []
     s = size - 1
-    for li in range(len(task_starts), 0, -1):
+    for li in range(len(layers) - 1, 0, -1):
         now, before = layers[li], layers[li - 1]
         if now[s] == before[s]:
             continue
@@ -239,6 +245,8 @@ def solve_dp(c: Compiled) -> SolverOutput:
         j = b0 + hit[0]
         chosen.append(int(local[j]))
         s ^= int(mask[j])
+    if len(layers) <= len(task_starts):
+        raise TimeUp(chosen)
     return SolverOutput(tuple(sorted(chosen)), nodes)
 
 
@@ -246,10 +254,11 @@ class Budget(Exception):
     """The sparse DP would take more transitions than allowed."""
 
 
-def solve_sparse(c: Compiled, budget: int | None = None) -> SolverOutput:
+def solve_sparse(c: Compiled, budget: int | None = None, deadline: float | None = None) -> SolverOutput:
     """The same DP in plain Python over the robot sets actually reached (exact used sets, not
     subsets), for small instances where numpy's per-call cost dominates.  Raises Budget when it
-    would evaluate more than ``budget`` (state, bid) transitions."""
+    would evaluate more than ``budget`` (state, bid) transitions, TimeUp (with the best allocation of
+    the tasks done) past ``deadline``."""
     by_task: dict[int, list[tuple[int, float, int]]] = {}
     for i in range(c.n_bids):
         v = c.value[i]
@@ -264,7 +273,10 @@ def solve_sparse(c: Compiled, budget: int | None = None) -> SolverOutput:
             raise Budget
         new = dict(states)
         choice: dict[int, tuple[int, int]] = {}
-        for s, v in states.items():
+        for k, (s, v) in enumerate(states.items()):
+            if not k & 0x3FF and (past(deadline) or len(new) > MAX_STATES):
+                raise TimeUp(_walk_back(states, choices),
+                             reason=None if past(deadline) else f"the limit of {MAX_STATES} DP states")
             for m, val, i in bids:
                 if m & s:
                     continue
@@ -275,6 +287,11 @@ def solve_sparse(c: Compiled, budget: int | None = None) -> SolverOutput:
                     choice[ns] = (s, i)
         states = new
         choices.append(choice)
+    return SolverOutput(_walk_back(states, choices), nodes)
+
+
+def _walk_back(states: dict[int, float], choices: list[dict[int, tuple[int, int]]]) -> tuple[int, ...]:
+    """The bids of the best state, followed back through each task's choices."""
     s = max(states, key=states.__getitem__)
     chosen = []
     for choice in reversed(choices):
@@ -282,4 +299,4 @@ def solve_sparse(c: Compiled, budget: int | None = None) -> SolverOutput:
         if hit is not None:
             s, i = hit
             chosen.append(i)
-    return SolverOutput(tuple(sorted(chosen)), nodes)
+    return tuple(sorted(chosen))

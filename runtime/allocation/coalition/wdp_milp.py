@@ -7,11 +7,13 @@ When every coalition is a single robot the problem is a rectangular assignment a
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 from scipy.optimize import Bounds, LinearConstraint, linear_sum_assignment, milp
 from scipy.sparse import csr_matrix
 
-from runtime.allocation.coalition.wdp_model import Compiled, SolverOutput
+from runtime.allocation.coalition.wdp_model import Compiled, SolverOutput, TimeUp
 
 
 def milp_matrix(c: Compiled) -> csr_matrix:
@@ -29,16 +31,23 @@ def milp_matrix(c: Compiled) -> csr_matrix:
     return csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(c.n_robots + c.n_tasks, c.n_bids))
 
 
-def solve_milp(c: Compiled) -> SolverOutput:
-    """Exact optimum by HiGHS; ``nodes`` is HiGHS's branch-and-bound node count."""
+def solve_milp(c: Compiled, deadline: float | None = None) -> SolverOutput:
+    """Exact optimum by HiGHS; ``nodes`` is HiGHS's branch-and-bound node count.  HiGHS stops at ``deadline``
+    (``time.perf_counter()`` seconds): TimeUp with its incumbent and its dual bound."""
     if c.n_bids == 0:
         return SolverOutput((), 0)
+    options = {} if deadline is None else {"time_limit": max(deadline - time.perf_counter(), 1e-3)}
     res = milp(
         -np.asarray(c.value, dtype=float),
         constraints=LinearConstraint(milp_matrix(c), -np.inf, 1.0),
         integrality=np.ones(c.n_bids),
         bounds=Bounds(0.0, 1.0),
+        options=options,
     )
+    if res.status == 1 and deadline is not None:          # the time limit
+        chosen = () if res.x is None else tuple(int(b) for b in np.flatnonzero(res.x > 0.5))
+        bound = getattr(res, "mip_dual_bound", None)
+        raise TimeUp(chosen, -bound if bound is not None and np.isfinite(bound) else None)
     if res.status != 0 or res.x is None:
         raise RuntimeError(f"milp: HiGHS did not prove optimality ({res.message})")
     chosen = tuple(int(b) for b in np.flatnonzero(res.x > 0.5))

@@ -10,6 +10,7 @@ of bid indices into the problem.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from typing import Hashable, Sequence
 
@@ -81,6 +82,22 @@ def compile_problem(problem: Problem) -> Compiled:
         masks.append(m)
         values.append(float(b.value))
     return Compiled(len(problem.robots), len(problem.tasks), tuple(tasks), tuple(masks), tuple(values))
+
+
+class TimeUp(Exception):
+    """A solver passed its deadline (or, with ``reason``, another limit of its own such as the states it may
+    hold): ``chosen`` is the best allocation it had found (local bid indices, empty when it had none) and
+    ``bound`` an upper bound on the optimum it had proven (None: none)."""
+
+    def __init__(self, chosen: Sequence[int] = (), bound: float | None = None, method: str = "",
+                 reason: str | None = None):
+        super().__init__(reason or "time limit reached")
+        self.chosen, self.bound, self.method, self.reason = tuple(chosen), bound, method, reason
+
+
+def past(deadline: float | None) -> bool:
+    """Whether ``deadline`` (``time.perf_counter()`` seconds; None: none) has passed."""
+    return deadline is not None and time.perf_counter() > deadline
 
 
 @dataclass

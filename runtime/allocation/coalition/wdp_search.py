@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import math
 
-from runtime.allocation.coalition.wdp_model import Compiled, SolverOutput
+from runtime.allocation.coalition.wdp_model import Compiled, SolverOutput, TimeUp, past
 
 DUMMY = (-1, 0, 0.0)
+MAX_OPEN = 2_000_000       # BFS nodes held at once (~300 bytes each): then it stops as at a time limit
 
 
 class NodeCap(Exception):
@@ -35,10 +36,12 @@ class Heuristic:
     """Equations 1-2 tabulated per depth: h(d, used) = total[d] - (contribution of used robots),
     looked up one byte of the robot mask at a time."""
 
-    def __init__(self, n_robots: int, lv: list[list[tuple[int, int, float]]]):
+    def __init__(self, n_robots: int, lv: list[list[tuple[int, int, float]]], deadline: float | None = None):
         depth = len(lv)
         contrib = [[0.0] * n_robots for _ in range(depth + 1)]
         for d in range(depth - 1, -1, -1):
+            if past(deadline):
+                raise TimeUp()
             row = list(contrib[d + 1])
             for _, m, v in lv[d]:
                 size = m.bit_count()
@@ -54,7 +57,11 @@ class Heuristic:
             contrib[d] = row
         self.n_bytes = max(1, (n_robots + 7) // 8)
         self.total = [math.fsum(row) for row in contrib]
-        self.tables = [[self._byte_table(row, j) for j in range(self.n_bytes)] for row in contrib]
+        self.tables = []
+        for row in contrib:
+            if past(deadline):
+                raise TimeUp((), self.total[0])
+            self.tables.append([self._byte_table(row, j) for j in range(self.n_bytes)])
 
     @staticmethod
     def _byte_table(row: list[float], j: int) -> list[float]:
@@ -73,14 +80,15 @@ class Heuristic:
         return self.total[d] - s
 
 
-def solve_idastar(c: Compiled, node_limit: int | None = None) -> SolverOutput:
+def solve_idastar(c: Compiled, node_limit: int | None = None, deadline: float | None = None) -> SolverOutput:
     """IDA* on the bid tree (maximisation): depth-first passes cut a branch when g + h is below
-    the threshold; the next threshold is the largest cut value.  Exact unless capped."""
+    the threshold; the next threshold is the largest cut value.  Exact unless capped.  Past ``deadline``
+    it raises TimeUp with the best path found and the current threshold (no allocation is worth more)."""
     lv = levels(c)
     depth = len(lv)
     if depth == 0:
         return SolverOutput((), 0, False, 0)
-    h = Heuristic(c.n_robots, lv)
+    h = Heuristic(c.n_robots, lv, deadline)
     kids = [bl + [DUMMY] for bl in lv]
     eps = 1e-9 * max(1.0, h.total[0])
     state = {"nodes": 0, "expanded": 0, "best": 0.0, "best_path": ()}
@@ -99,6 +107,8 @@ def solve_idastar(c: Compiled, node_limit: int | None = None) -> SolverOutput:
             state["nodes"] += 1
             if node_limit is not None and state["nodes"] > node_limit:
                 raise NodeCap
+            if not state["nodes"] & 0x3FF and past(deadline):
+                raise TimeUp(state["best_path"], thr)
             g2 = g + v
             u2 = used | m
             f = g2 + h(d + 1, u2)
@@ -137,15 +147,19 @@ def solve_idastar(c: Compiled, node_limit: int | None = None) -> SolverOutput:
         return SolverOutput(state["best_path"], node_limit, True, iterations, node_limit - start, state["expanded"])
 
 
-def solve_bfs(c: Compiled, node_limit: int | None = None) -> SolverOutput:
-    """Breadth-first generation of the whole bid tree; returns the first best leaf."""
+def solve_bfs(c: Compiled, node_limit: int | None = None, deadline: float | None = None) -> SolverOutput:
+    """Breadth-first generation of the whole bid tree; returns the first best leaf (past ``deadline``: raises
+    TimeUp with the best path generated so far)."""
     lv = levels(c)
     frontier: list[tuple[int, float, tuple | None]] = [(0, 0.0, None)]
     nodes = 0
     capped = False
     for bl in lv:
         nxt: list[tuple[int, float, tuple | None]] = []
-        for used, g, chain in frontier:
+        for k, (used, g, chain) in enumerate(frontier):
+            if not k & 0x3FF and (past(deadline) or len(frontier) + len(nxt) > MAX_OPEN):
+                raise TimeUp(_path(max(frontier + nxt, key=lambda node: node[1])),
+                             reason=None if past(deadline) else f"the limit of {MAX_OPEN} open BFS nodes")
             for i, m, v in bl:
                 if not m & used:
                     nxt.append((used | m, g + v, (i, chain)))
@@ -158,10 +172,14 @@ def solve_bfs(c: Compiled, node_limit: int | None = None) -> SolverOutput:
         if capped:
             nodes = node_limit
             break
-    best = max(frontier, key=lambda node: node[1])
+    return SolverOutput(_path(max(frontier, key=lambda node: node[1])), nodes, capped, 0)
+
+
+def _path(node: tuple[int, float, tuple | None]) -> tuple[int, ...]:
+    """The bid indices on a BFS node's path, root first."""
     chosen = []
-    chain = best[2]
+    chain = node[2]
     while chain is not None:
         chosen.append(chain[0])
         chain = chain[1]
-    return SolverOutput(tuple(reversed(chosen)), nodes, capped, 0)
+    return tuple(reversed(chosen))

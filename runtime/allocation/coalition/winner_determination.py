@@ -22,13 +22,16 @@ from pathlib import Path
 from typing import Any, Callable
 
 from runtime.allocation.coalition import wdp_bounds, wdp_dp, wdp_milp, wdp_search
-from runtime.allocation.coalition.wdp_model import Compiled, Problem, SolverOutput, TaskBid, compile_problem
+from runtime.allocation.coalition.wdp_model import (Compiled, Problem, SolverOutput, TaskBid, TimeUp,
+                                                    compile_problem)
 from runtime.errors import InputError
 from runtime.jsonfile import read_json
 
 DP_WORK_LIMIT = 30_000_000       # DP states touched before auto prefers HiGHS
 SPARSE_MAX_BIDS = 60             # auto tries the plain-Python DP up to this many bids...
 SPARSE_BUDGET = 6_000            # ...and this many transitions, then the numpy DP
+ASSIGNMENT_MAX = 4_000_000       # robots x tasks of the Hungarian method's matrix (auto takes HiGHS above)
+MAX_VALUE = 1e15                 # a bid's value: sums stay finite and far below HiGHS's infinity (1e20)
 
 
 def _best_single(c: Compiled) -> SolverOutput:
@@ -38,6 +41,7 @@ def _best_single(c: Compiled) -> SolverOutput:
     return SolverOutput(chosen, c.n_bids)
 
 
+DEADLINE_SOLVERS = {"idastar", "bfs", "dp", "sparse", "milp"}     # take ``deadline=`` and raise TimeUp
 SOLVERS: dict[str, Callable[..., SolverOutput]] = {
     "idastar": wdp_search.solve_idastar,
     "bfs": wdp_search.solve_bfs,
@@ -48,6 +52,17 @@ SOLVERS: dict[str, Callable[..., SolverOutput]] = {
     "best": _best_single,
 }
 METHODS = ("auto", "idastar", "bfs", "dp", "sparse", "assignment", "milp")
+
+
+class TimeLimit(Exception):
+    """:func:`solve` reached its time limit (or a solver's own limit, ``reason``).  ``value``: the total of the
+    best feasible allocation found (0 when none was); ``bound``: no allocation is worth more; ``method``: the
+    solver that was running."""
+
+    def __init__(self, limit: float | None, value: float, bound: float, method: str, reason: str | None = None):
+        self.limit, self.value, self.bound, self.method = limit, value, bound, method
+        super().__init__(f"{reason or f'time limit of {limit:g} s'} reached ({method}): best value found "
+                         f"{value:g}, optimum at most {bound:g}, not proven")
 
 
 @dataclass(frozen=True)
@@ -126,8 +141,10 @@ def parse_problem(obj: Any) -> Problem:
             if r in seen:
                 raise InputError(f"bid {i}: robot {r!r} appears twice in the coalition")
             seen.add(r)
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-            raise InputError(f"bid {i}: value must be a finite number >= 0, got {value!r}")
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= MAX_VALUE:
+            shown = (repr(value) if not isinstance(value, int) or value.bit_length() < 64
+                     else f"an integer of {int(value.bit_length() * math.log10(2)) + 1} digits")
+            raise InputError(f"bid {i}: value must be a finite number >= 0 and <= {MAX_VALUE:g}, got {shown}")
         bids.append(TaskBid(task, tuple(members), float(value)))
     return Problem(robots, tasks, tuple(bids))
 
@@ -147,36 +164,42 @@ def load_problem(path: str | Path) -> Problem:
 def components(c: Compiled) -> list[Compiled]:
     """Split into parts that share no robot and no task; tasks are renumbered from 0 per part,
     robot bits are kept."""
-    tmask = [0] * c.n_tasks
-    has_bid = [False] * c.n_tasks
+    parent: dict = {}                 # union-find over ("r", robot) and ("t", task)
+
+    def find(x):
+        root = x
+        while parent.get(root, root) != root:
+            root = parent[root]
+        while x != root:                   # path compression
+            parent[x], x = root, parent.get(x, x)
+        return root
+
     for t, m in zip(c.task, c.mask):
-        tmask[t] |= m
-        has_bid[t] = True
-    groups: list[tuple[int, list[int]]] = []          # (robot mask, tasks)
-    for t in range(c.n_tasks):
-        if not has_bid[t]:
-            continue
-        m, ts, rest = tmask[t], [t], []
-        for gm, gts in groups:
-            if gm & m:
-                m |= gm
-                ts += gts
-            else:
-                rest.append((gm, gts))
-        groups = rest + [(m, ts)]
+        a = find(("t", t))
+        while m:
+            low = m & -m
+            b = find(("r", low.bit_length() - 1))
+            if a != b:
+                parent[b] = a
+            m ^= low
+    by_root: dict = {}
+    for t in sorted(set(c.task)):
+        by_root.setdefault(find(("t", t)), []).append(t)
+    # in the order of each group's highest task (as merging groups task by task would leave them)
+    groups = sorted(by_root.values(), key=lambda ts: ts[-1])
     if len(groups) <= 1:
         return [c] if c.n_bids else []
     part_of = [0] * c.n_tasks
     local_task = [0] * c.n_tasks
-    for p, (_, ts) in enumerate(groups):
-        for j, t in enumerate(sorted(ts)):
+    for p, ts in enumerate(groups):
+        for j, t in enumerate(ts):
             part_of[t], local_task[t] = p, j
     members: list[list[int]] = [[] for _ in groups]
     for b, t in enumerate(c.task):
         members[part_of[t]].append(b)
     return [Compiled(c.n_robots, len(ts), tuple(local_task[c.task[b]] for b in bids), tuple(c.mask[b] for b in bids),
                      tuple(c.value[b] for b in bids), tuple(c.bid_ids[b] for b in bids))
-            for (_, ts), bids in zip(groups, members)]
+            for ts, bids in zip(groups, members)]
 
 
 def choose_method(c: Compiled) -> str:
@@ -185,7 +208,7 @@ def choose_method(c: Compiled) -> str:
     if c.n_tasks <= 1:
         return "best"
     if all(m & (m - 1) == 0 for m in c.mask):
-        return "assignment"
+        return "assignment" if c.n_robots * c.n_tasks <= ASSIGNMENT_MAX else "milp"
     if c.n_bids <= SPARSE_MAX_BIDS:
         return "sparse"
     return choose_method_dense(c)
@@ -206,7 +229,7 @@ def choose_method_dense(c: Compiled) -> str:
     return "milp"
 
 
-def _solve_auto(c: Compiled) -> tuple[SolverOutput, str, int]:
+def _solve_auto(c: Compiled, deadline: float | None = None) -> tuple[SolverOutput, str, int]:
     # work on local indices (bid_ids = position in c), so the answer indexes c
     positive = [b for b in range(c.n_bids) if c.value[b] > 0] if c.n_bids and min(c.value) <= 0 else None
     if positive is None:
@@ -220,16 +243,22 @@ def _solve_auto(c: Compiled) -> tuple[SolverOutput, str, int]:
     nodes = 0
     used: list[str] = []
     parts = components(kept)
-    for part in parts:
+    for k, part in enumerate(parts):
         name = choose_method(part)
-        if name == "sparse":
-            try:
-                out = wdp_dp.solve_sparse(part, SPARSE_BUDGET)
-            except wdp_dp.Budget:
-                name = choose_method_dense(part)
-                out = SOLVERS[name](part)
-        else:
-            out = SOLVERS[name](part)
+        try:
+            if name == "sparse":
+                try:
+                    out = wdp_dp.solve_sparse(part, SPARSE_BUDGET, deadline)
+                except wdp_dp.Budget:
+                    name = choose_method_dense(part)
+                    out = _run(name, part, deadline=deadline)
+            else:
+                out = _run(name, part, deadline=deadline)
+        except TimeUp as exc:          # in terms of c: the parts done, this part's best, bounds for the rest
+            bound = (c.total(chosen) + min(wdp_bounds.upper_bound(part), math.inf if exc.bound is None else exc.bound)
+                     + math.fsum(wdp_bounds.upper_bound(p) for p in parts[k + 1:]))
+            raise TimeUp(chosen + [part.bid_ids[i] for i in exc.chosen], bound, "auto:" + name, exc.reason) \
+                from None
         chosen.extend(part.bid_ids[i] for i in out.chosen)
         nodes += out.nodes
         if name not in used:
@@ -237,32 +266,54 @@ def _solve_auto(c: Compiled) -> tuple[SolverOutput, str, int]:
     return SolverOutput(tuple(sorted(chosen)), nodes), "auto:" + "+".join(used or ["empty"]), len(parts)
 
 
-def solve_compiled(c: Compiled, method: str = "auto", node_limit: int | None = None) -> tuple[SolverOutput, str]:
-    """Solve a compiled problem; returns the solver output (indices into ``c``) and the method name."""
+def _run(name: str, c: Compiled, node_limit: int | None = None, deadline: float | None = None) -> SolverOutput:
+    """Solver ``name`` on ``c``, with the options it takes."""
+    options = {"deadline": deadline} if name in DEADLINE_SOLVERS else {}
+    if name in ("idastar", "bfs"):
+        options["node_limit"] = node_limit
+    return SOLVERS[name](c, **options)
+
+
+def solve_compiled(c: Compiled, method: str = "auto", node_limit: int | None = None,
+                   deadline: float | None = None) -> tuple[SolverOutput, str]:
+    """Solve a compiled problem; returns the solver output (indices into ``c``) and the method name.  Past
+    ``deadline`` (``time.perf_counter()`` seconds) it raises TimeUp (indices into ``c``)."""
     if method == "auto":
-        out, name, _ = _solve_auto(c)
+        out, name, _ = _solve_auto(c, deadline)
         return out, name
-    if method in ("idastar", "bfs"):
-        return SOLVERS[method](c, node_limit=node_limit), method
+    if method == "assignment" and c.n_robots * c.n_tasks > ASSIGNMENT_MAX:
+        raise InputError(f"assignment: {c.n_robots} robots x {c.n_tasks} tasks exceed its {ASSIGNMENT_MAX} matrix "
+                         "cells; expected a smaller problem (or method auto or milp)")
     if method in SOLVERS:
-        return SOLVERS[method](c), method
+        try:
+            return _run(method, c, node_limit, deadline), method
+        except TimeUp as exc:
+            bound = min(wdp_bounds.upper_bound(c), math.inf if exc.bound is None else exc.bound)
+            raise TimeUp(exc.chosen, bound, method, exc.reason) from None
     raise InputError(f"method {method!r}: expected one of {', '.join(METHODS)}")
 
 
-def solve(problem: Problem, method: str = "auto", node_limit: int | None = None) -> Allocation:
-    """Pick the winning bids of ``problem`` with ``method`` (see module doc)."""
+def solve(problem: Problem, method: str = "auto", node_limit: int | None = None,
+          time_limit: float | None = None) -> Allocation:
+    """Pick the winning bids of ``problem`` with ``method`` (see module doc).  Past ``time_limit`` seconds it
+    raises :class:`TimeLimit` with the best value found and a bound on the optimum."""
     if method not in METHODS:
         raise InputError(f"method {method!r}: expected one of {', '.join(METHODS)}")
     t0 = time.perf_counter()
+    deadline = None if time_limit is None else t0 + time_limit
     c = compile_problem(problem)
     parts = 1
-    if method == "auto":
-        out, name, parts = _solve_auto(c)
-    else:
-        try:
-            out, name = solve_compiled(c, method, node_limit)
-        except ValueError as exc:
-            raise InputError(str(exc)) from None
+    try:
+        if method == "auto":
+            out, name, parts = _solve_auto(c, deadline)
+        else:
+            try:
+                out, name = solve_compiled(c, method, node_limit, deadline)
+            except ValueError as exc:
+                raise InputError(str(exc)) from None
+    except TimeUp as exc:
+        value = math.fsum(problem.bids[c.bid_ids[i]].value for i in exc.chosen)
+        raise TimeLimit(time_limit, value, exc.bound, exc.method, exc.reason) from None
     seconds = time.perf_counter() - t0
     winners = tuple(sorted(c.bid_ids[i] for i in out.chosen))
     assignment = {problem.bids[b].task: problem.bids[b].robots for b in winners}

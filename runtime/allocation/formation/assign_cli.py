@@ -19,6 +19,10 @@ from runtime.allocation.formation.simulate import METHODS    # the registry's fo
 from runtime.errors import InputError
 from runtime.jsonfile import read_json
 
+MAX_COORD = 1e9          # m: |x|, |y| of a position (distances and their sums stay far from overflow)
+MAX_COST = 1e30          # a cost (the agents' bids and prices travel as MAVLink floats, at most 3.4e38)
+MAX_AGENTS = 250         # robots a distributed method can run: MAVLink system ids 1..250
+MAX_POINTS = 4000        # robots (= tasks) given as positions: the cost matrix is n x n
 
 
 def _finite(v) -> bool:
@@ -37,8 +41,9 @@ def _points(data: dict, key: str, path: Path) -> list[tuple[float, float]]:
         if (not isinstance(p, list) or len(p) != 2
                 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in p)):
             raise InputError(f"{path}: {key}[{i}]: expected [x, y] (two numbers), got {json.dumps(p)[:40]}")
-        if not all(_finite(v) for v in p):
-            raise InputError(f"{path}: {key}[{i}]: expected finite coordinates, got {p}")
+        if not all(_finite(v) and abs(v) <= MAX_COORD for v in p):
+            raise InputError(f"{path}: {key}[{i}]: expected finite coordinates within +-{MAX_COORD:g} m, "
+                             f"got {json.dumps(p)[:60]}")
         out.append((float(p[0]), float(p[1])))
     return out
 
@@ -66,15 +71,22 @@ def load_problem(path: str | Path) -> tuple[np.ndarray, list | None, list | None
         raise InputError(f'{path}: expected a JSON object with "costs" or "robots" and "tasks"')
     if "costs" in data:
         try:
-            return check_costs(data["costs"]), None, None
+            costs = check_costs(data["costs"])
         except ValueError as exc:
             raise InputError(f"{path}: {exc}") from None
+        if costs.max() > MAX_COST:
+            i, j = (int(v) for v in np.unravel_index(np.argmax(costs), costs.shape))
+            raise InputError(f"{path}: costs[{i}][{j}]: expected at most {MAX_COST:g}, got {costs[i, j]:g}")
+        return costs, None, None
     if "robots" not in data or "tasks" not in data:
         missing = "tasks" if "robots" in data else "robots"
         raise InputError(f'{path}: missing key "{missing}" (expected "costs", or "robots" and "tasks")')
     robots, tasks = _points(data, "robots", path), _points(data, "tasks", path)
     if len(robots) != len(tasks):
         raise InputError(f"{path}: expected as many tasks as robots, got {len(robots)} robots and {len(tasks)} tasks")
+    if len(robots) > MAX_POINTS:
+        raise InputError(f"{path}: expected at most {MAX_POINTS} robots and tasks (an n x n cost matrix), "
+                         f"got {len(robots)}")
     world = data.get("world")
     if world is None:
         costs = straight_line_costs(robots, tasks)
@@ -91,6 +103,9 @@ def run(args: argparse.Namespace) -> int:
     if not (args.bid_timeout > 0 and math.isfinite(args.bid_timeout)):
         raise InputError(f"--bid-timeout: expected a positive number of seconds, got {args.bid_timeout}")
     costs, robots, tasks = load_problem(args.problem)
+    if args.method != "hungarian" and len(costs) > MAX_AGENTS:
+        raise InputError(f"{args.problem}: expected at most {MAX_AGENTS} robots for --method {args.method} (one "
+                         f"MAVLink system id each; hungarian takes any number), got {len(costs)}")
     result = solve(args.method, costs, tasks=tasks, bid_timeout=args.bid_timeout)
     if args.json:
         print(json.dumps({"assignment": result.assignment, "cost": result.cost, "messages": result.messages}))

@@ -1,0 +1,40 @@
+"""`mrta sitl run`'s options, checked before the world is built: each wrong one is one InputError line naming it.
+
+Numbers that override the fleet config (``--speedup``, ``--timeout``, ``--seed``) take the fleet config's own
+ranges; ``--instance`` must leave every port of the fleet in 1..65535; the run folder, the manifest and the JSON
+result must be writable now, not only when the run ends.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+from runtime import argcheck
+from runtime import config as C
+
+MAX_INSTANCE = 400
+
+
+def fleet_range(name: str) -> tuple[float | None, float | None]:
+    """The ``[lo, hi]`` range of FleetConfig field ``name``."""
+    meta = next(f.metadata for f in dataclasses.fields(C.FleetConfig) if f.name == name)
+    return meta.get("lo"), meta.get("hi")
+
+
+def check(args, stride: int) -> None:
+    """InputError naming the option unless ``args`` (parsed `mrta sitl run` options) can start a run; ``stride``:
+    the ports one ``--instance`` moves a fleet by."""
+    for name in ("speedup", "timeout", "seed"):
+        lo, hi = fleet_range(name)
+        argcheck.number(getattr(args, name), f"--{name}", lo, hi)
+    argcheck.number(args.instance, "--instance", 0, MAX_INSTANCE)
+    argcheck.output_dir(args.run_dir, "--run-dir")
+    argcheck.output_file(args.manifest, "--manifest", make_parents=True)
+    argcheck.output_file(args.json, "--json")
+    if args.instance:
+        fleet = C.load_fleet(args.fleet)
+        _, gcs_port = C.parse_hostport(fleet.gcs, fleet.source, "gcs")
+        shift = stride * args.instance
+        top = max(fleet.base_port + max(r.id for r in fleet.robots), gcs_port) + shift
+        if top > 65535:
+            raise C.ConfigError("--instance", "", f"an instance whose ports stay <= 65535 (this fleet's reach "
+                                f"{top} at --instance {args.instance})", args.instance)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import example, given, settings, strategies as st
 
 from runtime.drivers import arcos_protocol as P
 from runtime.errors import InputError
@@ -40,6 +40,7 @@ def test_vel2_left_minus_5_right_10():
 
 
 @given(st.integers(-128, 127), st.integers(-128, 127))
+@example(left=-128, right=0)                 # -32768: NINTARG with magnitude 0x8000
 def test_vel2_round_trip(left, right):
     assert P.vel2_wheels(P.parse_command(P.vel2(left, right)[3:-2]).value) == (left, right)
 

@@ -184,10 +184,11 @@ class PacketParser:
 
 # ----------------------------------------------------------------------------- arguments
 def int_arg(value: int) -> bytes:
-    """ArRobotPacketSender::comInt's argument: INTARG or NINTARG, then the magnitude as a little-endian u16."""
+    """ArRobotPacketSender::comInt's argument: INTARG or NINTARG, then the magnitude as a little-endian u16 (a short:
+    -32768 goes as NINTARG 0x8000, as ARIA's ``-val`` promoted to int gives it; VEL2 with left -128 sends it)."""
     value = int(value)
-    if not -32767 <= value <= 32767:
-        raise InputError(f"ARCOS integer argument {value}: expected -32767..32767 (a short)")
+    if not -32768 <= value <= 32767:
+        raise InputError(f"ARCOS integer argument {value}: expected -32768..32767 (a short)")
     return bytes([NINTARG if value < 0 else INTARG]) + abs(value).to_bytes(2, "little")
 
 

@@ -113,12 +113,22 @@ class Fleet:
 INSTANCE_STRIDE = 100      # ports an --instance moves a fleet by (as ArduPilot's SITL does, by 10 per vehicle)
 
 
+def check_instance(fleet: C.FleetConfig, instance: int) -> None:
+    """InputError naming ``--instance`` unless every port of ``fleet`` moved to ``instance`` stays <= 65535."""
+    _, gcs_port = C.parse_hostport(fleet.gcs, fleet.source, "gcs")
+    top = max(fleet.base_port + max(r.id for r in fleet.robots), gcs_port) + INSTANCE_STRIDE * instance
+    if top > 65535:
+        raise C.ConfigError("--instance", "", f"an instance whose ports stay <= 65535 (this fleet's reach {top} at "
+                            f"--instance {instance})", instance)
+
+
 def claim_ports(fleet: C.FleetConfig, instance: int = 0) -> C.FleetConfig:
     """The fleet moved to instance ``instance`` (its ground-station and robot ports + INSTANCE_STRIDE x N), once
     every robot's MAVLink port is checked free: a busy one is an InputError naming it (another fleet runs)."""
     import dataclasses
     import socket
 
+    check_instance(fleet, instance)
     host, gcs_port = C.parse_hostport(fleet.gcs, fleet.source, "gcs")
     shift = INSTANCE_STRIDE * instance
     fleet = dataclasses.replace(fleet, base_port=fleet.base_port + shift, gcs=f"{host}:{gcs_port + shift}")
@@ -543,7 +553,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _main(args) -> int:
     from sitl import run_args
 
-    run_args.check(args, INSTANCE_STRIDE)          # every option, before the world is built
+    run_args.check(args)          # every option, before the world is built
     f = build(args.fleet, args.run_dir, args.manifest, args.seed, args.signing, args.method, args.speedup,
               args.instance)
     speedup = args.speedup or f.fleet.speedup

@@ -20,9 +20,8 @@ def fleet_range(name: str) -> tuple[float | None, float | None]:
     return meta.get("lo"), meta.get("hi")
 
 
-def check(args, stride: int) -> None:
-    """InputError naming the option unless ``args`` (parsed `mrta sitl run` options) can start a run; ``stride``:
-    the ports one ``--instance`` moves a fleet by."""
+def check(args) -> None:
+    """InputError naming the option unless ``args`` (parsed `mrta sitl run` options) can start a run."""
     for name in ("speedup", "timeout", "seed"):
         lo, hi = fleet_range(name)
         argcheck.number(getattr(args, name), f"--{name}", lo, hi)
@@ -31,10 +30,5 @@ def check(args, stride: int) -> None:
     argcheck.output_file(args.manifest, "--manifest", make_parents=True)
     argcheck.output_file(args.json, "--json")
     if args.instance:
-        fleet = C.load_fleet(args.fleet)
-        _, gcs_port = C.parse_hostport(fleet.gcs, fleet.source, "gcs")
-        shift = stride * args.instance
-        top = max(fleet.base_port + max(r.id for r in fleet.robots), gcs_port) + shift
-        if top > 65535:
-            raise C.ConfigError("--instance", "", f"an instance whose ports stay <= 65535 (this fleet's reach "
-                                f"{top} at --instance {args.instance})", args.instance)
+        from sitl.launcher import check_instance
+        check_instance(C.load_fleet(args.fleet), args.instance)

@@ -75,6 +75,18 @@ def test_the_verdict_says_why_a_formation_missing_a_robot_fails(tmp_path):
 
 
 @pytest.mark.slow
+def test_a_run_that_times_out_before_its_goal_exits_1_saying_so(tmp_path):
+    """A formation that needs ~19 s given 3 s: exit 1, the verdict names the timeout (it printed a valid
+    assignment and exited 0 before)."""
+    proc = subprocess.run([sys.executable, "-m", "runtime.cli", "sitl", "run", str(_fleet_copy(tmp_path)),
+                           "--speedup", "2", "--timeout", "3", "--run-dir", str(tmp_path / "run")], cwd=ROOT,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 1, proc.stdout[-2000:]
+    assert proc.stderr.strip().splitlines()[-1].startswith("mrta: goal not met: timeout after 3 s"), proc.stderr
+    assert "verdict: goal not met: timeout after 3 s" in proc.stdout and "lost" not in proc.stdout
+
+
+@pytest.mark.slow
 def test_daemons_end_when_the_launcher_is_killed(tmp_path):
     """SIGKILL the launcher: no daemon is left running (parent-death signal)."""
     import time

@@ -406,3 +406,64 @@ def test_the_daemon_stops_on_a_lost_device_and_writes_its_final_snapshot(tmp_pat
     os.close(slave)
     assert code == 3
     assert json.loads(stats.read_text())["cycles"] > 0
+
+
+@pytest.mark.parametrize("ending", ["SIGTERM", "exception"])
+def test_the_daemon_stops_a_moving_create_on_a_signal_and_on_an_exception(tmp_path, ending):
+    """A Create has no watchdog of its own: whatever ends `mrta daemon`'s loop, the base is told to stop.  The
+    daemon drives the emulated Create at 0.2 m/s; a SIGTERM (or an exception in a cycle) ends the run, and the
+    emulator's wheels are at rest and the OI is out of Safe mode (Stop) afterwards."""
+    import os
+    import signal
+    import threading
+
+    from runtime import config as C
+    from runtime.clock import ScaledClock
+    from runtime.daemon import Daemon, run
+    body = FakeBody(track=P.GEOMETRY["create2"].track_mm / 1000.0)
+    dev = CreateOIDevice(body)
+    done = threading.Event()
+
+    def emulate():
+        t0 = time.monotonic()
+        while not done.is_set():
+            dev.service(time.monotonic() - t0)
+            time.sleep(0.005)
+
+    cfg = C.from_dict(C.RobotConfig, {"base": {"port": dev.path}, "gps": {"enabled": False},
+                                      "comms": {"listen": "127.0.0.1:0", "gcs": None},
+                                      "localization": {"initial_pose": [0, 0, 0]}})
+    d = Daemon(cfg)
+    step, moving = d.step, []
+
+    def step_and_drive(now):
+        step(now)
+        d.base.set_velocity(0.2, 0.0, now)
+        moving.append(body.cmd != (0.0, 0.0))
+        if ending == "exception" and len(moving) > 20:
+            raise RuntimeError("a bug in a cycle")
+
+    d.step = step_and_drive
+    emulator = threading.Thread(target=emulate, daemon=True)
+    emulator.start()
+    handlers = signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)
+    timer = threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGTERM))
+    try:
+        if ending == "SIGTERM":
+            timer.start()
+            assert run(d, ScaledClock(1.0), duration=30.0) == 0
+        else:
+            with pytest.raises(RuntimeError, match="a bug in a cycle"):
+                run(d, ScaledClock(1.0), duration=30.0)
+        assert any(moving), "the emulated Create never moved"
+        deadline = time.monotonic() + 2.0
+        while (body.cmd != (0.0, 0.0) or dev.mode_name == "safe") and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert body.cmd == (0.0, 0.0) and dev.mode_name != "safe", (body.cmd, dev.mode_name)
+    finally:
+        timer.cancel()
+        done.set()
+        emulator.join(2.0)
+        dev.close()
+        signal.signal(signal.SIGTERM, handlers[0])
+        signal.signal(signal.SIGINT, handlers[1])

@@ -89,7 +89,7 @@ def short_repr(value: Any, limit: int = 60) -> str:
 
 
 def rng(lo: float | None = None, hi: float | None = None, **extra: Any) -> dict:
-    """Field metadata: inclusive numeric range."""
+    """Field metadata: numeric range, inclusive (``lo_open=True``: the low end excluded)."""
     return {"lo": lo, "hi": hi, **extra}
 
 
@@ -210,9 +210,9 @@ def _build(tp: Any, value: Any, file: str, key: str, meta: dict | None = None) -
         if not ok:
             raise ConfigError(file, key, _type_name(tp), value)
         value = tp(value)
-        lo, hi = (meta or {}).get("lo"), (meta or {}).get("hi")
-        if (lo is not None and value < lo) or (hi is not None and value > hi):
-            raise ConfigError(file, key, f"a number in [{lo}, {hi}]", value)
+        lo, hi, lo_open = (meta or {}).get("lo"), (meta or {}).get("hi"), (meta or {}).get("lo_open", False)
+        if (lo is not None and (value <= lo if lo_open else value < lo)) or (hi is not None and value > hi):
+            raise ConfigError(file, key, f"a number in {'(' if lo_open else '['}{lo}, {hi}]", value)
         return value
     if tp is str:
         if not isinstance(value, str):

@@ -82,11 +82,16 @@ class Executive:
 
     # ------------------------------------------------------------------ commitments
     def sync(self, commitments: tuple[Commitment, ...], now: float) -> None:
-        """Start executors for new commitments, cancel those whose commitment ended."""
+        """Start executors for new commitments, cancel those whose commitment ended.  A commitment that changed
+        but keeps its task goes to its executor's ``recommit`` where it has one (a transport keeps its load when
+        its coalition changes), and restarts the executor where it has none."""
         want = {c.task_id: c for c in commitments}
         changed = False
         for tid in list(self.executors):
-            if tid not in want or want[tid] != self.executors[tid].commitment:
+            ex = self.executors[tid]
+            if tid in want and want[tid] != ex.commitment and hasattr(ex, "recommit"):
+                ex.recommit(want[tid], now)          # same task, new partners or parameters: carry on
+            elif tid not in want or want[tid] != ex.commitment:
                 self.executors.pop(tid).cancel(now)
                 changed = True
         for tid, c in want.items():

@@ -16,6 +16,7 @@ from runtime.tasks.model import (ARRIVED, DONE, FAILED, Commitment, Estimate, Pr
 KINDS: dict[str, str] = {
     "goto": "runtime.tasks.goto",
     "rendezvous": "runtime.tasks.rendezvous",
+    "transport": "runtime.tasks.transport",
 }
 
 

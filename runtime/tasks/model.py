@@ -7,7 +7,9 @@
 * :class:`Estimate` - a kind's pure estimate of what a task costs this robot (metres of travel for
   motion tasks) and how long it takes (seconds).
 * :class:`Commitment` - what an allocation agent hands to execution: the task, the robots it shares it
-  with (a coalition; empty when alone) and this robot's role in it.  A robot may hold several.
+  with (a coalition; empty when alone), this robot's role in it and the role's parameters (``params``:
+  ``(name, value)`` pairs the kind's executor reads, e.g. a transport's load per trip).  A robot may hold
+  several.
 * :class:`Progress` - what execution reports back to the agent: ``arrived``, ``done``, ``failed``
   (``detail`` says why), with the time.
 """
@@ -51,6 +53,10 @@ class Commitment:
     task: Task
     partners: tuple[int, ...] = ()      # the other robots of the coalition
     role: str = "solo"
+    params: tuple[tuple[str, Any], ...] = ()     # (name, value) pairs for the executor; hashable
+
+    def param(self, name: str, default: Any = None) -> Any:
+        return next((v for k, v in self.params if k == name), default)
 
     @property
     def task_id(self) -> int:

@@ -1,0 +1,115 @@
+"""The ``transport`` task kind (paper 000's objects) and its executor: trips of load, carry, unload, driven by a
+kinematic robot through the real executive (pure pursuit and the arbiter)."""
+from __future__ import annotations
+
+import logging
+import math
+
+import pytest
+
+from runtime import tasks as T
+from runtime.drivers.base import BaseSensors
+from runtime.execution.executive import ExecContext, Executive, Tunables
+from runtime.execution.transport import LOADING, TO_DELIVERY, TO_OBJECT, TransportExecutor
+from runtime.planning.robot_planner import RobotPlanner
+from runtime.tasks import Commitment, Task
+from runtime.tasks.transport import DELIVERED, LOADED, MAV_CMD_WAYPOINT_USER_2, Transport, from_item, to_item
+
+
+def test_mission_item_round_trip_and_kind_lookup():
+    spec = Transport(1.5, -2.0, 40.0, 108.0, 75.0)
+    command, params = to_item(spec)
+    assert command == MAV_CMD_WAYPOINT_USER_2 and T.kind_of_command(command).KIND == "transport"
+    assert from_item(command, params, 1.5, -2.0) == spec
+
+
+@pytest.mark.parametrize("params, why", [
+    ((0.0, 108.0, 1.0, 0.0), "param1 (weight, wu): expected a number > 0"),
+    ((float("nan"), 108.0, 1.0, 0.0), "param1 (weight, wu)"),
+    ((40.0, 0.0, 1.0, 0.0), "param2 (deadline, s): expected a number > 0"),
+    ((40.0, float("inf"), 1.0, 0.0), "param2 (deadline, s)"),
+    ((40.0, 108.0, -1.0, 0.0), "param3 (maximum utility): expected a number >= 0"),
+])
+def test_bad_params_are_one_line_reasons(params, why):
+    with pytest.raises(ValueError, match=re_escape(why)):
+        from_item(MAV_CMD_WAYPOINT_USER_2, params, 0.0, 0.0)
+
+
+def re_escape(s: str) -> str:
+    import re
+    return re.escape(s)
+
+
+def _run(executive, pose, until, t0=0.0, dt=0.1, on_progress=None):
+    """Drive a unicycle at the executive's commands; return the progress reported, with the pose kept."""
+    got = []
+    t = t0
+    while t < until:
+        (v, w), progress = executive.step(tuple(pose), BaseSensors(), t)
+        for p in progress:
+            got.append(p)
+            if on_progress:
+                on_progress(p)
+        pose[2] += w * dt
+        pose[0] += v * dt * math.cos(pose[2])
+        pose[1] += v * dt * math.sin(pose[2])
+        t += dt
+    return got, t
+
+
+def _executive():
+    ctx = ExecContext(RobotPlanner(None, "euclid", 0.25, 100, 0), Tunables(0.25, 0.5, 1.0, 0.1),
+                      logging.getLogger("test"), 0.25)
+    return Executive(ctx)
+
+
+PARAMS = (("delivery", (0.0, 0.0)), ("load", 2.0), ("load_time", 0.12), ("reach", 0.3))
+
+
+def test_trips_alternate_load_and_delivery_at_the_right_places_and_times():
+    ex = _executive()
+    task = Task(7, "transport", Transport(1.4, 0.0, 40.0, 108.0, 100.0))
+    ex.sync((Commitment(task, role="member", params=PARAMS),), 0.0)
+    pose = [0.0, 0.0, 0.0]
+    where = []
+    got, t = _run(ex, pose, 60.0, on_progress=lambda p: where.append(tuple(pose[:2])))
+    events = [p.event for p in got]
+    assert events[:4] == [LOADED, DELIVERED, LOADED, DELIVERED], events
+    assert all(p.data["wu"] == 2.0 for p in got)
+    for p, xy in zip(got, where):
+        target = (1.4, 0.0) if p.event == LOADED else (0.0, 0.0)
+        assert math.dist(xy, target) <= 0.3 + 0.05, (p.event, xy)
+    # a round trip of 2 x 1.4 m at <= 0.25 m/s, turning at each end, plus 0.48 s of dwell: 11.7 s at the least
+    deliveries = [p.t for p in got if p.event == DELIVERED]
+    assert all(b - a > 11.7 for a, b in zip(deliveries, deliveries[1:]))
+
+
+def test_a_changed_coalition_keeps_the_load_on_board():
+    ex = _executive()
+    task = Task(7, "transport", Transport(1.4, 0.0, 40.0, 108.0, 100.0))
+    c = Commitment(task, role="member", params=PARAMS)
+    ex.sync((c,), 0.0)
+    pose = [0.0, 0.0, 0.0]
+    got, t = _run(ex, pose, 30.0)
+    while ex.executors[7].phase != TO_DELIVERY:
+        more, t = _run(ex, pose, t + 0.1, t0=t)
+    before = ex.executors[7]
+    assert before.carrying == 2.0
+    ex.sync((Commitment(task, partners=(3, 4), role="member", params=PARAMS),), t)
+    assert ex.executors[7] is before and before.phase == TO_DELIVERY and before.carrying == 2.0
+    ex.sync((), t)
+    assert not ex.executors
+
+
+def test_the_robot_stands_still_while_loading():
+    ex = _executive()
+    task = Task(7, "transport", Transport(1.0, 0.0, 40.0, 108.0, 100.0))
+    ex.sync((Commitment(task, params=(("load", 10.0), ("load_time", 1.0), ("reach", 0.3))),), 0.0)
+    pose = [0.0, 0.0, 0.0]
+    t = 0.0
+    while ex.executors[7].phase == TO_OBJECT:
+        _, t = _run(ex, pose, t + 0.1, t0=t)
+    assert ex.executors[7].phase == LOADING
+    (v, w), _ = ex.step(tuple(pose), BaseSensors(), t + 1.0)
+    assert (v, w) == (0.0, 0.0)
+    assert isinstance(ex.executors[7], TransportExecutor)

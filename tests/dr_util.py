@@ -30,7 +30,7 @@ def busy_fleet() -> TransportFleet:
     return copy.deepcopy(_BUSY)
 
 
-def agent(robot_id: int = 1, peers=(2, 3, 4, 5), pos=(0.0, 0.0), speed: float = 0.25, **options) -> DrAgent:
+def agent(robot_id: int = 1, peers=(1, 2, 3, 4, 5), pos=(0.0, 0.0), speed: float = 0.25, **options) -> DrAgent:
     """A lone agent at ``pos`` whose peers are ``peers``; ``options`` are DrOptions fields."""
     where = {"pos": pos}
     est = StraightLineEstimator(Profile(speed, 0.2), lambda: where["pos"])

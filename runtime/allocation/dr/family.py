@@ -415,6 +415,7 @@ class DrAgent:
             info.left_heard = m.left
         if m.robot == self.robot_id and m.task in self.outboxes:
             self.outboxes[m.task].on_ledger(m)
+            return self._after_unload(now)
         return []
 
     # ------------------------------------------------------------------ roles

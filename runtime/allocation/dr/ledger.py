@@ -137,7 +137,6 @@ class Outbox:
     carried: float | None = None                      # the grant of the last load acknowledged
     head: object = None                               # the report being sent, resent until acknowledged
     sent: float = float("-inf")
-    exhausted: bool = False                           # a load was granted 0: nothing is left
 
     # ------------------------------------------------------------------ execution
     def loaded_now(self, wu: float) -> None:
@@ -201,7 +200,8 @@ class Outbox:
             self.head, self.sent = None, float("-inf")
             self.mine.loads, self.mine.taken = head.seq, self.mine.taken + granted
             self.carried = granted
-            self.exhausted = granted <= EPS
+            if granted <= EPS and not any(item[0] == LOAD for item in self.queue):
+                self.loaded = False                     # the load on board is nothing: drive on empty
         elif isinstance(head, DrDeliver) and e.deliveries >= head.seq:
             self.head, self.sent = None, float("-inf")
         self.mine.returned = max(self.mine.returned, e.returned)

@@ -399,3 +399,52 @@ def test_samples_are_learnt_only_online():
     a = agent(2, online=False)
     a.on_message(DrSvrSample(4, 0, 1, 2.0, 1.4, 0.1), 1.0)
     assert a.model.samples == []
+
+
+# ------------------------------------------------------------------------------------------------ config
+def test_the_allocation_section_builds_options_and_the_model_path_is_relative_to_the_config(tmp_path):
+    from runtime.config.build import ConfigError
+    from runtime.config.robot import load_robot
+    from runtime.allocation.agent import AgentContext
+    from runtime.allocation.dr.family import DrAgent
+    from runtime.errors import InputError
+
+    InterferenceModel.from_samples([(1.0, 1.0, 0.0), (4.0, 1.0, 0.2)], search=False).save(tmp_path / "i.json")
+    cfg = tmp_path / "robot.yaml"
+    cfg.write_text("allocation: {method: dr, auction: sr, strategy: M_I, utility: hard, online: true,\n"
+                   "             speed_belief: 0.0667, delivery: [1.0, -2.0], model: i.json, time_auction: 2.5}\n")
+    o = load_robot(cfg).allocation
+    assert (o.auction, o.strategy, o.utility, o.online, o.delivery, o.time_auction) == ("sr", "M_I", "hard", True,
+                                                                                         (1.0, -2.0), 2.5)
+    assert o.monitoring and o.interference and o.model_path() == tmp_path / "i.json"
+    a = DrAgent(AgentContext(1, (2,), agent().estimator, o))
+    assert a.model.samples == [(1.0, 1.0, 0.0), (4.0, 1.0, 0.2)] and a.speed == pytest.approx(0.0667)
+    cfg.write_text("allocation: {method: dr, strategy: X}\n")
+    with pytest.raises(ConfigError, match="allocation.strategy"):
+        load_robot(cfg)
+    cfg.write_text("allocation: {method: dr, model: missing.json}\n")
+    with pytest.raises(InputError) as exc:
+        DrAgent(AgentContext(1, (2,), agent().estimator, load_robot(cfg).allocation))
+    assert str(exc.value).startswith(f"{cfg}: allocation.model: ") and "missing.json" in str(exc.value)
+
+
+def test_speed_belief_is_what_eq5_uses():
+    a = agent(1, speed_belief=M.speed_from_paper(0.8))
+    a.add_tasks([transport(T1, 1.4, 0.0)], 0.0)
+    assert a.capacity(a.world.tasks[T1]) == pytest.approx(0.27 * WC, rel=0.02)
+    assert agent(1).capacity(agent(1).world.add(transport(T1, 1.4, 0.0), 0.0)) == pytest.approx(WC)
+
+
+def test_a_disarmed_leader_tells_its_group_and_the_task_is_free_to_lead_at_once():
+    a = agent(3)
+    a.add_tasks([transport(T1, 1.4, 0.0)], 0.0)
+    t, rid = elect(a, T1)
+    (alive,) = of(a.on_tick(t + 0.1) + a.lead._alive(t + 0.1), DrLeaderAlive)
+    b = agent(2)
+    b.add_tasks([transport(T1, 1.4, 0.0)], 0.0)
+    b.on_message(alive, t + 0.1)
+    assert not of(b.on_tick(t + 0.2), DrLeaderRequest)            # it has a leader
+    out = a.set_available(False, t + 0.3)
+    assert out == [DrExitLeader(3, 0, T1, YIELD)] and a.role(T1) is None and a.commitments == ()
+    b.on_message(out[0], t + 0.3)
+    assert of(b.on_tick(t + 0.4), DrLeaderRequest)                # no leader_timeout to wait

@@ -36,6 +36,7 @@ from runtime.allocation.dr.messages import (NOT_MEMBER, REASONS, WIRE_MESSAGES, 
                                             why_invalid)
 from runtime.allocation.dr.options import DrOptions
 from runtime.allocation.dr.world import TaskInfo, World
+from runtime.errors import InputError
 from runtime.fleet.messages import RobotState, task_origin
 from runtime.log import get_logger
 from runtime.tasks import FAILED as P_FAILED, Commitment, Progress, Task
@@ -85,7 +86,10 @@ class DrAgent:
         self.finished: dict[int, Finish] = {}          # tasks this robot completed as their leader
         self.gave_up: dict[int, float] = {}            # task -> when this robot gave up asking to lead it
         path = self.o.model_path()
-        self.model = load_model(path) if path is not None else InterferenceModel(source="none: learnt on-line")
+        try:
+            self.model = load_model(path) if path is not None else InterferenceModel(source="none: learnt on-line")
+        except InputError as exc:
+            raise InputError(f"{self.o.source or '<config>'}: allocation.model: {exc}") from None
         if path is None and self.o.interference:
             self.log.warning("strategy %s without an interference model file: I = 0 until samples are learnt",
                              self.o.strategy)
@@ -236,7 +240,7 @@ class DrAgent:
         if m is not None and m.leader == robot_id:
             out += self._leave(f"leader {robot_id} lost", now)
         if self.lead is not None and robot_id in self.lead.members:
-            self.lead._drop(robot_id, now, "lost")
+            self.lead.drop(robot_id, now, "lost")
         return self._route(out, now)
 
     def on_progress(self, p: Progress, now: float) -> list:
@@ -384,6 +388,9 @@ class DrAgent:
         return out
 
     def _on_exit(self, m: DrExitLeader, now: float) -> list:
+        info = self.world.tasks.get(m.task)
+        if m.dest == BROADCAST and info is not None and info.leader == m.sender:
+            info.leader = None                              # it no longer leads: the task is free to lead
         ms = self.membership
         if ms is not None and ms.task == m.task and ms.leader == m.sender:
             return self._leave(f"robot {m.sender} says: {REASONS[m.reason]}", now)

@@ -257,7 +257,7 @@ class Leader:
         out = []
         world, ledger = self.host.world, self.info.ledger
         for r in [r for r, j in self.members.items() if now - j.heard > self.o.member_timeout]:
-            self._drop(r, now, f"silent for {self.o.member_timeout:g} s")
+            self.drop(r, now, f"silent for {self.o.member_timeout:g} s")
         for r in ledger.carriers():
             if world.silent(r, now, self.o.member_timeout) and ledger.give_back(r):
                 self.host.log.warning("task %d: robot %d silent for %.1f s: its load goes back to the object",
@@ -269,7 +269,7 @@ class Leader:
                 out.append(self._release(r, EXHAUSTED))
         return out
 
-    def _drop(self, r: int, now: float, why: str) -> None:
+    def drop(self, r: int, now: float, why: str) -> None:
         self.members.pop(r, None)
         self.awarded.pop(r, None)
         self.host.log.warning("task %d: member %d dropped (%s)", self.task, r, why)
@@ -320,7 +320,7 @@ class Leader:
     def on_refuse(self, m, now: float) -> None:
         r = m.sender
         if m.round == 0 and r in self.members:
-            self._drop(r, now, "it left")
+            self.drop(r, now, "it left")
         elif r in self.pending and m.round == self.pending[r].round:
             del self.pending[r]
             self.awarded.pop(r, None)

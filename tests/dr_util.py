@@ -79,8 +79,8 @@ class Watch:
                     self.leaders.setdefault(t, []).append((now, rid))
                 for m in list(a.lead.members):
                     b = f.robots[m].agent
-                    ok = m in live and ((b.membership is not None and (b.membership.task, b.membership.leader) == (t, rid))
-                                        or b.carrying == t)
+                    ms = b.membership
+                    ok = m in live and ((ms is not None and (ms.task, ms.leader) == (t, rid)) or b.carrying == t)
                     key = (rid, m, t)
                     if ok:
                         self.stale.pop(key, None)

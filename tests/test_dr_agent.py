@@ -183,9 +183,8 @@ def test_a_silent_member_is_dropped_after_member_timeout_and_eq8_failing_reopens
 def _free_robot(**options):
     a = agent(2, pos=(0.0, 0.0), **options)
     a.add_tasks([transport(T1, 1.0, 0.0), transport(T2, 2.0, 0.0), transport(T2 + 1, 1.0, 1.0)], 0.0)
-    for t in (T1, T2, T2 + 1):                          # every task has a leader: the robot does not ask to lead
-        a.on_message(DrLeaderAlive({T1: 1, T2: 4, T2 + 1: 5}[t], 0, t, 10, 0, 0, 1, 1, 1, ({T1: 1, T2: 4, T2 + 1: 5}[t],)),
-                     0.0)
+    for t, leader in ((T1, 1), (T2, 4), (T2 + 1, 5)):   # every task has a leader: the robot does not ask to lead
+        a.on_message(DrLeaderAlive(leader, 0, t, 10, 0, 0, 1, 1, 1, (leader,)), 0.0)
     assert not of(a.on_tick(0.05), DrLeaderRequest)
     return a
 

@@ -91,10 +91,14 @@ def _leader(f, task):
     return next((r for r in f.live() if f.robots[r].agent.role(task) == "leader"), None)
 
 
-@pytest.mark.parametrize("drop, seed", [(0.0, 1), (0.1, 7)])
-def test_a_killed_leader_is_replaced_within_15_s_and_the_weight_left_is_carried_on(drop, seed):
+@pytest.mark.parametrize("drop, seed, link", [(0.0, 1, True), (0.1, 7, True), (0.1, 7, False), (0.1, 8, False)])
+def test_a_killed_leader_is_replaced_within_15_s_and_the_weight_left_is_carried_on(drop, seed, link):
+    """``link`` False: the link never reports the dead leader lost, only its silence tells (leader_timeout)."""
     o = DrOptions(strategy="NM_NI")
     f = TransportFleet(FIVE, options=o, drop=drop, seed=seed, tick=0.1)
+    if not link:
+        for r in f.robots.values():
+            r.timeout = 1e9
     f.run(0.5)
     (tid,) = f.put(1, [(1.5, 1.5, 20, 60, 100)])
     f.run(20.0)
@@ -118,12 +122,13 @@ def test_a_killed_leader_is_replaced_within_15_s_and_the_weight_left_is_carried_
     when, new, left = seen["leader"]
     assert new != old and when - killed <= 15.0
     assert seen["left"] - killed <= o.leader_timeout + 0.2
+    assert when - killed <= o.leader_timeout + o.time_leadership + 0.3
     assert left == pytest.approx(before.left)                    # the books went on where the old leader stopped
     got = f.delivered()[tid]
     assert got == pytest.approx(20.0)                            # the dead leader's load went back and was re-taken
     fin = f.robots[new].agent.finished[tid]
     assert fin.started < killed                                  # the first leader's election carried on
-    print(f"drop {drop}: new leader {new} {when - killed:.2f} s after the kill (members gone after "
+    print(f"drop {drop}, link {link}: new leader {new} {when - killed:.2f} s after the kill (members gone after "
           f"{seen['left'] - killed:.2f} s); {before.left:g} wu left, {on_board:g} wu on the dead leader put back")
 
 
@@ -223,3 +228,30 @@ def test_online_samples_reach_every_robot_despite_loss():
     models = {r: sorted(f.robots[r].agent.model.samples) for r in f.robots}
     assert len(models[1]) == len(handed)
     assert all(m == models[1] for m in models.values()), {r: len(m) for r, m in models.items()}
+
+
+def _first_recruit(strategy: str) -> tuple[float, float]:
+    """One object a lone leader believes it can move in time (it thinks it drives 1 m/s; it drives 0.25): when
+    does it first recruit, and when was the task done (s after it appeared)?"""
+    o = DrOptions(strategy=strategy, speed_belief=1.0)
+    f = TransportFleet({1: (2.0, 0.0), 2: (-2.0, -2.0), 3: (-2.0, 2.0)}, options=o, tick=0.1)
+    f.run(0.5)
+    (tid,) = f.put(1, [(2.0, 0.0, 20, 80, 100)])
+    seen = {}
+
+    def watch(fl):
+        lead = fl.robots[1].agent.lead
+        if lead is not None and lead.members and "recruit" not in seen:
+            seen["recruit"] = fl.now - 0.5
+    f.run(400, stop=lambda fl: fl.table_state(tid) == T_DONE, observe=watch)
+    assert _leader(f, tid) is None and f.robots[1].agent.finished[tid].delivered == 20
+    return seen.get("recruit", float("inf")), f.robots[1].agent.finished[tid].time
+
+
+def test_monitoring_notices_slow_progress_at_load_events_and_not_monitoring_only_at_the_deadline():
+    m_recruit, m_done = _first_recruit("M_NI")
+    nm_recruit, nm_done = _first_recruit("NM_NI")
+    assert m_recruit < 80 <= nm_recruit
+    assert m_done < nm_done
+    print(f"believing 1 m/s: M recruits at {m_recruit:.1f} s, done {m_done:.1f} s; "
+          f"NM recruits at {nm_recruit:.1f} s, done {nm_done:.1f} s (deadline 80 s)")

@@ -244,7 +244,8 @@ class Leader:
             silent = sorted(self.pending)
             self.pending.clear()
             if silent:
-                self.host.log.info("task %d: no ROBOT_ALIVE from %s within %.1f s", self.task, silent, self.o.award_wait)
+                self.host.log.info("task %d: no ROBOT_ALIVE from %s within %.1f s", self.task, silent,
+                                   self.o.award_wait)
             self._settle(now)
             return out
         for r, j in self.pending.items():

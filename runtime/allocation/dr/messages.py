@@ -16,7 +16,7 @@ so a resent or duplicated report changes nothing and the replicas merge in any o
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 from runtime.fleet.messages import task_origin
 
@@ -286,7 +286,3 @@ def why_invalid(msg) -> str | None:
         return msg.invalid()
     except Exception as exc:          # values of types the protocol never sends
         return f"malformed: {type(exc).__name__}"
-
-
-def field_names(cls) -> tuple[str, ...]:
-    return tuple(f.name for f in fields(cls))

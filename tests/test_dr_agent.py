@@ -447,3 +447,21 @@ def test_a_disarmed_leader_tells_its_group_and_the_task_is_free_to_lead_at_once(
     assert out == [DrExitLeader(3, 0, T1, YIELD)] and a.role(T1) is None and a.commitments == ()
     b.on_message(out[0], t + 0.3)
     assert of(b.on_tick(t + 0.4), DrLeaderRequest)                # no leader_timeout to wait
+
+
+def test_a_leader_of_an_exhausted_object_keeps_the_books_without_recruiting():
+    a = agent(3)
+    a.add_tasks([transport(T1, 1.4, 0.0, weight=4.0, deadline=1.0)], 0.0)          # late, and all taken
+    for robot in (1, 2):
+        a.on_message(DrLedger(1, 0, T1, robot, 1, 2.0, 0, 0.0, 0.0, 0.0), 0.1)
+    a.on_message(DrExitLeader(1, 0, T1, YIELD), 0.2)
+    out = a.on_tick(0.3)
+    assert of(out, DrLeaderRequest)
+    out = a.on_tick(1.6)
+    assert a.role(T1) == "leader" and not of(out, DrBidRequest) and a.commitments == ()
+    a.on_message(idle(5, 2.0), 2.0)
+    assert not of(a.on_tick(4.0), DrBidRequest)
+    for robot in (1, 2):
+        a.on_message(DrDeliver(robot, 3, T1, 1, 2.0, 1, 2.0, 2.0, 0.0), 5.0)
+    a.on_tick(5.1)
+    assert a.role(T1) is None and a.finished[T1].delivered == 4.0

@@ -161,6 +161,9 @@ class Leader:
         self.host.log.info("leading task %d (%.1f wu at %.2f m, deadline %.0f s, %.1f s gone)", self.task,
                            self.info.ledger.left, self.info.distance, self.info.task.spec.deadline,
                            now - self.info.appeared)
+        if not self.working:                       # only the books to finish: nobody to recruit
+            self.next_check = now + self.o.time_auction
+            return self._alive(now)
         return self._open(now) + self._alive(now)
 
     def _open(self, now: float) -> list:

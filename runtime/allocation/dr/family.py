@@ -414,6 +414,7 @@ class DrAgent:
             self.dropped["too many unknown tasks"] += 1
             return []
         info.ledger.merge(m.robot, m.loads, m.taken, m.deliveries, m.delivered, m.returned)
+        self.world.mentioned(m.robot, now)
         if m.sender == info.leader or m.sender == self.robot_id:
             info.left_heard = m.left
         ms = self.membership

@@ -103,6 +103,11 @@ class World:
         self.lost.discard(rid)
         self.peers.setdefault(rid, Peer()).heard = now
 
+    def mentioned(self, rid: int, now: float) -> None:
+        """A robot named in the books, never heard yet: its silence counts from now."""
+        if rid in self.configured and rid not in self.peers:
+            self.peers[rid] = Peer(heard=now)
+
     def on_state(self, m: RobotState) -> bool:
         try:
             ok = m.invalid() is None and all(isinstance(t, int) for t in m.tasks)

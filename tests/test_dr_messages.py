@@ -10,10 +10,12 @@ from pathlib import Path
 import pytest
 from hypothesis import given, settings, strategies as st
 
+from runtime.allocation.agent import why_invalid
 from runtime.allocation.dr import messages as W
 from runtime.comms import codec, dialect
 from runtime.fleet.messages import RobotState
 
+from tests.codec_util import damage, decode, frame
 from tests.dr_util import busy_fleet
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -56,26 +58,6 @@ MESSAGES = st.one_of(
 )
 
 
-def _frame(mod, msg) -> bytes:
-    return codec.encode(msg, mod.MAVLink(None, srcSystem=msg.sender, srcComponent=1))
-
-
-def _decode(mod, data: bytes) -> tuple[list, int]:
-    """Parse like the link does: (our messages, frames refused)."""
-    rx = mod.MAVLink(None, srcSystem=200, srcComponent=1)
-    rx.robust_parsing = True
-    out, refused = [], 0
-    for m in rx.parse_buffer(data) or []:
-        try:
-            msg = codec.from_mavlink(m)
-        except Exception:                      # InvalidMessage, or a field that will not convert: counted
-            refused += 1
-            continue
-        if msg is not None:
-            out.append(msg)
-    return out, refused
-
-
 def test_the_block_holds_one_message_per_wire_class_and_the_fleet_dialect_includes_it(mod):
     ids = {int(m.get("id")): m.get("name") for m in ET.parse(XML).iter("message")}
     assert all(44150 <= i < 44200 for i in ids)
@@ -88,7 +70,7 @@ def test_the_block_holds_one_message_per_wire_class_and_the_fleet_dialect_includ
 @given(MESSAGES)
 def test_round_trip(mod, msg):
     assert msg.invalid() is None
-    got, refused = _decode(mod, _frame(mod, msg))
+    got, refused = decode(mod, frame(mod, msg))
     assert refused == 0 and got == [msg]
 
 
@@ -103,21 +85,16 @@ def test_round_trip(mod, msg):
     (W.DrLoad(3, 1, 1 << 16, 0, 2.0, 0, 0, 0, 0), "seq"),
     (W.DrLedger(3, 0, 1 << 16, 251, 1, 2, 0, 0, 0, 3), "robot"),
 ])
-def test_values_the_protocol_does_not_allow_are_refused_at_decode(mod, msg, why):
+def test_values_the_protocol_does_not_allow_are_refused_atdecode(mod, msg, why):
     assert why in msg.invalid()
-    got, refused = _decode(mod, _frame(mod, msg))
+    got, refused = decode(mod, frame(mod, msg))
     assert got == [] and refused == 1
 
 
 @settings(max_examples=200, deadline=None)
 @given(st.lists(MESSAGES, min_size=1, max_size=6), st.randoms(use_true_random=False), st.integers(0, 30))
 def test_bit_flipped_and_truncated_frames_never_raise(mod, msgs, rnd, flips):
-    data = bytearray(b"".join(_frame(mod, m) for m in msgs))
-    for _ in range(flips):
-        i = rnd.randrange(len(data))
-        data[i] ^= 1 << rnd.randrange(8)
-    data = bytes(data[:rnd.randrange(len(data) + 1)])
-    got, refused = _decode(mod, data)
+    got, refused = decode(mod, damage(b"".join(frame(mod, m) for m in msgs), rnd, flips))
     assert len(got) + refused <= len(msgs) + flips
     agent = busy_fleet().robots[1].agent
     for m in got:
@@ -140,7 +117,7 @@ def test_nonsense_messages_never_raise_and_are_counted(fields, rid):
     for cls, sender, values in fields:
         names = [f.name for f in dataclasses.fields(cls)]
         m = cls(**dict(zip(names, [sender] + values)))
-        bad += (cls is not RobotState and W.why_invalid(m) is not None) or sender not in (1, 2, 3, 4, 5)
+        bad += (cls is not RobotState and why_invalid(m) is not None) or sender not in (1, 2, 3, 4, 5)
         out = agent.on_message(m, 30.0)
         assert isinstance(out, list) and all(hasattr(o, "dest") for o in out)
         assert isinstance(agent.on_tick(30.05), list)
@@ -199,5 +176,5 @@ def test_random_bytes_decode_to_nothing_or_valid_messages(mod):
     rnd = random.Random(5)
     for _ in range(200):
         data = bytes(rnd.randrange(256) for _ in range(rnd.randrange(1, 300)))
-        got, _ = _decode(mod, data)
+        got, _ = decode(mod, data)
         assert all(m.invalid() is None for m in got)

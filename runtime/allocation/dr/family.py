@@ -19,11 +19,11 @@ in-memory tests hand over objects the codec never made); what cannot be acted on
 from __future__ import annotations
 
 import math
-from collections import Counter, deque
+from collections import Counter
 from pathlib import Path
 from typing import Sequence
 
-from runtime.allocation.agent import FAILED, AgentContext, Method, TaskEvent
+from runtime.allocation.agent import FAILED, AgentContext, Method, TaskEvent, route, why_invalid
 from runtime.allocation.dr import model as M
 from runtime.allocation.dr.interference import InterferenceModel
 from runtime.allocation.dr.leader import Finish, Leader, LeaderView
@@ -32,8 +32,7 @@ from runtime.allocation.dr.ledger import EPS, Entry, Outbox
 from runtime.allocation.dr.member import Membership, Offer, Offers, Request, better
 from runtime.allocation.dr.messages import (NOT_MEMBER, REASONS, WIRE_MESSAGES, YIELD, DrAward, DrBid, DrBidRequest,
                                             DrDeliver, DrExitLeader, DrLeaderAlive, DrLeaderRequest, DrLedger,
-                                            DrLoad, DrRefuse, DrRobotAlive, DrSampleRequest, DrSvrSample,
-                                            why_invalid)
+                                            DrLoad, DrRefuse, DrRobotAlive, DrSampleRequest, DrSvrSample)
 from runtime.allocation.dr.options import DrOptions
 from runtime.allocation.dr.world import TaskInfo, World
 from runtime.errors import InputError
@@ -557,17 +556,9 @@ class DrAgent:
                 del self.outboxes[task]
         return out
 
-    # ------------------------------------------------------------------ routing
     def _route(self, msgs: list, now: float) -> list:
         """The messages for the wire; those for this robot are handled here (broadcasts both)."""
-        wire, todo = [], deque(msgs)
-        while todo:
-            msg = todo.popleft()
-            if msg.dest != self.robot_id:
-                wire.append(msg)
-            if msg.dest in (self.robot_id, BROADCAST):
-                todo.extend(self._dispatch(msg, now))
-        return wire
+        return route(msgs, self.robot_id, lambda m: self._dispatch(m, now))
 
 
 _HANDLERS = {

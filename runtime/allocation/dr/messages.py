@@ -278,11 +278,3 @@ class DrLedger:
 
 WIRE_MESSAGES = (DrLeaderRequest, DrBidRequest, DrBid, DrAward, DrRobotAlive, DrRefuse, DrLeaderAlive, DrExitLeader,
                  DrSvrSample, DrSampleRequest, DrLoad, DrDeliver, DrLedger)
-
-
-def why_invalid(msg) -> str | None:
-    """``msg.invalid()`` for a message that did not come through the codec: never raises."""
-    try:
-        return msg.invalid()
-    except Exception as exc:          # values of types the protocol never sends
-        return f"malformed: {type(exc).__name__}"

@@ -76,3 +76,25 @@ class Method:
     dialect: str | None = None                     # its MAVLink XML (path), included in the fleet dialect
     solver: type | None = None                     # bare sans-IO solver for in-process sweeps, if any
     extra: dict = field(default_factory=dict)
+
+
+def why_invalid(msg) -> str | None:
+    """``msg.invalid()`` for a message that did not come through the codec (in-memory tests hand agents objects
+    the codec never made): never raises."""
+    try:
+        return msg.invalid()
+    except Exception as exc:          # values of types the protocol never sends
+        return f"malformed: {type(exc).__name__}"
+
+
+def route(msgs: list, robot_id: int, handle: Callable[[Any], list]) -> list:
+    """The messages for the wire among ``msgs``; those addressed to ``robot_id`` are handed to ``handle`` here (a
+    broadcast, dest 0, both), and so are the messages that handling returns, until none is left."""
+    wire, todo = [], list(msgs)
+    while todo:
+        msg = todo.pop(0)
+        if msg.dest != robot_id:
+            wire.append(msg)
+        if msg.dest in (robot_id, 0):
+            todo.extend(handle(msg))
+    return wire

@@ -13,6 +13,7 @@ METHODS: dict[str, str] = {
     "rtma": "runtime.allocation.formation.family:RTMA",          # paper 002 robot and task mean allocation
     "auction": "runtime.allocation.formation.family:AUCTION",    # epsilon-scaling auction (optimal)
     "coalition": "runtime.allocation.coalition.family:COALITION",  # paper 001 simultaneous coalition auction
+    "dr": "runtime.allocation.dr.family:DR",                     # paper 000 Double Round auction
 }
 DEFAULT = "auction"
 

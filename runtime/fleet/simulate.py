@@ -116,12 +116,14 @@ class SimFleet:
     seed: int = 0
     tick: float = 0.05
     speed: float = 0.25
+    robot_class: type = SimRobot          # a SimRobot subclass with another kinematic execution
 
     def __post_init__(self) -> None:
         ids = tuple(sorted(self.starts))
         method = registry.method(self.method)
         self.options = method.options() if self.options is None else self.options
-        self.robots = {r: SimRobot(r, ids, self.starts[r], method, self.options, speed=self.speed) for r in ids}
+        self.robots = {r: self.robot_class(r, ids, self.starts[r], method, self.options, speed=self.speed)
+                       for r in ids}
         self.bus = InMemoryBus(dict(self.robots), delay=self.delay, jitter=self.jitter, drop=self.drop,
                                duplicate=self.duplicate, seed=self.seed)
 

@@ -38,6 +38,9 @@ SETTLE = 1.0        # s the goal must hold before the run ends
 PREROLL_ROUNDS = 200
 
 
+WITHDRAWN_AT = (500.0, 500.0)     # m: where a withdrawn robot's body is put, far outside any arena
+
+
 @dataclass
 class SimRobot:
     id: int
@@ -68,6 +71,7 @@ class Fleet:
     device_period: float = 0.005
     events: list[str] = field(default_factory=list)
     device_hook: object = None          # called with the sim time after every device service
+    withdrawn: set[int] = field(default_factory=set)     # robots taken out of the arena
 
     # -------------------------------------------------------------- devices
     def service_devices(self) -> None:
@@ -88,6 +92,12 @@ class Fleet:
 
     def true_pose(self, rid: int) -> tuple[float, float, float]:
         return self.robots[rid].body.pose()
+
+    def withdraw(self, rid: int) -> None:
+        """Take robot ``rid``'s body out of the arena, as a person carries a failed robot away (paper 000
+        §6.4): it no longer blocks or shows on the others' sensors, and the run's trace ends its track."""
+        self.robots[rid].body.place(WITHDRAWN_AT[0] + 5.0 * rid, WITHDRAWN_AT[1], 0.0)
+        self.withdrawn.add(rid)
 
     def close(self, keep_key: bool = False) -> None:
         for r in self.robots.values():
@@ -307,6 +317,27 @@ def _check(f: Fleet, op, now: float, since: float | None, wait: bool = False) ->
     return None, None
 
 
+def scenario_actions(f: Fleet, op, now: float, kill) -> None:
+    """What a reacting scenario asks for after an operator poll: new hand-overs go to the operator, kills to
+    ``kill(robot)`` (a withdrawal also takes the body out of the arena)."""
+    from sitl.operator import RunView
+    from sitl.scenarios.base import Handover
+
+    hook = getattr(f.scenario, "on_poll", None)
+    if hook is None:
+        return
+    for action in hook(RunView(op), now):
+        if isinstance(action, Handover):
+            op.handovers.append(action)
+        elif action[0] in ("kill", "withdraw") and action[1] in f.robots:
+            what = "killed" if action[0] == "kill" else "killed and withdrawn"
+            f.events.append(f"robot {action[1]} {what} by the scenario at {now:.1f} s")
+            log.warning("scenario: robot %d %s at %.1f s", action[1], what, now)
+            kill(action[1])
+            if action[0] == "withdraw":
+                f.withdraw(action[1])
+
+
 class Lockstep:
     """The daemons inside this process on a simulated clock, with the operator: :meth:`step` runs one control
     cycle of physics, daemons and operator.  Deterministic for a given seed."""
@@ -352,6 +383,7 @@ class Lockstep:
             if rid not in self.stopped:
                 d.step(self.clock.now())
         self.op.poll(f.world.t)
+        scenario_actions(f, self.op, f.world.t, self.kill)
         self.op.record(f.world.t)
 
     def kill(self, rid: int) -> None:
@@ -451,6 +483,7 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
                 slips += 1
             now = f.world.t
             op.poll(now)
+            scenario_actions(f, op, now, lambda rid: _kill_process(f, rid))
             if now >= next_record:
                 op.record(now)
                 next_record = now + 0.05
@@ -492,6 +525,13 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
         res["idle_cpu_share"] = {rid: (_cpu_seconds(f.robots[rid].proc.pid) - c0) / wall
                                  for rid, c0 in idle_from[1].items()}
     return res
+
+
+def _kill_process(f: Fleet, rid: int) -> None:
+    """SIGKILL robot ``rid``'s daemon (the loop then reports its exit, as it would a crash)."""
+    proc = f.robots[rid].proc
+    if proc is not None and proc.poll() is None:
+        proc.kill()
 
 
 def _die_with_parent() -> None:

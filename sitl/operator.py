@@ -172,6 +172,8 @@ class Operator:
     def record(self, now: float) -> None:
         """True poses into the trace and the distance driven."""
         for rid in self.fleet.robots:
+            if rid in self.fleet.withdrawn:
+                continue
             x, y, yaw = self.fleet.true_pose(rid)
             self.trace.robots[rid].add(now, x, y, yaw)
             last = self._last_pose.get(rid)
@@ -227,6 +229,11 @@ class RunView:
     def first_seen(self, tid: int) -> float | None:
         mark = self.op.trace.tasks.get(tid)
         return None if mark is None else mark.arrived_at
+
+    def texts(self) -> dict[int, list[tuple[float, str]]]:
+        """The STATUSTEXT lines each robot sent the operator, (time heard, line), oldest first (the newest
+        few dozen per robot)."""
+        return {rid: list(v.texts) for rid, v in self.op.gcs.robots.items() if rid in self.op.fleet.robots}
 
     def true_pose(self, rid: int):
         return self.op.fleet.true_pose(rid)

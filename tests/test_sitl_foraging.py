@@ -1,0 +1,133 @@
+"""The SITL `foraging` scenario's logic against a stand-in view of the run: objects replaced as the fleet
+delivers them, the leader of an object killed (and withdrawn) once it has one, the time to its new leader, and
+the verdict's shortfall."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from runtime import config as C
+from runtime.config.build import ConfigError
+from runtime.fleet.messages import DONE, OPEN
+from sitl.scenarios.base import Handover
+from sitl.scenarios.foraging import Scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+FLEET = ROOT / "configs" / "fleets" / "foraging_4.yaml"
+
+
+class View:
+    """What a scenario reads of a run (sitl.operator.RunView), settable by the test."""
+
+    def __init__(self):
+        self.states: dict[int, int] = {}
+        self.said: dict[int, list[tuple[float, str]]] = {}
+        self.live = [1, 2, 3, 4]
+        self.done_at: dict[int, float] = {}
+        self.done_by: dict[int, tuple] = {}
+        self.driven: dict[int, float] = {}
+
+    def task_state(self, tid):
+        return self.states.get(tid)
+
+    def texts(self):
+        return self.said
+
+    def live_robots(self):
+        return self.live
+
+    def dead(self):
+        return [r for r in (1, 2, 3, 4) if r not in self.live]
+
+
+def _scenario(tmp_path, **changes) -> Scenario:
+    data = yaml.safe_load(FLEET.read_text())
+    data["world"] = str(ROOT / "configs" / "worlds" / "arena_10x5.yaml")
+    data["robot"] = str(ROOT / "configs" / "robots" / "pioneer3dx_forage.yaml")
+    data["scenario"].update(changes)
+    path = tmp_path / "fleet.yaml"
+    path.write_text(yaml.safe_dump(data))
+    fleet = C.load_fleet(path)
+    return Scenario(fleet, C.load_world(fleet.world))
+
+
+def _name(h: Handover, robot: int, n: int) -> int:
+    """The fleet id the robot gave the hand-over's object (as the operator learns from the table)."""
+    h.done, h.result, h.task_ids = True, 0, [robot << 16 | n]
+    return h.task_ids[0]
+
+
+def test_objects_are_replaced_as_they_are_delivered_until_the_total(tmp_path):
+    sc = _scenario(tmp_path, total=4, present=2, objects=[], kill_leader=None)
+    first = sc.handovers()
+    assert len(first) == 2 and all(h.to == 1 for h in first)
+    view = View()
+    ids = [_name(h, 1, k + 1) for k, h in enumerate(first)]
+    for tid in ids:
+        view.states[tid] = OPEN
+    assert sc.on_poll(view, 10.0) == []
+    view.states[ids[0]] = DONE
+    new = sc.on_poll(view, 12.0)
+    assert len(new) == 1 and isinstance(new[0], Handover) and new[0].at == 12.0
+    spec = sc.objects[2].spec
+    assert spec.weight == 16 and spec.deadline == 108 and 50 <= spec.u_max <= 150 and spec.u_max.is_integer()
+    assert (spec.x ** 2 + spec.y ** 2) ** 0.5 >= 1.0 and abs(spec.x) <= 5 - 0.75 and abs(spec.y) <= 2.5 - 0.75
+    ids.append(_name(new[0], 1, 3))
+    view.states[ids[1]] = view.states[ids[2]] = DONE
+    last = sc.on_poll(view, 20.0)
+    assert len(last) == 1 and len(sc.objects) == 4           # the 4th and last
+    assert sc.on_poll(view, 21.0) == []
+    assert sc.shortfall(view) == "3/4 objects delivered"
+    view.states[_name(last[0], 1, 4)] = DONE
+    assert sc.shortfall(view) is None
+
+
+def test_the_leader_is_withdrawn_once_due_and_its_successor_timed(tmp_path):
+    sc = _scenario(tmp_path)                                  # kill_leader: object 1 at 25 s, within 15 s
+    first = sc.handovers()
+    view = View()
+    o1, o2 = (_name(h, 1, k + 1) for k, h in enumerate(first))
+    view.states = {o1: OPEN, o2: OPEN}
+    assert sc.on_poll(view, 30.0) == []                       # O1 has no leader yet: nothing to kill
+    view.said = {3: [(31.0, "task 1.1 awarded to R3+R4")], 2: [(31.5, "task 1.2 awarded to R2")]}
+    assert sc.on_poll(view, 32.0) == [("withdraw", 3)]
+    assert sc.on_poll(view, 33.0) == []                       # once
+    assert "O1 has no new leader since R3 was killed" in sc.shortfall(view)
+    view.live = [1, 2, 4]
+    view.said[3].append((34.0, "task 1.1 awarded to R3"))   # heard late from the dead one: not a successor
+    view.said[4] = [(41.0, "task 1.1 awarded to R4+R1")]
+    sc.on_poll(view, 42.0)
+    assert sc.new_leader() == (4, pytest.approx(9.0))
+    view.states = {o1: DONE, o2: DONE}
+    assert sc.shortfall(view) is None
+
+
+def test_a_successor_later_than_the_limit_fails_the_goal(tmp_path):
+    sc = _scenario(tmp_path, new_leader_within=5)
+    first = sc.handovers()
+    view = View()
+    o1, o2 = (_name(h, 1, k + 1) for k, h in enumerate(first))
+    view.states = {o1: DONE, o2: DONE}
+    view.states[o1] = OPEN
+    view.said = {2: [(26.0, "task 1.1 awarded to R2")]}
+    assert sc.on_poll(view, 27.0) == [("withdraw", 2)]
+    view.said[1] = [(40.0, "task 1.1 awarded to R1")]
+    sc.on_poll(view, 41.0)
+    view.states[o1] = DONE
+    assert sc.shortfall(view) == "O1's new leader came 13.0 s after the kill (> 5 s)"
+
+
+@pytest.mark.parametrize("changes, key", [
+    ({"objects": [[9.0, 0.0]]}, "scenario.objects[0]"),
+    ({"kill_leader": {"object": 9, "at": 1}}, "scenario.kill_leader.object"),
+    ({"u_max": [10, 5]}, "scenario.u_max"),
+    ({"min_distance": 50}, "scenario"),
+    ({"to": 9}, "scenario.to"),
+    ({"weight": 0}, "scenario.weight"),
+])
+def test_bad_scenarios_are_refused_naming_the_key(tmp_path, changes, key):
+    with pytest.raises(ConfigError) as info:
+        _scenario(tmp_path, **changes)
+    assert f": {key}: expected" in str(info.value) and "\n" not in str(info.value)

@@ -90,3 +90,35 @@ def test_operator_tasks_off_the_map_in_a_box_or_out_of_reach_are_refused_naming_
     assert "off the map" in p.refuse(START, 40.0, 0.0)
     assert "inside an obstacle" in p.refuse(START, 0.0, 0.0)
     assert "not a finite number" in p.refuse(START, math.nan, 0.0)
+
+
+def _clear_of(route, points, clearance, step=0.02):
+    """Every point along the route at least ``clearance`` from every obstacle point (less a cell's rounding)."""
+    import numpy as np
+    for (ax, ay), (bx, by) in zip(route, route[1:]):
+        n = max(2, int(math.hypot(bx - ax, by - ay) / step))
+        for t in np.linspace(0, 1, n):
+            x, y = ax + t * (bx - ax), ay + t * (by - ay)
+            if min(math.hypot(x - ox, y - oy) for ox, oy in points) < clearance - 0.08:
+                return False
+    return True
+
+
+def test_a_detour_goes_around_sensed_obstacles_without_a_map():
+    p = RobotPlanner(None, "euclid", 0.25, 100, 0)
+    blocker = [(-1.0, 0.0), (-1.0, 0.15), (-1.0, -0.15)]          # a robot's front seen by sonar, in the way
+    route = p.detour((-2.0, 0.0, 0.0), (1.0, 0.0), blocker, clearance=0.5)
+    assert route[0] == (-2.0, 0.0) and route[-1] == (1.0, 0.0) and len(route) > 2
+    assert _clear_of(route[1:], blocker, 0.5)
+    assert p.stats.detours == 1
+
+
+def test_a_detour_keeps_to_the_map_and_says_none_when_boxed_in():
+    world = C.WorldConfig(size=(6.0, 6.0), walls=True, resolution=0.1, obstacles=())
+    p = RobotPlanner(world, "astar", 0.25, 100, 0)
+    wall = [(0.0, y / 10) for y in range(-30, 31)]                # sensed points right across the arena
+    assert p.detour((-2.0, 0.0, 0.0), (2.0, 0.0), wall, clearance=0.3) is None
+    gap = [pt for pt in wall if abs(pt[1]) > 0.8]                 # a gap of 1.6 m in the middle
+    route = p.detour((-2.0, 0.0, 0.0), (2.0, 0.0), gap, clearance=0.3)
+    assert route is not None and _clear_of(route, gap, 0.3)
+    assert all(abs(x) < 3.0 - 0.25 and abs(y) < 3.0 - 0.25 for x, y in route)

@@ -3,7 +3,8 @@ operator's task must pass.  Counts its fallbacks for the daemon's status.
 
 ``TravelEstimator`` prices tasks for the allocation agents (:class:`runtime.allocation.agent.Estimator`):
 one planner search for a batch of tasks from the current pose estimate, reused until the robot has
-moved 0.25 m or a different batch is asked for.
+moved 0.25 m or a different batch is asked for.  ``RobotPlanner.detour`` plans around obstacles the robot
+sensed that its map does not hold (a stalled executor asks for one).
 """
 from __future__ import annotations
 
@@ -17,6 +18,8 @@ from runtime.config import WorldConfig, load_world
 from runtime.log import get_logger
 
 REPRICE_AFTER = 0.25       # m moved before a batch of bid costs is computed again
+DETOUR_RESOLUTION = 0.1    # m: cells of a detour's grid when the robot has no map
+DETOUR_WINDOW = 2.0        # m: how far beyond start and goal a map-less detour may go
 
 
 @dataclass
@@ -24,6 +27,7 @@ class PlannerStats:
     plan_fallbacks: int = 0        # RRT found no path, the A* path was taken
     bid_fallbacks: int = 0         # bid costs the first RRT tree missed (priced by a second tree or A*)
     plan_failures: int = 0         # no path at all: headed straight for the goal
+    detours: int = 0               # paths planned around sensed obstacles
 
 
 class RobotPlanner:
@@ -76,6 +80,39 @@ class RobotPlanner:
             self.stats.plan_fallbacks += 1
             self.log.warning("%s found no path to (%.2f, %.2f) in two trees: following the %s path", self.planner,
                              *goal, used)
+        return route
+
+    def detour(self, pose: Sequence[float], goal: tuple[float, float], obstacles: Sequence[Sequence[float]],
+               clearance: float | None = None, window: float = DETOUR_WINDOW) -> list[tuple[float, float]] | None:
+        """A path to ``goal`` around sensed ``obstacles`` (world (x, y) points the map does not hold: another
+        robot, a box), each kept ``clearance`` m off (default: the robot's inflation); planned by A* on the map's
+        grid with the points added, or, without a map, on a grid of ``DETOUR_RESOLUTION`` m around start and goal
+        (``window`` m beyond them).  None when the points leave no way (the caller keeps its path and waits)."""
+        import numpy as np
+
+        from runtime.planning.costs import grid_for, path
+        from runtime.planning.grid import OccupancyGrid
+
+        pts = np.asarray([o[:2] for o in obstacles], dtype=float).reshape(-1, 2)
+        pts = pts[np.all(np.isfinite(pts), axis=1)]
+        r = self.inflate if clearance is None else float(clearance)
+        if self.world is not None:
+            base = grid_for(self.world, self.inflate)
+            occ, res, origin = np.array(base.occ), base.resolution, base.origin
+        else:
+            res = DETOUR_RESOLUTION
+            lo = np.minimum(pose[:2], goal) - window
+            hi = np.maximum(pose[:2], goal) + window
+            n = np.ceil((hi - lo) / res).astype(int)
+            occ, origin = np.zeros((n[1], n[0]), dtype=bool), (float(lo[0]), float(lo[1]))
+        ny, nx = occ.shape
+        cy, cx = np.mgrid[0:ny, 0:nx]
+        wx, wy = origin[0] + (cx + 0.5) * res, origin[1] + (cy + 0.5) * res
+        for ox, oy in pts:
+            occ |= (wx - ox) ** 2 + (wy - oy) ** 2 <= r * r
+        route = path(OccupancyGrid(occ, res, origin), pose[:2], goal, planner="astar", inflate=0.0,
+                     snap=r + res)
+        self.stats.detours += route is not None
         return route
 
     def refuse(self, pose: Sequence[float] | None, x: float, y: float) -> str | None:

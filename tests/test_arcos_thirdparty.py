@@ -45,7 +45,9 @@ def test_soar_connects_reads_sips_and_sonar_and_drives():
     client = arcos.ARCOSClient(timeout=1.0)
     try:
         client.connect(forced_ports=[dev.path])               # CLOSE, SYNC0-2, OPEN, SONAR 1, waits for sonar
-        assert dev.stats.ignored >= 1                         # its CLOSE before syncing
+        # Its CLOSE before syncing may or may not reach us (Soar reopens the port and flushes its output buffer,
+        # which on a pty can discard the unread CLOSE); test_arcos_emulator covers a CLOSE while idle.
+        assert dev.stats.handshakes == 1 and dev.stats.bad_packets == 0
         sip = client.standard
         assert sip["TYPE"] == "STANDARD" and sip["FLAGS"] & 0x2 and "ROTVEL" in sip
         assert client.sonars[3] == 1200

@@ -60,4 +60,5 @@ def test_a_point_dead_ahead_is_hit_by_forward_arcs_only_and_soonest_by_the_faste
     speeds = np.asarray(arcs.speeds)
     assert np.all(np.isinf(col[speeds <= 0]))                 # standing, turning or backing away: no hit
     assert col[-1] == pytest.approx(2.125)      # 0.51 m to close at 0.25 m/s: 2.04 s, sampled every 0.125 s
-    assert np.all(np.diff(col[speeds > 0.1]) <= 0)             # faster hits sooner
+    hits = col[np.isfinite(col)]
+    assert len(hits) >= 3 and np.all(np.diff(hits) < 0)        # faster hits sooner; the slowest not within 3 s

@@ -1,0 +1,159 @@
+"""A small stand-in allocation agent for the foraging harness tests (never a registered method): each free robot
+joins the nearest object with weight left to load; robots on an object broadcast what they loaded and
+delivered; the lowest-id live robot that worked on an object reports it DONE once everything is delivered and
+nobody carries any more.  A robot leaves an object (and looks for another) once all of it is loaded by what it
+knows and it carries nothing.  A lost robot's loads that it never delivered count as back on the pile, as the
+harness puts them back."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from runtime.allocation.agent import DONE, Method, TaskEvent
+from runtime.tasks import Commitment
+from runtime.tasks.transport import DELIVERED, LOADED
+
+
+@dataclass(frozen=True)
+class Cargo:
+    sender: int
+    dest: int
+    task: int
+    loaded: float         # wu this robot loaded from the task, in all
+    delivered: float      # of them, delivered
+    carrying: bool
+
+
+@dataclass
+class StandInOptions:
+    delivery: tuple[float, float] = (0.0, 0.0)
+    load: float = 2.0
+    load_time: float = 0.12
+    reach: float = 0.3
+    period: float = 1.0             # s between repeats of a robot's own cargo record
+
+
+class StandIn:
+    def __init__(self, ctx):
+        self.robot_id = ctx.robot_id
+        self.estimator = ctx.estimator
+        self.o = ctx.options
+        self.tasks: dict = {}                       # open tasks
+        self.cargo: dict[int, dict[int, Cargo]] = {}   # task -> robot -> its latest record
+        self.lost: set[int] = set()
+        self.mine: int | None = None
+        self.available = True
+        self.events: list[TaskEvent] = []
+        self.reported: set[int] = set()
+        self._next_repeat = 0.0
+
+    # ------------------------------------------------------------------ what the node asks
+    @property
+    def commitments(self):
+        if self.mine is None or self.mine not in self.tasks:
+            return ()
+        partners = tuple(sorted(r for r in self.cargo.get(self.mine, {}) if r != self.robot_id and r not in self.lost))
+        params = (("delivery", self.o.delivery), ("load", self.o.load), ("load_time", self.o.load_time),
+                  ("reach", self.o.reach))
+        return (Commitment(self.tasks[self.mine], partners, "member", params),)
+
+    @property
+    def converged(self) -> bool:
+        return True
+
+    def pop_events(self):
+        out, self.events = self.events, []
+        return out
+
+    # ------------------------------------------------------------------ inputs
+    def add_tasks(self, tasks, now):
+        for t in tasks:
+            if t.kind == "transport" and t.id not in self.reported:
+                self.tasks[t.id] = t
+        return []
+
+    def withdraw_tasks(self, task_ids, now):
+        for tid in task_ids:
+            self.tasks.pop(tid, None)
+            self.reported.add(tid)
+            if self.mine == tid:
+                self.mine = None
+        return []
+
+    def set_available(self, available, now):
+        self.available = bool(available)
+        return []
+
+    def on_peer_lost(self, robot_id, now):
+        self.lost.add(robot_id)
+        return []
+
+    def on_message(self, msg, now):
+        if isinstance(msg, Cargo):
+            self.lost.discard(msg.sender)
+            self.cargo.setdefault(msg.task, {})[msg.sender] = msg
+        return []
+
+    def on_progress(self, p, now):
+        if p.task != self.mine:
+            return []
+        me = self._me(p.task)
+        wu = float(p.data.get("wu", 0.0))
+        if p.event == LOADED:
+            me = Cargo(self.robot_id, 0, p.task, me.loaded + wu, me.delivered, True)
+        elif p.event == DELIVERED:
+            me = Cargo(self.robot_id, 0, p.task, me.loaded, me.delivered + wu, False)
+        self.cargo[p.task][self.robot_id] = me
+        return [me]
+
+    def on_tick(self, now):
+        out = []
+        for tid in list(self.tasks):
+            self._maybe_done(tid)
+        if self.mine is not None and self._left(self.mine) <= 0 and not self._me(self.mine).carrying:
+            self.mine = None                          # all of it loaded (by what I know): look for another
+        if self.mine is None and self.available:
+            self._choose()
+            if self.mine is not None:
+                out.append(self._me(self.mine))
+                self.cargo[self.mine][self.robot_id] = out[-1]
+        if self.mine is not None and now >= self._next_repeat:
+            self._next_repeat = now + self.o.period
+            out.append(self._me(self.mine))
+        return out
+
+    # ------------------------------------------------------------------ the logic
+    def _me(self, tid: int) -> Cargo:
+        return self.cargo.setdefault(tid, {}).get(self.robot_id) or Cargo(self.robot_id, 0, tid, 0.0, 0.0, False)
+
+    def _records(self, tid: int):
+        return self.cargo.get(tid, {})
+
+    def _left(self, tid: int) -> float:
+        """Weight not yet taken off the pile, by what I know: live robots' loads, lost robots' deliveries."""
+        taken = sum(c.delivered if r in self.lost else c.loaded for r, c in self._records(tid).items())
+        return self.tasks[tid].spec.weight - taken
+
+    def _choose(self) -> None:
+        open_ = [t for t in self.tasks.values() if self._left(t.id) > 0]
+        if not open_:
+            return
+        costs = self.estimator.estimates(open_)
+        best = min(range(len(open_)), key=lambda k: (costs[k].cost, open_[k].id))
+        if math.isfinite(costs[best].cost):
+            self.mine = open_[best].id
+
+    def _maybe_done(self, tid: int) -> None:
+        recs = self._records(tid)
+        workers = [r for r in recs if r not in self.lost]
+        if tid in self.reported or not workers or min(workers) != self.robot_id:
+            return
+        delivered = sum(c.delivered for c in recs.values())
+        busy = any(c.carrying for r, c in recs.items() if r not in self.lost)
+        if delivered >= self.tasks[tid].spec.weight and not busy:
+            self.events.append(TaskEvent(tid, DONE, tuple(sorted(workers))))
+            self.withdraw_tasks([tid], 0.0)
+
+
+STANDIN = Method(name="standin", summary="test stand-in: join the nearest object", options=StandInOptions,
+                 make=StandIn, task_kinds=("transport",), messages=(Cargo,))

@@ -1,13 +1,12 @@
 """A small stand-in allocation agent for the foraging harness tests (never a registered method): each free robot
-joins the nearest object with weight left to load; robots on an object broadcast what they loaded and
-delivered; the lowest-id live robot that worked on an object reports it DONE once everything is delivered and
-nobody carries any more.  A robot leaves an object (and looks for another) once all of it is loaded by what it
-knows and it carries nothing.  A lost robot's loads that it never delivered count as back on the pile, as the
-harness puts them back."""
+joins the nearest object that has fewer than ``cap`` live robots on it and stays on it until it is done; robots
+on an object broadcast what they loaded and delivered; the lowest-id live robot on an object reports it DONE
+once everything is delivered and nobody carries any more.  A lost robot's loads that it never delivered are
+not counted delivered (the harness puts them back on the pile)."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from runtime.allocation.agent import DONE, Method, TaskEvent
 from runtime.tasks import Commitment
@@ -22,6 +21,7 @@ class Cargo:
     loaded: float         # wu this robot loaded from the task, in all
     delivered: float      # of them, delivered
     carrying: bool
+    on: bool = True       # it works on the task (False: it left it)
 
 
 @dataclass
@@ -31,6 +31,7 @@ class StandInOptions:
     load_time: float = 0.12
     reach: float = 0.3
     period: float = 1.0             # s between repeats of a robot's own cargo record
+    cap: int = 2                    # robots per object at most
 
 
 class StandIn:
@@ -45,6 +46,7 @@ class StandIn:
         self.available = True
         self.events: list[TaskEvent] = []
         self.reported: set[int] = set()
+        self.full: dict[int, frozenset] = {}         # tasks I left to lower ids that chose them with me: which
         self._next_repeat = 0.0
 
     # ------------------------------------------------------------------ what the node asks
@@ -86,6 +88,7 @@ class StandIn:
 
     def on_peer_lost(self, robot_id, now):
         self.lost.add(robot_id)
+        self.full = {t: who for t, who in self.full.items() if robot_id not in who}    # look at it again
         return []
 
     def on_message(self, msg, now):
@@ -110,12 +113,18 @@ class StandIn:
         out = []
         for tid in list(self.tasks):
             self._maybe_done(tid)
-        if self.mine is not None and self._left(self.mine) <= 0 and not self._me(self.mine).carrying:
-            self.mine = None                          # all of it loaded (by what I know): look for another
+        if self.mine is not None and self._me(self.mine).loaded == 0:
+            ahead = [r for r in self._members(self.mine) if r < self.robot_id]
+            if len(ahead) >= self.o.cap:              # others chose it at the same time: lower ids keep it
+                self.full[self.mine] = frozenset(ahead)
+                left = Cargo(self.robot_id, 0, self.mine, 0.0, 0.0, False, on=False)
+                self.cargo[self.mine][self.robot_id] = left
+                out.append(left)
+                self.mine = None
         if self.mine is None and self.available:
             self._choose()
             if self.mine is not None:
-                out.append(self._me(self.mine))
+                out.append(replace(self._me(self.mine), on=True))
                 self.cargo[self.mine][self.robot_id] = out[-1]
         if self.mine is not None and now >= self._next_repeat:
             self._next_repeat = now + self.o.period
@@ -129,13 +138,11 @@ class StandIn:
     def _records(self, tid: int):
         return self.cargo.get(tid, {})
 
-    def _left(self, tid: int) -> float:
-        """Weight not yet taken off the pile, by what I know: live robots' loads, lost robots' deliveries."""
-        taken = sum(c.delivered if r in self.lost else c.loaded for r, c in self._records(tid).items())
-        return self.tasks[tid].spec.weight - taken
+    def _members(self, tid: int) -> list[int]:
+        return [r for r, c in self._records(tid).items() if c.on and r not in self.lost]
 
     def _choose(self) -> None:
-        open_ = [t for t in self.tasks.values() if self._left(t.id) > 0]
+        open_ = [t for t in self.tasks.values() if t.id not in self.full and len(self._members(t.id)) < self.o.cap]
         if not open_:
             return
         costs = self.estimator.estimates(open_)

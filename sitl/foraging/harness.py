@@ -86,9 +86,9 @@ class ForagingConfig:
     load: float = 2.0                         # wu per trip (calibration mode's commitments)
     load_time: float = 0.12                   # s per wu
     reach: float = 0.3                        # m
-    speed: float = 0.25                       # m/s cruise
-    lookahead: float = 0.5
-    max_turn_rate: float = 1.2
+    speed: float = 0.25                       # m/s cruise (the paper's 3 du/tu)
+    lookahead: float = 0.3                    # m (pure pursuit; it slows down within 2 x this of a mark)
+    max_turn_rate: float = 2.0                # rad/s (arc set and pursuit; the drive ramps at 100 deg/s^2)
     goal_tolerance: float = 0.12
     control_period: float = 0.1               # s
     dt: float = DT                            # s, physics step

@@ -253,9 +253,10 @@ class _Robot:
 
 class ForagingRun:
     """A foraging run being simulated: :meth:`run` it (or :meth:`step` it), :meth:`kill` robots on the way, read
-    :meth:`result`."""
+    :meth:`result`.  ``world(starts, cfg)`` builds the world (default :class:`ForagingWorld`; a benchmark puts
+    a peer with the same methods in its place)."""
 
-    def __init__(self, cfg: ForagingConfig):
+    def __init__(self, cfg: ForagingConfig, world: Callable | None = None):
         self.cfg = cfg
         ids = cfg.ids
         if not ids:
@@ -266,7 +267,8 @@ class ForagingRun:
         options = cfg.options
         if self.method is not None and options is None:
             options = self.method.options()
-        self.world = ForagingWorld(self._starts(ids), size=cfg.size, dt=cfg.dt, solver_iterations=cfg.solver_iterations)
+        starts = self._starts(ids)
+        self.world = (world or _fast_world)(starts, cfg)
         self.robots = {r: _Robot(r, ids, cfg, self.method, options) for r in ids}
         self.records = {r: RobotRecord(r) for r in ids}
         self.bus = _Bus({r: rb for r, rb in self.robots.items()}, delay=cfg.delay, jitter=cfg.jitter, drop=cfg.drop,
@@ -512,6 +514,10 @@ class ForagingRun:
 
     def close(self) -> None:
         self.world.close()
+
+
+def _fast_world(starts, cfg: ForagingConfig) -> ForagingWorld:
+    return ForagingWorld(starts, size=cfg.size, dt=cfg.dt, solver_iterations=cfg.solver_iterations)
 
 
 def run(cfg: ForagingConfig, observe=None) -> ForagingResult:

@@ -110,6 +110,7 @@ class Behaviour(Protocol):
     def ballot(self, arcs: ArcSet, now: float) -> Ballot: ...
 
 
+@lru_cache(maxsize=16)
 def _spread(arcs: ArcSet) -> tuple[float, float]:
     sv = np.ptp(arcs.speeds) if len(arcs.speeds) > 1 else 1.0
     sw = np.ptp(arcs.turn_rates) if len(arcs.turn_rates) > 1 else 1.0
@@ -163,10 +164,15 @@ class Stop:
     name: str = "stop"
 
     def ballot(self, arcs: ArcSet, now: float) -> Ballot:
-        if not self.follow.done:
-            return Ballot(np.zeros(len(arcs.v)))
-        votes = np.where((arcs.v == 0) & (arcs.w == 0), 1.0, -1.0)
-        return Ballot(votes)
+        return Ballot(_stop_votes(arcs, bool(self.follow.done)))
+
+
+@lru_cache(maxsize=32)
+def _stop_votes(arcs: ArcSet, stop: bool) -> np.ndarray:
+    """Stop's votes, the same every cycle for an arc set (read-only, computed once)."""
+    if not stop:
+        return _frozen(np.zeros(len(arcs.v)))
+    return _frozen(np.where((arcs.v == 0) & (arcs.w == 0), 1.0, -1.0))
 
 
 @dataclass
@@ -217,17 +223,18 @@ class AvoidObstacles:
     def on_ranges(self, readings: Iterable, now: float) -> int:
         """Range readings in the robot frame; returns how many were kept."""
         pts = []
+        cos, sin, finite, max_range = math.cos, math.sin, math.isfinite, self.max_range
         for r in readings:
             try:
                 bearing, dist = float(r[0]), float(r[1])
             except (TypeError, ValueError, IndexError, KeyError):
                 self.dropped += 1
                 continue
-            if not (math.isfinite(bearing) and math.isfinite(dist)) or dist < 0:
+            if not (finite(bearing) and finite(dist)) or dist < 0:
                 self.dropped += 1
                 continue
-            if dist <= self.max_range:
-                pts.append((dist * math.cos(bearing), dist * math.sin(bearing)))
+            if dist <= max_range:
+                pts.append((dist * cos(bearing), dist * sin(bearing)))
         self._points = np.asarray(pts, dtype=float).reshape(-1, 2)
         self._ranges_at = now
         return len(pts)
@@ -239,22 +246,39 @@ class AvoidObstacles:
     def time_to_collision(self, arcs: ArcSet, horizon: float, steps: int = 16) -> np.ndarray:
         """Per arc, the first sampled time within ``horizon`` at which the robot disc reaches a range point.
         Points farther than any arc can take the robot within ``horizon`` (plus the clearance) cannot be hit and
-        are left out first: a scan usually leaves a few, so a cycle costs tens of microseconds, not a millisecond."""
+        are left out first.
+
+        A hit is coming within the clearance ``c`` of a point ``p`` while getting closer to it than now: an arc
+        that moves away from something already too close stays allowed, so the robot can back out.  The samples
+        are not tested one by one: at a given turn rate and time every speed's sample lies on one ray from the
+        robot, ``q = v g u`` (unit ``u``, length ``g`` per unit speed), and both conditions, ``|q - p|^2 <= c^2``
+        and ``|q - p|^2 < |p|^2 - 1e-12``, hold (as real numbers) for ``(v g - a)^2 <= a^2 + min(c^2 - |p|^2, -1e-12)``
+        with ``a = u . p``: an interval of speeds.  So a cycle costs (turn rates x steps x points) intervals and
+        one pass over the samples, not (arcs x steps x points) distances."""
         out = np.full(len(arcs.v), np.inf)
         if len(self._points) == 0:
             return out
         clearance = self.radius + self.margin
         reach = float(np.max(np.abs(arcs.v))) * horizon + clearance
-        pts = self._points[(self._points * self._points).sum(axis=1) <= reach * reach]
+        d2 = (self._points * self._points).sum(axis=1)
+        near = d2 <= reach * reach
+        pts, d2 = self._points[near], d2[near]
         if len(pts) == 0:
             return out
-        t, x, y = _arc_samples(arcs, float(horizon), int(steps))
-        px, py = pts[None, None, :, 0], pts[None, None, :, 1]
-        d2 = (x[:, :, None] - px) ** 2 + (y[:, :, None] - py) ** 2
-        d0 = (px * px + py * py)[0]
-        # A hit is coming within the clearance while getting closer to that point than now: an arc that
-        # moves away from something already too close stays allowed, so the robot can back out.
-        hit = ((d2 <= clearance ** 2) & (d2 < d0 - 1e-12)).any(axis=2)
+        t, rays, g, axis = _arc_rays(arcs, float(horizon), int(steps))
+        nv, nw = arcs.shape
+        a = rays @ pts.T                                              # (nw * steps, points)
+        m = a * a + np.minimum(clearance * clearance - d2, -1e-12)
+        root = np.sqrt(np.maximum(m, 0.0))
+        lo = axis.count_below((a - root) / g)                       # first speed in the interval ...
+        hi = axis.count_upto((a + root) / g)                        # ... and one past the last
+        rows, cols = np.nonzero((m >= 0) & (hi > lo))
+        if len(rows) == 0:
+            return out
+        lo, hi = lo[rows, cols], hi[rows, cols]
+        n = (nv + 1) * len(rays)
+        edges = np.bincount(lo * len(rays) + rows, minlength=n) - np.bincount(hi * len(rays) + rows, minlength=n)
+        hit = (np.cumsum(edges.reshape(nv + 1, len(rays)), axis=0)[:nv] > 0).reshape(nv * nw, len(t))
         any_hit = hit.any(axis=1)
         out[any_hit] = t[np.argmax(hit[any_hit], axis=1)]
         return out
@@ -271,21 +295,63 @@ class AvoidObstacles:
             veto |= (ttc <= self.veto_time) & (arcs.v != 0)
             hits = np.isfinite(ttc)
             votes = np.where(hits, np.minimum(votes, -(1.0 - ttc / self.horizon)), votes)
-        return Ballot(np.clip(votes, -1.0, 1.0), veto)
+        return Ballot(_clip1(votes), veto)
 
 
 @lru_cache(maxsize=16)
-def _arc_samples(arcs: ArcSet, horizon: float, steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Sample times in (0, horizon] and the robot's position along every arc at them (robot frame), computed once
-    per arc set, horizon and step count."""
+def _arc_rays(arcs: ArcSet, horizon: float, steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Sample times in (0, horizon] and, per (turn rate, time) row, the unit direction from the robot (robot frame)
+    on which every speed's sample lies and its length per unit speed (the sample of speed v is ``v g u``), and
+    the sorted speeds; computed once per arc set, horizon and step count."""
     t = np.linspace(horizon / steps, horizon, steps)
-    v, w = arcs.v[:, None], arcs.w[:, None]
+    w = np.asarray(arcs.turn_rates)[:, None]
     th = w * t
     small = np.abs(w) < 1e-9
     safe_w = np.where(small, 1.0, w)
-    x = np.where(small, v * t, v / safe_w * np.sin(th))
-    y = np.where(small, 0.0, v / safe_w * (1 - np.cos(th)))
-    return _frozen(t), _frozen(x), _frozen(y)
+    ux = np.where(small, t, np.sin(th) / safe_w).ravel()
+    uy = np.where(small, 0.0, (1 - np.cos(th)) / safe_w).ravel()
+    g = np.hypot(ux, uy)
+    home = g < 1e-12                      # a full turn: every speed's sample is back at the start, hitting nothing
+    g = np.where(home, 1.0, g)
+    rays = np.where(home[:, None], 0.0, np.column_stack((ux / g, uy / g)))
+    return _frozen(t), _frozen(rays), _frozen(g[:, None].copy()), _SortedAxis(np.asarray(arcs.speeds, dtype=float))
+
+
+class _SortedAxis:
+    """Counts of a sorted axis's values below (or up to) each of many numbers, as ``np.searchsorted`` gives them,
+    faster for an evenly spaced axis (the arc sets are): a guess from the spacing, corrected by one step each
+    way against the values themselves, so the counts are exact."""
+
+    def __init__(self, values: np.ndarray):
+        self.values = _frozen(values)
+        n = len(values)
+        self.step = float(values[-1] - values[0]) / (n - 1) if n > 1 else 0.0
+        even = n > 2 and self.step > 0 and np.max(np.abs(values - (values[0] + self.step * np.arange(n)))) < self.step / 4
+        self._padded = _frozen(np.concatenate(([-np.inf], values, [np.inf]))) if even else None
+
+    def _count(self, x: np.ndarray, below: bool) -> np.ndarray:
+        if self._padded is None:
+            return np.searchsorted(self.values, x, side="left" if below else "right")
+        n, pad = len(self.values), self._padded
+        k = np.minimum(np.maximum(np.floor((x - self.values[0]) / self.step) + 1, 0), n).astype(np.intp)  # about
+        if below:                                     # count of values < x: values[k-1] < x <= values[k]
+            k -= pad[k] >= x
+            k += pad[k + 1] < x
+        else:                                         # count of values <= x
+            k -= pad[k] > x
+            k += pad[k + 1] <= x
+        return k
+
+    def count_below(self, x: np.ndarray) -> np.ndarray:
+        return self._count(x, True)
+
+    def count_upto(self, x: np.ndarray) -> np.ndarray:
+        return self._count(x, False)
+
+
+def _clip1(votes: np.ndarray) -> np.ndarray:
+    """``np.clip(votes, -1, 1)`` without its Python-level dispatch (the arbiter clips every ballot every cycle)."""
+    return np.minimum(np.maximum(votes, -1.0), 1.0)
 
 
 @dataclass
@@ -318,7 +384,7 @@ class Arbiter:
             votes = ballot.votes
             if not np.isfinite(votes).all():
                 votes = np.nan_to_num(votes, nan=0.0)
-            total += b.weight * np.clip(votes, -1.0, 1.0)
+            total += b.weight * _clip1(votes)
             if ballot.veto is not None:
                 veto |= ballot.veto
         grid = total.reshape(self.arcs.shape)

@@ -35,6 +35,7 @@ class PurePursuit:
     _pts: np.ndarray = field(default_factory=lambda: np.zeros((1, 2)), init=False, repr=False)
     _progress: float = field(default=0.0, init=False, repr=False)
     _fresh: bool = field(default=True, init=False, repr=False)
+    _segs: tuple = field(default=(), init=False, repr=False)
 
     def __post_init__(self) -> None:
         for name in ("lookahead", "cruise_speed", "max_turn_rate", "goal_tolerance"):
@@ -69,20 +70,25 @@ class PurePursuit:
         self._cum = np.concatenate(([0.0], np.cumsum(seg)))
         self._progress = 0.0
         self._fresh = True
+        # per-segment constants of the projection, computed once per path instead of every cycle
+        a = pts[:-1]
+        d = pts[1:] - a
+        seg_len2 = np.einsum("ij,ij->i", d, d)
+        seg_len = np.sqrt(seg_len2)
+        self._segs = (a, d, seg_len2, np.where(seg_len2 > 0, seg_len2, 1.0), seg_len,
+                      np.where(seg_len > 0, seg_len, 1.0))
 
     def _project(self, x: float, y: float) -> float:
         """Arc length of the closest path point; after the first call, only within a window around progress."""
         pts, cum = self._pts, self._cum
         if len(pts) == 1:
             return 0.0
-        a, b = pts[:-1], pts[1:]
-        d = b - a
-        seg_len2 = np.einsum("ij,ij->i", d, d)
-        t = np.einsum("ij,ij->i", np.array([x, y]) - a, d) / np.where(seg_len2 > 0, seg_len2, 1.0)
-        t = np.clip(t, 0.0, 1.0)
+        a, d, seg_len2, len2_div, seg_len, len_div = self._segs
+        t = np.einsum("ij,ij->i", np.array([x, y]) - a, d) / len2_div
+        t = np.minimum(np.maximum(t, 0.0), 1.0)
         proj = a + d * t[:, None]
         dist2 = np.einsum("ij,ij->i", proj - (x, y), proj - (x, y))
-        s = cum[:-1] + t * np.sqrt(seg_len2)
+        s = cum[:-1] + t * seg_len
         if self._fresh:
             self._fresh = False
             i = int(np.argmin(dist2))
@@ -91,8 +97,7 @@ class PurePursuit:
         # later leg that passes close by is not jumped to; if the robot is more than a lookahead away from
         # that window (pushed, pose jump), take the closest point anywhere ahead of progress - lookahead.
         lo, hi = self._progress - self.lookahead, self._progress + 3.0 * self.lookahead
-        seg_len = np.sqrt(seg_len2)
-        tw = np.clip((np.clip(s, lo, hi) - cum[:-1]) / np.where(seg_len > 0, seg_len, 1.0), 0.0, 1.0)
+        tw = np.minimum(np.maximum((np.minimum(np.maximum(s, lo), hi) - cum[:-1]) / len_div, 0.0), 1.0)
         pw = a + d * tw[:, None]
         dw = np.einsum("ij,ij->i", pw - (x, y), pw - (x, y))
         dw = np.where((cum[1:] < lo) | (cum[:-1] > hi), np.inf, dw)

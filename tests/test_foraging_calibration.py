@@ -1,0 +1,69 @@
+"""`mrta experiment dr-calibration`: the interference samples (n, d_m, I) of paper 000 section 4.2.1."""
+from __future__ import annotations
+
+import csv
+import math
+
+import pytest
+
+from runtime.errors import InputError
+from sitl.experiments import dr_calibration as cal
+from sitl.foraging import scenario
+
+
+def test_one_case_row_is_consistent():
+    row = cal.run_case(1, 140, 120.0, seed=1, dt=0.05)
+    assert row["n"] == 1 and row["d_m"] == pytest.approx(1.40) and row["duration_s"] == pytest.approx(120.0)
+    ideal = scenario.work_capacity(1.40, 2.0, 0.25, 0.12)
+    assert row["ideal_wu_per_s"] == pytest.approx(ideal)
+    assert row["I_wu_per_s"] == pytest.approx(ideal - row["moved_wu"] / 120.0)
+    assert row["I_wu_per_tu"] == pytest.approx(row["I_wu_per_s"] * 0.12)
+    assert row["moved_wu"] == 2.0 * row["trips"] > 0
+    assert 0.5 < row["fraction_of_ideal"] < 1.1                 # one robot alone: near eq. 5 (turns cost time)
+
+
+def test_interference_grows_with_the_group_at_a_short_distance():
+    one = cal.run_case(1, 140, 120.0, seed=1, dt=0.05)
+    three = cal.run_case(3, 140, 120.0, seed=1, dt=0.05)
+    assert three["I_wu_per_s"] > one["I_wu_per_s"]
+    assert three["fraction_of_ideal"] < one["fraction_of_ideal"]
+
+
+@pytest.mark.slow
+def test_quick_run_writes_the_samples_and_the_report(tmp_path):
+    import argparse
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--out")
+    cal.add_arguments(parser)
+    samples = tmp_path / "samples.csv"
+    args = parser.parse_args(["--out", str(tmp_path / "out"), "--quick", "--jobs", "2", "--samples", str(samples)])
+    assert cal.run(args) == 0
+    with samples.open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 3 * 2                                    # robots 1, 2, 4 x 140 and 400 du
+    assert {"n", "d_m", "I_wu_per_s"} <= set(rows[0])
+    assert all(math.isfinite(float(r["I_wu_per_s"])) for r in rows)
+    get = {(int(r["n"]), int(r["d_du"])): float(r["I_wu_per_s"]) for r in rows}
+    assert get[(4, 140)] > get[(1, 140)]
+    for name in ("dr_calibration.csv", "dr_calibration.md", "dr_calibration.png"):
+        assert (tmp_path / "out" / name).stat().st_size > 0
+    md = (tmp_path / "out" / "dr_calibration.md").read_text()
+    assert "Fraction of the ideal capacity" in md and "interference grows with the number of robots" in md
+    # resuming from the CSV runs nothing again and gives the same samples
+    args = parser.parse_args(["--out", str(tmp_path / "out"), "--quick", "--jobs", "1", "--samples", str(samples),
+                              "--resume", str(tmp_path / "out" / "dr_calibration.csv")])
+    before = samples.read_text()
+    assert cal.run(args) == 0 and samples.read_text() == before
+
+
+@pytest.mark.parametrize("argv, why", [(["--robots", "0-3"], "--robots '0-3': expected group sizes"),
+                                       (["--robots", "a"], "--robots 'a': expected a range"),
+                                       (["--distances", "140,900"], "--distances '140,900': expected du between"),
+                                       (["--jobs", "0"], "--jobs 0: expected at least 1")])
+def test_bad_arguments_are_one_line_errors(argv, why, tmp_path):
+    import argparse
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--out", default=str(tmp_path))
+    cal.add_arguments(parser)
+    with pytest.raises(InputError, match=why.replace("(", r"\(").replace(")", r"\)")):
+        cal.run(parser.parse_args(argv))

@@ -89,7 +89,8 @@ class Daemon:
                                                    cfg.allocation))
         self.node = FleetNode(self.id, self.agent, armed=cfg.robot.armed, peers=[p.id for p in cfg.comms.peers])
         self.executive = Executive(ExecContext(self.planner, Tunables(c.cruise_speed, c.lookahead, c.max_turn_rate,
-                                                                      c.goal_tolerance), self.log, radius))
+                                                                      c.goal_tolerance), self.log, radius,
+                                               seed=self.id))
         self.ground = GroundServices(self)
         self.period = 1.0 / c.rate
         self._last_step: float | None = None

@@ -221,3 +221,27 @@ def test_decide_scores_equal_the_2d_gaussian_filter_of_the_weighted_votes(seed, 
     want = ndimage.gaussian_filter(total.reshape(arcs.shape), sigma, mode="nearest").ravel()
     assert np.allclose(d.scores, want, rtol=0, atol=1e-12)
     assert d.arc == int(np.argmax(want))
+
+
+def test_something_dead_ahead_votes_for_curving_right_and_the_vote_is_held():
+    arcs = ArcSet.uniform(max_speed=0.25, max_turn_rate=2.0)
+    avoid = AvoidObstacles(radius=0.25)
+    avoid.on_ranges([(0.0, 1.2)], 0.0)                         # dead ahead, 1.2 m
+    assert avoid.dead_ahead() > 0
+    votes = avoid.ballot(arcs, 0.0).votes
+    right, left = arcs.nearest(0.2, -1.0), arcs.nearest(0.2, 1.0)
+    assert votes[right] > votes[left]
+    avoid.on_ranges([(0.0, 5.0)], 0.1)                          # lane clear: still held ...
+    assert avoid.ballot(arcs, 0.1).votes[right] > avoid.ballot(arcs, 0.1).votes[left]
+    avoid.on_ranges([(0.0, 5.0)], 3.0)                          # ... for keep_right_hold s only
+    v = avoid.ballot(arcs, 3.0).votes
+    assert v[right] == v[left]
+
+
+def test_what_stands_at_the_goal_is_not_passed():
+    avoid = AvoidObstacles(radius=0.25)
+    avoid.on_ranges([(0.0, 1.0)], 0.0)
+    avoid.goal_distance = 1.2                                   # the point is on the goal's doorstep
+    assert avoid.dead_ahead() == 0.0
+    avoid.goal_distance = 3.0
+    assert avoid.dead_ahead() > 0

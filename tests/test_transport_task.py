@@ -113,3 +113,35 @@ def test_the_robot_stands_still_while_loading():
     (v, w), _ = ex.step(tuple(pose), BaseSensors(), t + 1.0)
     assert (v, w) == (0.0, 0.0)
     assert isinstance(ex.executors[7], TransportExecutor)
+
+
+def test_keep_lane_moves_each_long_leg_right_and_keeps_the_marks():
+    from runtime.execution.transport import keep_lane
+    path = keep_lane([(0.0, 0.0), (2.0, 0.0)], 0.3)
+    assert path[0] == (0.0, 0.0) and path[-1] == (2.0, 0.0)
+    assert [p[1] for p in path[1:-1]] == [-0.3, -0.3]                  # right of +x is -y
+    back = keep_lane([(2.0, 0.0), (0.0, 0.0)], 0.3)
+    assert [p[1] for p in back[1:-1]] == [0.3, 0.3]                    # the way back: the other lane
+    assert keep_lane([(0.0, 0.0), (0.5, 0.0)], 0.3) == [(0.0, 0.0), (0.5, 0.0)]    # too short to taper
+    assert keep_lane([(0.0, 0.0), (2.0, 0.0)], 0.0) == [(0.0, 0.0), (2.0, 0.0)]
+
+
+def test_a_robot_that_gets_nowhere_backs_out_and_replans():
+    """Held in place (pushed back by something it cannot see) while it wants to drive: after STALL_TIME s it
+    backs up for ESCAPE_TIME s, once, then drives again."""
+    from runtime.execution.executive import ESCAPE_TIME, STALL_TIME
+    from runtime.tasks.goto import Goto
+    ctx = ExecContext(RobotPlanner(None, "euclid", 0.25, 0, 1), Tunables(0.25, 0.3, 2.0, 0.12),
+                      logging.getLogger("test"), 0.25, seed=1)
+    ex = Executive(ctx)
+    ex.sync((Commitment(Task(1, "goto", Goto(3.0, 0.0, hold=None))),), 0.0)
+    cmds = []
+    t = 0.0
+    while t < STALL_TIME + ESCAPE_TIME + 1.0:
+        (v, w), _ = ex.step((0.0, 0.0, 0.0), BaseSensors(), t)
+        cmds.append((round(t, 1), v))
+        t += 0.1
+    assert ex.escapes == 1
+    assert all(v > 0 for t, v in cmds if t < STALL_TIME)
+    assert all(v < 0 for t, v in cmds if STALL_TIME + 0.15 < t < STALL_TIME + ESCAPE_TIME - 0.15)
+    assert all(v > 0 for t, v in cmds if t > STALL_TIME + ESCAPE_TIME + 0.15)

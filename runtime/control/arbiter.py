@@ -184,8 +184,10 @@ class AvoidObstacles:
     away from the side hit, and veto forward arcs.  Ranges newer than ``range_timeout``: an arc "hits" when
     its path brings the robot within ``radius + margin`` of a reading (and closer to it than now); arcs
     hitting within ``horizon`` seconds get votes from -1 (hit at once) rising to 0 (hit at the horizon),
-    and moving arcs hitting within ``veto_time`` are vetoed.  Readings that are not finite or negative are dropped
-    and counted in ``dropped``.
+    and moving arcs hitting within ``veto_time`` are vetoed.  Something in the robot's lane ahead (nearer than its
+    goal less a body, within ``ahead_range`` of the clearance) adds a vote for curving right, growing as it nears
+    (``keep_right``) and held ``keep_right_hold`` s after the lane clears: robots meeting head-on pass each other
+    right to right.  Readings that are not finite or negative are dropped and counted in ``dropped``.
     """
     weight: float = 1.5
     radius: float = 0.17
@@ -197,6 +199,10 @@ class AvoidObstacles:
     backup_turn: float = 1.0
     range_timeout: float = 0.5
     max_range: float = 5.0
+    keep_right: float = 2.0
+    ahead_range: float = 2.0
+    keep_right_hold: float = 2.0
+    goal_distance: float = math.inf      # m to where the robot is going (set each cycle by whoever drives it)
     name: str = "avoid"
     dropped: int = 0
     _bump_until: float = field(default=-math.inf, repr=False)
@@ -204,6 +210,7 @@ class AvoidObstacles:
     _pressed: bool = field(default=False, repr=False)
     _points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
     _ranges_at: float = field(default=-math.inf, repr=False)
+    _ahead: tuple[float, float] = field(default=(0.0, -math.inf), repr=False)
 
     def on_bumpers(self, left: bool, right: bool, now: float) -> None:
         """Bumper state: a press starts (or extends) a back-up-and-turn-away manoeuvre."""
@@ -238,6 +245,12 @@ class AvoidObstacles:
         self._points = np.asarray(pts, dtype=float).reshape(-1, 2)
         self._ranges_at = now
         return len(pts)
+
+    def escape(self, turn: float, duration: float, now: float) -> None:
+        """Back up turning at ``turn`` rad/s for ``duration`` s, as after a bump: the way out of a standstill the
+        votes cannot leave (two robots stopped nose to nose, each one's path through the other)."""
+        self._turn = float(turn)
+        self._bump_until = max(self._bump_until, now + duration)
 
     def backing_up(self, now: float) -> bool:
         """True while the bump manoeuvre runs (bumper pressed, or within backup_time of the last press)."""
@@ -295,7 +308,31 @@ class AvoidObstacles:
             veto |= (ttc <= self.veto_time) & (arcs.v != 0)
             hits = np.isfinite(ttc)
             votes = np.where(hits, np.minimum(votes, -(1.0 - ttc / self.horizon)), votes)
+            ahead = self.dead_ahead()
+            if ahead > 0:
+                self._ahead = (ahead, now)
+            elif now - self._ahead[1] <= self.keep_right_hold:
+                ahead = self._ahead[0]              # held: turning right clears the lane, the pass is not done
+            if ahead > 0 and self.keep_right > 0:
+                wmax = float(np.max(np.abs(arcs.w))) or 1.0
+                votes = votes - ahead * self.keep_right * np.where(arcs.v > 0, arcs.w / wmax, 0.0)
         return Ballot(_clip1(votes), veto)
+
+    def dead_ahead(self) -> float:
+        """How close the nearest range point in the robot's lane ahead is: 0 (none within ``ahead_range`` of
+        the clearance) to 1 (at the clearance).  Something dead ahead makes the robot keep right, as road traffic
+        does: two robots meeting head-on both veer to their right and pass, where votes that only penalise the
+        arcs towards each other leave both facing each other, stopped (each one's path runs through the other).
+        What stands at the goal (within a body of it: a robot at the same mark) is waited for, not passed."""
+        pts = self._points
+        if len(pts) == 0:
+            return 0.0
+        clearance = self.radius + self.margin
+        lane = (pts[:, 0] > 0) & (np.abs(pts[:, 1]) < clearance) & (pts[:, 0] < self.goal_distance - 2 * self.radius)
+        if not lane.any():
+            return 0.0
+        gap = float(np.min(pts[lane, 0])) - clearance
+        return float(min(max(1.0 - gap / self.ahead_range, 0.0), 1.0))
 
 
 @lru_cache(maxsize=16)

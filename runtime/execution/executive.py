@@ -7,6 +7,8 @@ command's arc won (the path follower won: no grid rounding).
 """
 from __future__ import annotations
 
+import math
+import random
 from dataclasses import dataclass, field
 
 from runtime.control.arbiter import Arbiter, ArcSet, AvoidObstacles, Stop
@@ -30,6 +32,7 @@ class ExecContext:
     tunables: Tunables
     log: object
     radius: float                     # m, the base's footprint (obstacle avoidance)
+    seed: int = 0                     # the robot's own random choices (escape turns): its id on a robot
 
     @property
     def goal_tolerance(self) -> float:
@@ -41,15 +44,25 @@ class ExecContext:
                            goal_tolerance=t.goal_tolerance)
 
 
+STALL_TIME = 4.0          # s over which a stall is judged
+STALL_MOVE = 0.1          # m the path follower asked for, at least, in that time (turns at the robot's radius) ...
+STALL_SHARE = 0.25        # ... of which the robot got less than this share: stalled
+ESCAPE_TIME = 2.0         # s backing up and turning
+
+
 @dataclass
 class Executive:
     ctx: ExecContext
     executors: dict[int, object] = field(default_factory=dict)      # task id -> executor
     arbiter: Arbiter | None = None
+    escapes: int = 0                  # stalls escaped by backing up
 
     def __post_init__(self) -> None:
         self.avoid = AvoidObstacles(radius=self.ctx.radius)
         self._backing = False
+        self._mark: tuple[tuple, float, float] | None = None  # (pose, time, m asked since) of the stall window
+        self._last: tuple | None = None                         # (follower's command, time) of the last cycle
+        self._rng = random.Random(self.ctx.seed)
         self._rebuild_arbiter()
 
     def _arcs(self) -> ArcSet:
@@ -116,6 +129,9 @@ class Executive:
         ranges = getattr(sensors, "ranges", None)
         if ranges:
             self.avoid.on_ranges(ranges, now)
+        path = self._lead().follow.path
+        self.avoid.goal_distance = math.hypot(path[-1][0] - pose[0], path[-1][1] - pose[1]) if path else math.inf
+        self._check_stall(pose, now)
         backing = self.avoid.backing_up(now)
         if self._backing and not backing:
             for e in self.executors.values():
@@ -130,6 +146,34 @@ class Executive:
         if cmd is not None and not backing and d.arc == self.arbiter.arcs.nearest(*cmd):
             return cmd, progress          # the path follower won: pass its exact command, not the arc's grid value
         return (d.v, d.w), progress
+
+    def _check_stall(self, pose, now: float) -> None:
+        """A robot whose path follower has asked for at least ``STALL_MOVE`` m of driving (turning counts at the
+        robot's radius) and that got less than ``STALL_SHARE`` of it over ``STALL_TIME`` s backs up for
+        ``ESCAPE_TIME`` s, turning to a side drawn at random (robots stalled against each other draw apart, not
+        in step); the executors then re-plan from where it ends, as after a bump.  A slow final approach asks
+        for little and is left alone."""
+        cmd = self._lead().follow.command
+        mark, last = self._mark, self._last
+        self._last = (cmd, now)
+        if cmd is None or self.avoid.backing_up(now) or mark is None:
+            self._mark = (pose, now, 0.0)
+            return
+        if last is not None and last[0] is not None:
+            v, w = last[0]
+            self._mark = mark = (mark[0], mark[1], mark[2] + (abs(v) + self.ctx.radius * abs(w)) * (now - last[1]))
+        (x, y, th), t, wanted = mark
+        turned = abs((pose[2] - th + math.pi) % (2 * math.pi) - math.pi)
+        got = math.hypot(pose[0] - x, pose[1] - y) + self.ctx.radius * turned
+        if now - t < STALL_TIME:
+            return
+        if wanted >= STALL_MOVE and got < STALL_SHARE * wanted:
+            turn = self._rng.choice((-1.0, 1.0)) * self.avoid.backup_turn
+            self.ctx.log.info("stalled: %.2f m in %.0f s of %.2f m asked; backing up %.0f s turning %+.1f rad/s",
+                              got, now - t, wanted, ESCAPE_TIME, turn)
+            self.avoid.escape(turn, ESCAPE_TIME, now)
+            self.escapes += 1
+        self._mark = (pose, now, 0.0)
 
     @property
     def arrived(self) -> bool:

@@ -4,6 +4,9 @@ commitment.  A trip's parameters (delivery point, load per trip, load time per w
 commitment (see runtime/tasks/transport.py); a changed coalition reaches :meth:`recommit`, which keeps the
 trip where it is, so a robot carrying a load never drops it because a partner joined or left.
 
+Legs are driven in lanes (:func:`keep_lane`, ``lane`` m right of the straight line, default 1.2 robot radii):
+robots going to an object and robots coming back from it do not meet head-on.
+
 Progress: :data:`~runtime.tasks.transport.LOADED` after each load and
 :data:`~runtime.tasks.transport.DELIVERED` after each unload, ``data={"wu": load}``.  A robot whose route is
 blocked keeps trying (the avoidance behaviour and re-planning after a bump sort it out); the time lost is the
@@ -20,6 +23,26 @@ from runtime.tasks.transport import DELIVERED, LOADED
 
 TO_OBJECT, LOADING, TO_DELIVERY, UNLOADING = "to_object", "loading", "to_delivery", "unloading"
 DEFAULT_REACH = 0.3           # m
+LANE_FACTOR = 1.2             # default lane offset: this many robot radii right of the straight line
+
+
+def keep_lane(path: list, offset: float) -> list:
+    """``path`` with each leg moved ``offset`` m to its right between its ends (it leaves and reaches the
+    marks themselves along a taper of a quarter of the leg, at most 1 m): robots going and coming between the
+    same two marks drive in two lanes and do not meet head-on.  Legs too short to taper stay as they are."""
+    if offset <= 0 or len(path) < 2:
+        return path
+    out = [path[0]]
+    for (x0, y0), (x1, y1) in zip(path, path[1:]):
+        dx, dy = x1 - x0, y1 - y0
+        length = math.hypot(dx, dy)
+        taper = min(0.25 * length, 1.0)
+        if taper >= offset:
+            ux, uy = dx / length, dy / length
+            rx, ry = uy * offset, -ux * offset                    # the right-hand normal
+            out += [(x0 + ux * taper + rx, y0 + uy * taper + ry), (x1 - ux * taper + rx, y1 - uy * taper + ry)]
+        out.append((x1, y1))
+    return out
 
 
 class TransportExecutor:
@@ -58,6 +81,13 @@ class TransportExecutor:
         return p
 
     @property
+    def lane(self) -> float:
+        return float(self.commitment.param("lane", LANE_FACTOR * self.ctx.radius))
+
+    def _route(self, pose) -> list:
+        return keep_lane(self.ctx.planner.route(pose, self.goal), self.lane)
+
+    @property
     def goal(self) -> tuple[float, float]:
         return self.task.position if self.phase in (TO_OBJECT, LOADING) else self.delivery
 
@@ -74,11 +104,11 @@ class TransportExecutor:
     def begin(self, pose, now: float) -> None:
         if not self._routed and self.phase in (TO_OBJECT, TO_DELIVERY):
             self._routed = True
-            self.follow.set_path(self.ctx.planner.route(pose, self.goal))
+            self.follow.set_path(self._route(pose))
 
     def bump_ended(self, pose, now: float) -> None:
         if self.phase in (TO_OBJECT, TO_DELIVERY):
-            self.follow.set_path(self.ctx.planner.route(pose, self.goal))
+            self.follow.set_path(self._route(pose))
 
     def update(self, pose, now: float) -> list[Progress]:
         self.follow.update(pose, now)
@@ -89,7 +119,7 @@ class TransportExecutor:
                 self._dwell_until = now + self.load * self.load_time
                 self.follow.set_path(None)        # stand still (the Stop behaviour votes for it)
             elif self.follow.done:                # stopped short (pushed, or the path ended off the mark)
-                self.follow.set_path(self.ctx.planner.route(pose, self.goal))
+                self.follow.set_path(self._route(pose))
             return []
         if now < self._dwell_until:
             return []
@@ -102,7 +132,7 @@ class TransportExecutor:
             self.trips += 1
             self.phase = TO_OBJECT
             out = [Progress(self.task.id, DELIVERED, now, data={"wu": wu})]
-        self.follow.set_path(self.ctx.planner.route(pose, self.goal))
+        self.follow.set_path(self._route(pose))
         return out
 
     def cancel(self, now: float) -> None:

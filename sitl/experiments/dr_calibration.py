@@ -27,8 +27,7 @@ import numpy as np
 from runtime.errors import InputError
 from runtime.log import get_logger
 from sitl.experiments import report
-from sitl.foraging import harness, scenario
-from sitl.foraging.world import DT
+from sitl.foraging import scenario
 
 log = get_logger("experiments.dr_calibration")
 
@@ -47,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="object-to-D distances in du (1 du = 1 cm), comma-separated")
     parser.add_argument("--duration", type=float, default=DURATION, help="simulated s per case (40,000 tu = 4800 s)")
     parser.add_argument("--seed", type=int, default=1, help="robot starts (and nothing else: the world is exact)")
-    parser.add_argument("--dt", type=float, default=DT, help="physics step (s)")
+    parser.add_argument("--dt", type=float, default=None, help="physics step (s; default: the world's, 0.05)")
     parser.add_argument("--check-dt", type=float, default=0.01,
                         help="finer physics step at which the check point (4 robots, 140 du) is run again (0: skip)")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="cases run in this many processes")
@@ -91,7 +90,9 @@ def work_capacity(d_m: float) -> float:
     return scenario.work_capacity(d_m, LOAD, SPEED, LOAD_TIME)
 
 
-def config(n: int, d_du: int, duration: float, seed: int, dt: float) -> harness.ForagingConfig:
+def config(n: int, d_du: int, duration: float, seed: int, dt: float) -> "harness.ForagingConfig":
+    from sitl.foraging import harness          # pybullet: loaded when a case runs, not when the CLI is built
+
     d = d_du * scenario.DU
     return harness.ForagingConfig(robots=n, method=None, seed=seed, time_limit=duration, dt=dt,
                                   fixed_object=(d / math.sqrt(2), d / math.sqrt(2)), load=LOAD, load_time=LOAD_TIME,
@@ -100,6 +101,8 @@ def config(n: int, d_du: int, duration: float, seed: int, dt: float) -> harness.
 
 def run_case(n: int, d_du: int, duration: float, seed: int, dt: float) -> dict:
     """One calibration case: the row of the CSV."""
+    from sitl.foraging import harness
+
     cfg = config(n, d_du, duration, seed, dt)
     t0 = time.perf_counter()
     res = harness.run(cfg)
@@ -274,6 +277,9 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--duration {args.duration!r}: expected seconds > 0")
     if args.jobs < 1:
         raise InputError(f"--jobs {args.jobs}: expected at least 1")
+    if args.dt is None:
+        from sitl.foraging.world import DT
+        args.dt = DT
     out = Path(args.out)
     cases = [(n, d, args.dt) for d in distances for n in robots]
     if args.check_dt and CHECK_CASE[0] in robots and CHECK_CASE[1] in distances:

@@ -5,14 +5,18 @@ robot is lost, the lowest-id live robot adopts it (after ``2 * report_period`` o
 ``CmHold`` reports, so a task already held is not announced twice).
 
 * **Insertion.**  One auction at a time, at least ``insert_interval`` (Delta t) apart: ``CmAnnounce``, bids for
-  ``auction_timeout`` seconds.
+  ``auction_timeout`` seconds.  The paper assumes Delta t between any two insertions; with several robots
+  taking tasks in, an auctioneer that hears another's announcement waits until that auction is over plus
+  the rest of Delta t (and a random 0-0.5 s, so that two that collided do not collide again), so auctions
+  run one after the other fleet-wide and their pre-allocations do not crowd each other out.
 * **Winner.**  A task served by one coalition (``avoid_obstacles``) goes to the cheapest bid (ties: fewer
   robots, then the lower robot ids).  A ``surveillance`` task takes every robot that can: each robot's
   cheapest bid, up to the task's ``robots`` (0: all), cheapest first; their waypoints are shared.
 * **Award.**  ``CmAward`` broadcast, re-sent to every robot that has not acknowledged each ``resend``
   seconds.  After ``ack_timeout`` the silent robots' part is cancelled (``CmCancel``): for a one-coalition
   task the whole award goes, for a team only their share; a task left with nobody is announced again.
-* **Unservable.**  A task that drew no bid in ``max_announces`` announcements (``retry`` s apart) is reported
+* **Unservable.**  A task that drew no bid in ``max_announces`` announcements (``retry`` to 2 ``retry`` s
+  apart, at random) is reported
   FAILED with the reason.  A holder that resigns, falls silent for ``member_timeout`` or is lost releases
   its share the same way (RELEASED, then announced again).
 * **Done.**  A surveillance task when every waypoint is visited (the agent says so), an avoidance task after
@@ -21,6 +25,7 @@ robot is lost, the lowest-id live robot adopts it (after ``2 * report_period`` o
 from __future__ import annotations
 
 import math
+import random
 from dataclasses import dataclass, field
 
 from runtime.allocation.agent import AWARDED, DONE, FAILED, RELEASED, TaskEvent
@@ -76,6 +81,7 @@ class Auctioneer:
         self.failed: set[int] = set()
         self.count = 0
         self.next_insert = -math.inf
+        self.rng = random.Random(self.me)            # back-off jitter: seeded, so runs repeat
         self.stats = AuctioneerStats()
 
     # ------------------------------------------------------------------ which tasks are mine
@@ -171,9 +177,10 @@ class Auctioneer:
             self.a.log.warning("task %d %s", job.task.id, why)
             self.a.events.append(TaskEvent(job.task.id, FAILED, (self.me,), why))
             return []
-        job.state, job.not_before = QUEUED, now + self.o.retry
+        wait = self.o.retry * (1.0 + self.rng.random())
+        job.state, job.not_before = QUEUED, now + wait
         self.a.log.info("auction %s: no bids for task %d; announcing again in %.1f s", _name(job.auction),
-                        job.task.id, self.o.retry)
+                        job.task.id, wait)
         return []
 
     def _chase(self, job: Job, now: float) -> list:
@@ -233,6 +240,12 @@ class Auctioneer:
         return [CmDone(self.me, 0, job.auction, task_id)]
 
     # ------------------------------------------------------------------ messages
+    def on_announce(self, m, now: float) -> None:
+        """Another auctioneer's auction runs: mine waits until it is over, plus the rest of Delta t."""
+        if m.sender != self.me:
+            rest = max(0.0, self.o.insert_interval - self.o.auction_timeout)
+            self.next_insert = max(self.next_insert, now + m.timeout + rest + 0.5 * self.rng.random())
+
     def _job(self, m) -> Job | None:
         job = self.jobs.get(m.task)
         return job if job is not None and job.auction == m.auction else None

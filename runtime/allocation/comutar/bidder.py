@@ -7,9 +7,9 @@ bid, and allocate what they are awarded.  Sans-IO: every input carries ``now``; 
   inputs sends one ``CmQuery`` per input and waits ``budget`` seconds (``query_wait`` per level still below it)
   before composing; one without bids at once.
 * **Query.**  Each action producing the information asked checks and pre-allocates in turn (a reader for
-  another robot's region also constrains this robot's c-space, Alg. 3; a stream to another robot costs
-  bandwidth on this robot's link), queries its own inputs with a shorter budget, and answers ``CmCost`` with
-  each sub-coalition it can form.  So the query recurses down the chain (laser reader -> obstacle detector
+  another robot's region must have it within its sensor's range and constrains this robot's c-space to keep
+  it in view, Alg. 3; a stream to another robot costs bandwidth on this robot's link), queries its own inputs
+  with a shorter budget, and answers ``CmCost`` with each sub-coalition it can form.  So the query recurses down the chain (laser reader -> obstacle detector
   -> obstacle avoider).
 * **Composing.**  The ``max_options`` cheapest answers per input are combined; a combination whose remote
   inputs do not fit this robot's link is dropped; the slot's hold grows to the largest combination kept.
@@ -20,7 +20,8 @@ bid, and allocate what they are awarded.  Sans-IO: every input carries ``now``; 
   ``report_period``.
 
 Every pre-allocation expires: slots not awarded vanish at their expiry (the record is kept a while so a late
-award can still be taken up, afresh).
+award can still be taken up, afresh).  An action's processor share is held once for its running instance,
+however many consumers (slots) it serves; streams and c-space constraints are held per slot.
 """
 from __future__ import annotations
 
@@ -108,8 +109,10 @@ class Bidder:
         return self.me << 16 | n
 
     def _demands(self, slot: Slot, link_in: float = 0.0) -> dict:
+        """What one slot holds: its streams on this robot's link and its c-space constraint.  The processor
+        belongs to the action's running instance (:meth:`_instance`), shared by all its consumers."""
         me = self.me
-        d = {(me, "processor"): slot.spec.processor}
+        d = {}
         link = link_in + (slot.spec.rate(slot.info) if slot.provides_remote else 0.0)
         if link:
             d[(me, "link")] = link
@@ -117,19 +120,87 @@ class Bidder:
             d[(me, "cspace")] = lambda now, s=slot: self.a.cspace_mask(s, now)
         return d
 
-    def _open(self, slot: Slot, now: float) -> bool:
-        why = self.a.ledger.preallocate(slot.ref, self._demands(slot), now, slot.expires, (slot.auction, slot.task))
+    def _instance(self, spec: A.ActionSpec) -> tuple:
+        """The ledger holder of an action's running instance: one reader or detector serves every consumer,
+        so its processor share is held once however many slots (consumers) it has."""
+        return ("run", spec.name)
+
+    def _rivals(self, auction: int) -> set:
+        """Holders the slots of ``auction`` need not fit beside: the other candidates of that auction on this
+        robot (they cannot all win; digest §7's per-coalition check), and action instances only they keep."""
+        pre = {r for r, s in self.slots.items() if s.auction == auction and not s.held and not s.expired}
+        out = set(pre)
+        for spec in {self.slots[r].spec.name: self.slots[r].spec for r in pre}.values():
+            alive = [r for r, s in self.slots.items() if s.spec.name == spec.name and (s.held or not s.expired)]
+            if set(alive) <= pre:
+                out.add(self._instance(spec))
+        return out
+
+    def _admit(self, slots: list, now: float, link_in: float = 0.0) -> str | None:
+        """Why ``slots`` (one coalition's slots on this robot, of one auction; the first receiving ``link_in``
+        Mb/s from other robots) cannot run together beside every allocation and every other auction's
+        pre-allocation, or None."""
+        led = self.a.ledger
+        rivals = self._rivals(slots[0].auction)
+        demands = [self._demands(s, link_in if i == 0 else 0.0) for i, s in enumerate(slots)]
+        for spec in {s.spec.name: s.spec for s in slots}.values():
+            inst = self._instance(spec)
+            if inst not in led.holds or inst in rivals:
+                demands.append({(self.me, "processor"): spec.processor})
+        joined = led.join(demands, now)
+        why = led.check(joined, now, exclude=rivals | {s.ref for s in slots})
         if why is not None:
             self.stats.refused += 1
-            self.a.log.debug("%s cannot run for task %d: %s", slot.spec.name, slot.task, why)
+        return why
+
+    def _open(self, slot: Slot, now: float) -> bool:
+        why = self._admit([slot], now)
+        if why is not None:
+            self.a.log.debug("%s cannot run (auction %s): %s", slot.spec.name, _auction_name(slot.auction), why)
             return False
+        led, inst = self.a.ledger, self._instance(slot.spec)
+        led.holds.pop(slot.ref, None)
+        self._hold(slot, self._demands(slot), now)
+        if inst not in led.holds:
+            led.preallocate(inst, {(self.me, "processor"): slot.spec.processor}, now, slot.expires,
+                            exclude=self._rivals(slot.auction))
         self.slots[slot.ref] = slot
+        self._sync(slot.spec)
         return True
 
+    def _hold(self, slot: Slot, demands: dict, now: float) -> None:
+        """Hold what :meth:`_admit` admitted (the check is done: rivals of the auction are not counted)."""
+        self.a.ledger.preallocate(slot.ref, demands, now, slot.expires, (slot.auction, slot.task),
+                                  exclude=self._rivals(slot.auction))
+
+    def _sync(self, spec: A.ActionSpec) -> None:
+        """Keep the instance's hold matching its slots: allocated while one is held, pre-allocated until the
+        last pre-allocated one expires, released when none is left."""
+        led, inst = self.a.ledger, self._instance(spec)
+        alive = [s for s in self.slots.values() if s.spec.name == spec.name and (s.held or not s.expired)]
+        hold = led.holds.get(inst)
+        if not alive:
+            led.release(inst)
+        elif hold is not None:
+            hold.expires = None if any(s.held for s in alive) else max(s.expires for s in alive)
+
+    def _run(self, spec: A.ActionSpec, now: float) -> str | None:
+        """Allocate the action's instance (admitted afresh if its pre-allocation lapsed)."""
+        led, inst = self.a.ledger, self._instance(spec)
+        if inst in led.holds:
+            led.holds[inst].expires = None
+            return None
+        return led.allocate(inst, now, {(self.me, "processor"): spec.processor})
+
     def release(self, refs) -> None:
+        specs = {}
         for ref in refs:
             self.a.ledger.release(ref)
-            self.slots.pop(ref, None)
+            slot = self.slots.pop(ref, None)
+            if slot is not None:
+                specs[slot.spec.name] = slot.spec
+        for spec in specs.values():
+            self._sync(spec)
 
     def release_auction(self, auction: int, keep=()) -> None:
         self.release([r for r, s in self.slots.items() if s.auction == auction and r not in keep and not s.held])
@@ -169,6 +240,8 @@ class Bidder:
                 continue
             if spec.inputs and m.budget - self.o.query_wait < self.o.query_wait / 2:
                 continue                       # no time left to connect its own inputs
+            if spec.sensor is not None and m.owner != self.me and not self.a.in_range(spec, m.x, m.y):
+                continue                       # the region is out of its sensor's range: it cannot run as expected
             slot = Slot(self._ref(), m.auction, 0, spec, 0, m.sender, m.query, info, (m.owner, m.x, m.y),
                         m.depth + 1, now + m.expires)
             if not self._open(slot, now):
@@ -203,10 +276,14 @@ class Bidder:
 
     # ------------------------------------------------------------------ composing
     def tick(self, now: float) -> list:
+        lapsed = {}
         for ref in self.a.ledger.expire(now):
             slot = self.slots.get(ref)
             if slot is not None:
                 slot.expired = True
+                lapsed[slot.spec.name] = slot.spec
+        for spec in lapsed.values():
+            self._sync(spec)
         for ref, slot in list(self.slots.items()):
             if slot.expired and now > slot.expires + KEEP_EXPIRED:
                 del self.slots[ref]
@@ -230,8 +307,8 @@ class Bidder:
             if len(set(refs)) != len(refs):
                 continue
             link_in = self._link_in(chosen)
-            if link_in and self.a.ledger.check(self._demands(slot, link_in), now, exclude=(slot.ref,)) is not None:
-                self.stats.refused += 1
+            local = [slot] + [self.slots[r] for r in refs[1:] if slot_robot(r) == self.me and r in self.slots]
+            if (link_in or len(local) > 1) and self._admit(local, now, link_in) is not None:
                 continue
             cost = self.a.own_cost(slot) + sum(a.cost + self.a.link_cost(a.rate, a.robot) for a in pick)
             combos.append((refs, cost, chosen))
@@ -240,8 +317,7 @@ class Bidder:
             return []
         widest = max(self._link_in(c[2]) for c in combos)
         if widest:
-            self.a.ledger.preallocate(slot.ref, self._demands(slot, widest), now, slot.expires,
-                                      (slot.auction, slot.task))
+            self._hold(slot, self._demands(slot, widest), now)
         slot.combos = sorted(combos, key=lambda c: c[1])[:self.o.max_options]
         if slot.requester is None:
             self.stats.bids += len(slot.combos)
@@ -263,6 +339,7 @@ class Bidder:
         self.stats.awards += 1
         if held is not None:                   # a newer award of a task I still hold: the old one is over
             self.drop(m.task)
+        self.release_auction(m.auction, keep=mine)         # the losers first: the winners must fit beside the rest
         why = self._allocate(mine, m, now)
         if why is not None:
             self.stats.declined += 1
@@ -270,7 +347,6 @@ class Bidder:
             self.release(mine)
             self.release_auction(m.auction)
             return [CmResign(self.me, m.sender, m.auction, m.task)]
-        self.release_auction(m.auction, keep=mine)
         self.holdings[m.task] = Holding(m.task, m.auction, tuple(m.slots), mine, now)
         self.a.log.info("holding task %d (auction %s) with %s", m.task, _auction_name(m.auction),
                         "+".join(self.slots[r].spec.name for r in mine))
@@ -294,14 +370,17 @@ class Bidder:
                 if len(chosen) != len(slot.spec.inputs):
                     why = f"{slot.spec.name}: the award connects no provider to an input"
                 else:
-                    why = self.a.ledger.allocate(ref, now, self._demands(slot, self._link_in(chosen)),
-                                                 (slot.auction, m.task))
+                    why = self._run(slot.spec, now) or self.a.ledger.allocate(
+                        ref, now, self._demands(slot, self._link_in(chosen)), (slot.auction, m.task))
                     if why is None:
                         slot.held, slot.expired, slot.chosen, slot.task = True, False, chosen, m.task
                         done.append(ref)
             if why is not None:
                 for r in done:
                     self.slots[r].held = False
+                for r in mine:
+                    if r in self.slots:
+                        self._sync(self.slots[r].spec)
                 return why
         return None
 

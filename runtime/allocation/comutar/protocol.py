@@ -179,6 +179,10 @@ class ComutarAgent:
         """A stream received from another robot: its share of this robot's link."""
         return 0.0 if robot == self.robot_id else rate / max(self.options.link_capacity, 1e-9)
 
+    def in_range(self, spec: A.ActionSpec, x: float, y: float) -> bool:
+        """Is (x, y) within the range of ``spec``'s sensor from here?"""
+        return self.pose is not None and math.dist(self.position, (x, y)) <= A.SENSORS[spec.sensor].range
+
     def serves(self, spec: A.ActionSpec, task: Task) -> bool:
         """Can ``spec`` accomplish ``task`` on this robot (an avoider protects only its own robot)."""
         return task.kind != "avoid_obstacles" or getattr(task.spec, "robot", None) == self.robot_id
@@ -319,6 +323,7 @@ class ComutarAgent:
     def _dispatch(self, msg, now: float) -> list:
         b, a = self.bidder, self.auction
         if isinstance(msg, CmAnnounce):
+            a.on_announce(msg, now)
             return b.on_announce(msg, now)
         if isinstance(msg, CmQuery):
             return b.on_query(msg, now)

@@ -18,8 +18,9 @@ The :class:`Ledger` holds what every running (allocated) and pre-allocated actio
 it knows, and admits a new demand only if, for every resource it names, the compound of all holds with the
 new demand still fits (eq. 5 over every robot's actions).  Pre-allocations carry an expiry time and vanish
 on :meth:`Ledger.expire`; allocations stay until released.  Every hold counts against every other (the
-admission test of Alg. 1 as printed): so the sum of everything held, pre-allocated or running, never exceeds
-a scalar resource's capacity.
+admission test of Alg. 1 as printed) unless the caller names rivals to leave out (``exclude``): CoMutaR's
+bidder leaves out the other candidates of the same auction (digest §7), which cannot all win; so the
+allocations never exceed a capacity, and neither do the pre-allocations of any one auction beside them.
 """
 from __future__ import annotations
 
@@ -145,16 +146,33 @@ class Ledger:
                 return _refusal(res, joined, evaluate(demand, now))
         return None
 
-    def fits(self, now: float) -> dict[Key, bool]:
-        """Per resource: does everything held fit (the invariant the tests check every tick)?"""
-        return {k: r.algebra.fits(self.total(k, now), r.capacity) for k, r in self.resources.items()}
+    def join(self, demands: list[Mapping[Key, Demand]], now: float) -> dict[Key, Any]:
+        """Several holders' demands compounded per resource (eq. 3 over them), evaluated at ``now``."""
+        out: dict[Key, Any] = {}
+        for d in demands:
+            for key, value in d.items():
+                v = evaluate(value, now)
+                out[key] = self.resources[key].algebra.compound(out[key], v) if key in out else v
+        return out
+
+    def fits(self, now: float, allocated_only: bool = False) -> dict[Key, bool]:
+        """Per resource: does everything held (or everything allocated) fit?"""
+        out = {}
+        for k, r in self.resources.items():
+            alg, total = r.algebra, r.algebra.identity
+            for hold in self.holds.values():
+                if k in hold.demands and (hold.allocated or not allocated_only):
+                    total = alg.compound(total, evaluate(hold.demands[k], now))
+            out[k] = alg.fits(total, r.capacity)
+        return out
 
     # ------------------------------------------------------------------ holds
     def preallocate(self, holder: Hashable, demands: Mapping[Key, Demand], now: float, expires: float,
-                    tag: Any = None) -> str | None:
+                    tag: Any = None, exclude=()) -> str | None:
         """Admit and hold ``demands`` until ``expires`` (or until allocated); returns why not, or None.
-        A holder that already holds is replaced (its old demands do not count against its new ones)."""
-        why = self.check(demands, now, exclude=(holder,))
+        A holder that already holds is replaced (its old demands do not count against its new ones), and so
+        are the holders in ``exclude`` not counted (rivals the caller knows cannot run beside it)."""
+        why = self.check(demands, now, exclude=(holder, *exclude))
         if why is not None:
             self.refused += 1
             return why

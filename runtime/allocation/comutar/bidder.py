@@ -299,7 +299,10 @@ class Bidder:
 
     def _compose(self, slot: Slot, now: float) -> list:
         inputs = slot.spec.inputs
-        options = [sorted(slot.answers.get(i, []), key=lambda a: (a.cost, a.robot))[:self.o.max_options] for i in inputs]
+        def price(a: Answer) -> tuple:
+            return a.cost + self.a.link_cost(a.rate, a.robot), a.robot != self.me, a.robot
+
+        options = [sorted(slot.answers.get(i, []), key=price)[:self.o.max_options] for i in inputs]
         combos = []
         for pick in itertools.product(*options):
             chosen = dict(zip(inputs, pick))

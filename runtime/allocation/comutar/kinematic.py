@@ -13,9 +13,11 @@ Each frame (the window's ``T_f``):
    serving another robot keeping that robot's region in view (Alg. 3);
 3. the whole fleet's constraints are evaluated in one batch and each robot takes its best command
    (:func:`~runtime.allocation.comutar.cspace.choose`); a conflict (empty intersection) stops it;
-4. robots move on exact arcs.  Robot-robot contact: a move that would make a robot's disc overlap another
-   robot's (its old position, or its new one if it already moved this frame) or a static obstacle is not
-   made; the robot only turns (a bumper stop), and the contact is counted.  So discs never overlap;
+4. robots move on exact arcs.  Robot-robot contact: a robot whose new disc would overlap another robot's
+   (at its new position if it already moved this frame, else its old one) or a static obstacle is pushed
+   back out along the contact normal, so it slides along the other disc as rigid bodies without friction
+   would; if that still overlaps something it stays put.  Each such move is counted as a contact.  So discs
+   never overlap;
 5. a robot holding a surveillance task within ``visit_radius`` of an open waypoint reports it visited.
 
 No sensing noise, no wheel slip: runs differ by their start poses and the bus's seeded jitter.
@@ -224,28 +226,39 @@ class KinematicFleet:
 
     # ------------------------------------------------------------------ motion and visits
     def _move(self, proposed: np.ndarray) -> None:
+        """Move every robot to its proposed pose, resolving contacts in id order: a disc that would overlap
+        another robot (at its new position if it already moved, else its old one) or a static obstacle is
+        pushed back out along the contact normal (it slides along the other disc); if that still overlaps
+        something, it does not move.  Each resolved or refused move counts one contact."""
         old = self.poses
-        r2 = (2 * self.radius) ** 2
         final = old.copy()
-        moved = np.zeros(len(self.ids), dtype=bool)
+        final[:, 2] = proposed[:, 2]
         for i in range(len(self.ids)):
-            x, y = proposed[i, :2]
-            others_old = np.delete(old[:, :2], i, axis=0)
-            clash = np.any(((others_old - (x, y)) ** 2).sum(axis=1) < r2 - 1e-12)
-            if not clash and moved.any():
-                mine = moved.copy()
-                mine[i] = False
-                clash = np.any(((final[mine, :2] - (x, y)) ** 2).sum(axis=1) < r2 - 1e-12)
-            if not clash and len(self.static):
-                gap = np.hypot(self.static[:, 0] - x, self.static[:, 1] - y) - self.static[:, 2] - self.radius
-                clash = bool(np.any(gap < 0))
-            final[i, 2] = proposed[i, 2]
-            if clash:
-                if np.hypot(*(proposed[i, :2] - old[i, :2])) > 1e-12:
-                    self.contacts += 1
+            want = proposed[i, :2]
+            if np.hypot(*(want - old[i, :2])) < 1e-12:
                 continue
-            final[i, :2] = proposed[i, :2]
-            moved[i] = True
+            others = np.delete(final[:, :2], i, axis=0)
+            discs = np.column_stack([others, np.full(len(others), self.radius)])
+            if len(self.static):
+                discs = np.vstack([discs, self.static])
+            pos, touched = want.copy(), False
+            for _ in range(3):
+                gap = np.hypot(discs[:, 0] - pos[0], discs[:, 1] - pos[1]) - discs[:, 2] - self.radius
+                j = int(np.argmin(gap)) if len(gap) else -1
+                if j < 0 or gap[j] >= -1e-9:
+                    break
+                touched = True
+                n = pos - discs[j, :2]
+                norm = np.hypot(*n)
+                n = n / norm if norm > 1e-12 else (old[i, :2] - discs[j, :2]) / max(np.hypot(*(old[i, :2] - discs[j, :2])), 1e-12)
+                pos = discs[j, :2] + n * (discs[j, 2] + self.radius + 1e-9)
+            else:
+                gap = np.hypot(discs[:, 0] - pos[0], discs[:, 1] - pos[1]) - discs[:, 2] - self.radius
+                if len(gap) and gap.min() < -1e-9:
+                    pos = old[i, :2]
+            if touched:
+                self.contacts += 1
+            final[i, :2] = pos
         self.driven += np.hypot(final[:, 0] - old[:, 0], final[:, 1] - old[:, 1])
         self.poses = final
 

@@ -131,16 +131,17 @@ class Board:
         return any(w == i and (t, r) < mine for r, (w, t) in self.claims.items() if r != self.me)
 
     def choose(self, xy, now: float) -> bool:
-        """Keep the current target, or claim the nearest waypoint not visited and not claimed by another robot
-        (if every open one is claimed: the nearest open one).  True if the target changed."""
+        """Keep the current target, or claim the nearest waypoint neither visited nor claimed by another robot.
+        When every open waypoint is claimed by another robot, claim nothing and wait (the first claimant
+        wins; a robot whose claimant is lost sees the claim dropped).  True if the target changed."""
         if self.target is not None or self.complete:
             return False
-        open_ = np.array([i for i in range(len(self.points)) if i not in self.visited])
         taken = {w for r, (w, _) in self.claims.items() if r != self.me}
-        free = np.array([i for i in open_ if i not in taken])
-        pool = free if len(free) else open_
-        d = np.hypot(*(self.points[pool] - np.asarray(xy, float)).T)
-        self.target = int(pool[int(np.argmin(d))])
+        free = [i for i in range(len(self.points)) if i not in self.visited and i not in taken]
+        if not free:
+            return False
+        d = np.hypot(*(self.points[free] - np.asarray(xy, float)).T)
+        self.target = free[int(np.argmin(d))]
         self.claimed_at = float(now)
         return True
 

@@ -15,6 +15,7 @@ EXPERIMENTS = {
     "formation-ideal": ("sitl.experiments.formation_ideal", "paper 002 Fig. 6 and 7: error vs Hungarian, 2-20 robots"),
     "formation-twobox": ("sitl.experiments.formation_twobox", "paper 002 Fig. 9: the two-box distribution"),
     "formation-world": ("sitl.experiments.formation_world", "paper 002 Tables I-II: A*/RRT in the pybullet world"),
+    "comutar-surveillance": ("sitl.experiments.comutar_surveillance", "paper 003 Figs. 4-7: surveillance and sensor sharing"),
 }
 
 

@@ -38,3 +38,6 @@ class ComutarOptions:
     region_radius: float = field(default=1.0, metadata=rng(0.0, 50.0))      # m: the region a consumer asks to watch
     max_options: int = field(default=2, metadata=rng(1, 8))                  # providers kept per input
     visit_radius: float = field(default=0.1, metadata=rng(0.01, 5.0))       # m: a waypoint this close is visited
+    # m: a survey's claim moves to a free waypoint nearer by more than this (Alg. 2: the nearest at each
+    # instant); null: a claim is kept until visited
+    switch: float | None = field(default=0.5, metadata=rng(0.0, 100.0))

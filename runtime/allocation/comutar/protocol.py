@@ -294,7 +294,7 @@ class ComutarAgent:
         out = []
         for tid, board in self.boards.items():
             held = tid in self.bidder.holdings
-            if held and self.pose is not None and board.choose(self.position, now):
+            if held and self.pose is not None and board.choose(self.position, now, self.options.switch):
                 self._status_at[tid] = -math.inf
             if board.complete and tid in self.auction.jobs:
                 out += self.auction.complete(tid, now)

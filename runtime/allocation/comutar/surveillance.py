@@ -130,18 +130,24 @@ class Board:
         mine = (self.claimed_at, self.me)
         return any(w == i and (t, r) < mine for r, (w, t) in self.claims.items() if r != self.me)
 
-    def choose(self, xy, now: float) -> bool:
-        """Keep the current target, or claim the nearest waypoint neither visited nor claimed by another robot.
-        When every open waypoint is claimed by another robot, claim nothing and wait (the first claimant
-        wins; a robot whose claimant is lost sees the claim dropped).  True if the target changed."""
-        if self.target is not None or self.complete:
+    def choose(self, xy, now: float, switch: float | None = None) -> bool:
+        """Claim the nearest waypoint neither visited nor claimed by another robot (Alg. 2 heads for the nearest
+        waypoint at each instant: with ``switch`` (m), a held claim moves to a free waypoint nearer by more than
+        that; None keeps it until visited).  When every open waypoint is claimed by another robot, claim nothing
+        and wait (the first claimant wins; a lost claimant's claims are dropped).  True if the target changed."""
+        if self.complete or (self.target is not None and switch is None):
             return False
         taken = {w for r, (w, _) in self.claims.items() if r != self.me}
         free = [i for i in range(len(self.points)) if i not in self.visited and i not in taken]
         if not free:
             return False
         d = np.hypot(*(self.points[free] - np.asarray(xy, float)).T)
-        self.target = free[int(np.argmin(d))]
+        best = free[int(np.argmin(d))]
+        if self.target is not None:
+            mine = float(np.hypot(*(self.points[self.target] - np.asarray(xy, float))))
+            if best == self.target or float(d.min()) >= mine - switch:
+                return False
+        self.target = best
         self.claimed_at = float(now)
         return True
 

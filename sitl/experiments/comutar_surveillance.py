@@ -5,7 +5,8 @@ the CoMutaR agents on the in-memory bus driving a fast kinematic 2D fleet
 Surveillance: a 9 x 9 grid of waypoints 2 m apart over 16 x 16 m (the digest's reading of "a 2 x 2 m region"
 beside Fig. 4's +-8 m trajectories), each to be visited at least once; visits are broadcast, the first claim on
 a waypoint wins.  Robots are Pioneer-sized discs (0.25 m radius, 0.25 m/s, 2 rad/s) commanded through the
-21 x 21 c-space window (T_f = 0.2 s) with the survey constraint (Alg. 2) alone, as in the paper; contact
+21 x 21 c-space window (T_f = 0.2 s) with the survey constraint (Alg. 2) alone, as in the paper (agents tick
+at 10 Hz); contact
 between robots is resolved by sliding (counted).  Scenarios: A, robots spread evenly on a circle of 9.5 m
 around the region, facing its centre (+-30 deg); B, robots packed in a block off the bottom-right corner,
 headings at random; C, robots at random over 18 x 18 m.  Every run draws its own start (seeded).  The task is
@@ -48,6 +49,7 @@ TASK = 1 << 16 | 1                                          # handed to robot 1
 FIG4 = {"A": 4, "B": 8, "C": 16}                            # the robot counts Fig. 4 draws
 PAPER_TRENDS = {"A": "leans to stabilize", "B": "decreases systematically", "C": "leans to stabilize"}
 TRACE_EVERY = 5                                             # frames between kept trajectory points (1 s)
+AGENT_TICK = 0.1                                            # s: agents tick at 10 Hz (timers of 0.3 s and up)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -129,7 +131,7 @@ def surveillance_run(scenario: str, n: int, run: int, seed: int, max_time: float
     """One run: {"row": the CSV row, "tracks": (frames, n, 3) or None}."""
     s = run_seed(seed, scenario, n, run)
     rng = np.random.default_rng(s)
-    fleet = KinematicFleet(starts(scenario, n, rng), options=ComutarOptions(), seed=s, trace=trace)
+    fleet = KinematicFleet(starts(scenario, n, rng), options=ComutarOptions(), seed=s, trace=trace, tick=AGENT_TICK)
     t0 = time.perf_counter()
     fleet.hand_in([Task(TASK, "surveillance", REGION)])
     fleet.run(max_time, stop=lambda f: f.covered(TASK))

@@ -81,12 +81,16 @@ class Auctioneer:
         self.failed: set[int] = set()
         self.count = 0
         self.next_insert = -math.inf
+        self._synced = -1
         self.rng = random.Random(self.me)            # back-off jitter: seeded, so runs repeat
         self.stats = AuctioneerStats()
 
     # ------------------------------------------------------------------ which tasks are mine
     def sync(self, now: float) -> None:
         """Take the open tasks I am the auctioneer of; let go of those I no longer am (their origin is back)."""
+        if self._synced == self.a.fleet_version:
+            return
+        self._synced = self.a.fleet_version
         for tid, task in self.a.tasks.items():
             if tid in self.jobs or tid in self.finished or tid in self.failed:
                 continue

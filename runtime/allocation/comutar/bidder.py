@@ -78,6 +78,7 @@ class Holding:
     mine: tuple[int, ...]
     since: float
     next_report: float = -math.inf
+    links: tuple | None = None             # ({input: provider}, {output: consumer}), once known
 
 
 @dataclass
@@ -424,9 +425,11 @@ class Bidder:
     def links(self, task_id: int) -> tuple[dict, dict]:
         """The connections of my slots in ``task_id``: ({input info: provider robot}, {output info: consumer})."""
         h = self.holdings.get(task_id)
-        ins, outs = {}, {}
         if h is None:
-            return ins, outs
+            return {}, {}
+        if h.links is not None:
+            return h.links
+        ins, outs = {}, {}
         for ref in h.mine:
             slot = self.slots.get(ref)
             if slot is None:
@@ -435,6 +438,7 @@ class Bidder:
                 ins[info] = ans.robot
             if slot.requester is not None:
                 outs[slot.info] = slot.requester
+        h.links = (ins, outs)                  # the award fixed them
         return ins, outs
 
     def held_slots(self, task_id: int) -> list[Slot]:

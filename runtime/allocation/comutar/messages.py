@@ -264,8 +264,9 @@ class CmSurvey:
             return f"task {self.task}: expected a fleet task id"
         if not (_int(self.target) and 0 <= self.target <= MAX_VISITED and _finite(self.claimed)):
             return "target/claimed: expected 0..200 and a finite time"
-        if not isinstance(self.visited, tuple) or len(self.visited) > MAX_VISITED or \
-                not all(_int(v) and 1 <= v <= MAX_VISITED for v in self.visited):
+        vis = self.visited
+        if not isinstance(vis, tuple) or len(vis) > MAX_VISITED or \
+                (vis and (set(map(type, vis)) != {int} or min(vis) < 1 or max(vis) > MAX_VISITED)):
             return "visited: expected at most 200 waypoint numbers 1..200"
         return None
 

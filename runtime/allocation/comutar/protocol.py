@@ -25,6 +25,7 @@ more (``invalid()``) and must come from a configured peer; what cannot be acted 
 """
 from __future__ import annotations
 
+import itertools
 import math
 from collections import Counter, deque
 from pathlib import Path
@@ -48,6 +49,7 @@ from runtime.tasks import FAILED as P_FAILED, Commitment, Progress, Task
 BROADCAST = 0
 KINDS = ("surveillance", "avoid_obstacles")
 VISITED = "visited"                       # Progress event of a surveillance executor: data["waypoint"]
+CHOOSE_PERIOD = 0.25                      # s between re-evaluations of the nearest waypoint (at once on news)
 
 
 class ComutarAgent:
@@ -68,6 +70,7 @@ class ComutarAgent:
         self.ledger.add(Resource(me, "link", capacity=self.options.link_capacity, unit=" Mb/s"))
         self.ledger.add(Resource(me, "cspace", CSPACE))
         self.tasks: dict[int, Task] = {}
+        self.fleet_version = 0               # bumped when the tasks or the live robots change
         self.pose: tuple[float, float, float] | None = None
         self.obstacles = np.zeros((0, 3))
         self.boards: dict[int, Board] = {}
@@ -78,6 +81,7 @@ class ComutarAgent:
         self.bidder = Bidder(self)
         self.auction = Auctioneer(self)
         self._status_at: dict[int, float] = {}
+        self._choose_at: dict[int, float] = {}
         self._region_at: dict[int, float] = {}
         self._refused: set[int] = set()
 
@@ -203,6 +207,7 @@ class ComutarAgent:
         for t in tasks:
             if t.kind in KINDS:
                 self.tasks[t.id] = t
+                self.fleet_version += 1
                 if t.kind == "surveillance" and t.id not in self.boards:
                     self.boards[t.id] = Board(t.spec.waypoints(), self.robot_id)
             elif t.id not in self._refused:
@@ -214,6 +219,7 @@ class ComutarAgent:
         return []
 
     def withdraw_tasks(self, task_ids: Sequence[int], now: float) -> list:
+        self.fleet_version += 1
         for t in task_ids:
             self.tasks.pop(t, None)
             self.boards.pop(t, None)
@@ -236,6 +242,7 @@ class ComutarAgent:
         if robot_id not in self.peers:
             return []
         self.lost.add(robot_id)
+        self.fleet_version += 1
         for board in self.boards.values():
             board.forget(robot_id)
         out = []
@@ -256,7 +263,7 @@ class ComutarAgent:
             board = self.boards.get(p.task)
             i = p.data.get("waypoint")
             if board is not None and isinstance(i, int) and board.visit(i):
-                self._status_at[p.task] = -math.inf
+                self._status_at[p.task] = self._choose_at[p.task] = -math.inf
             return []
         if p.event == P_FAILED:
             return self._route(self.bidder.resign(p.task, f"execution failed: {p.detail}"), now)
@@ -279,7 +286,9 @@ class ComutarAgent:
             self.dropped["invalid"] += 1
             self.log.debug("dropped %s from robot %d: %s", type(msg).__name__, sender, why)
             return []
-        self.lost.discard(sender)
+        if sender in self.lost:
+            self.lost.discard(sender)
+            self.fleet_version += 1
         return self._route(self._dispatch(msg, now), now)
 
     def on_tick(self, now: float) -> list:
@@ -294,8 +303,10 @@ class ComutarAgent:
         out = []
         for tid, board in self.boards.items():
             held = tid in self.bidder.holdings
-            if held and self.pose is not None and board.choose(self.position, now, self.options.switch):
-                self._status_at[tid] = -math.inf
+            if held and self.pose is not None and now >= self._choose_at.get(tid, -math.inf):
+                self._choose_at[tid] = now + CHOOSE_PERIOD
+                if board.choose(self.position, now, self.options.switch):
+                    self._status_at[tid] = -math.inf
             if board.complete and tid in self.auction.jobs:
                 out += self.auction.complete(tid, now)
             if held and now - self._status_at.get(tid, -math.inf) >= self.options.status_period:
@@ -351,10 +362,9 @@ class ComutarAgent:
             board = self.boards.get(msg.task)
             if board is None or msg.sender == self.robot_id:
                 return []
-            visited = [v - 1 for v in msg.visited if v - 1 < len(board.points)]
             target = msg.target - 1 if 0 < msg.target <= len(board.points) else None
-            if board.merge(msg.sender, visited, target, msg.claimed):
-                self._status_at[msg.task] = -math.inf
+            if board.merge(msg.sender, map(int.__sub__, msg.visited, itertools.repeat(1)), target, msg.claimed):
+                self._status_at[msg.task] = self._choose_at[msg.task] = -math.inf
             return []
         if isinstance(msg, CmRegion):
             if msg.task in self.bidder.holdings:

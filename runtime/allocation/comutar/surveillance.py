@@ -111,8 +111,9 @@ class Board:
         return True
 
     def merge(self, robot: int, visited, target: int | None, claimed_at: float) -> bool:
-        """A peer's status: its visits, and its claim (None: it heads nowhere).  True if my target changed."""
-        for i in visited:
+        """A peer's status: its visits (waypoint indices), and its claim (None: it heads nowhere).  True if my
+        target changed."""
+        for i in set(visited).difference(self.visited):
             self.visit(i)
         if target is None or target in self.visited:
             self.claims.pop(robot, None)

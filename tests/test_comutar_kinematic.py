@@ -32,6 +32,33 @@ def test_a_move_into_another_robot_slides_along_it_and_discs_never_overlap():
     assert fleet.poses[0, 1] < 0.0 and fleet.poses[0, 0] > 0.0   # pushed out along the normal: it slid down and on
 
 
+def test_a_head_on_contact_keeps_right_instead_of_pushing_forever():
+    fleet = KinematicFleet({1: (0.0, 0.0, 0.0), 2: (0.5, 0.0, math.pi)})   # touching, exactly in line
+    want = fleet.poses.copy()
+    want[0, :2] = (0.05, 0.0)
+    fleet._move(want)
+    assert _min_gap(fleet) >= -1e-9 and fleet.contacts == 1
+    assert fleet.poses[0, 1] < -0.01                                      # it stepped to its right
+
+
+def test_a_waiting_robot_parked_by_an_open_waypoint_stands_aside_so_its_claimant_can_reach_it():
+    """Robot 2 waits beside the last open waypoint, claimed by robot 1 behind it: without standing aside,
+    robot 1 could never come within the visit radius (discs cannot overlap)."""
+    task = Task(1 << 16 | 1, "surveillance", Surveillance(0.0, 0.0, 2.0, 0.0, 2.0))    # (-1, 0) and (1, 0)
+    fleet = KinematicFleet({1: (-3.0, 0.0, 0.0), 2: (1.2, 0.1, math.pi)})
+    fleet.visits[task.id] = {}
+    fleet.hand_in([task])
+    board2 = fleet.agents[2].boards[task.id]
+    board2.visit(0)                                 # robot 2 already saw (-1, 0) visited ...
+    board2.claims[1] = (1, -1.0)                    # ... and robot 1 claimed (1, 0) long ago
+    fleet.agents[1].boards[task.id].visit(0)
+    fleet.visits[task.id][0] = (0.0, 1)
+    fleet.agents[1].boards[task.id].target, fleet.agents[1].boards[task.id].claimed_at = 1, -1.0
+    fleet.run(120.0, stop=lambda f: f.covered(task.id))
+    assert fleet.covered(task.id) and fleet.visits[task.id][1][1] == 1
+    assert board2.clear_of((1.2, 0.1), 0.6) is not None and board2.clear_of((3.0, 0.0), 0.6) is None
+
+
 def test_a_crowded_start_makes_contacts_but_never_an_overlap():
     rng = np.random.default_rng(1)
     fleet = KinematicFleet(X.starts("B", 8, rng))

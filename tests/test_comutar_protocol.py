@@ -222,6 +222,39 @@ def test_under_loss_every_task_ends_served_or_unservable_and_resources_stay_with
         assert busy or not a.ledger.preallocated()
 
 
+SETTLING = (M.CmAward, M.CmAck, M.CmCancel, M.CmDone, M.CmResign)
+
+
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 10_000), lose=st.sampled_from([0.3, 0.6, 0.85]))
+def test_when_awards_and_acks_are_lost_the_task_is_still_served_by_those_who_hold_it(seed, lose):
+    """Digest §7: a lost award must not leave a task unserved (TCP hid it; UDP will not).  Only the messages
+    that settle an auction are lost here, each copy with probability ``lose``."""
+    rnd = random.Random(seed)
+    agents, bus = fleet({1: (), 2: ("laser",), 3: ("sonar",)},
+                        {r: (rnd.uniform(-3, 3), rnd.uniform(-3, 3), rnd.uniform(-3, 3)) for r in (1, 2, 3)},
+                        jitter=0.005, seed=seed)
+    send = bus.send
+
+    def lossy(msgs, now):
+        send([m for m in msgs if not (isinstance(m, SETTLING) and rnd.random() < lose)], now)
+
+    bus.send = lossy
+    opts = ComutarOptions()
+    tasks = [Task(tid(rnd.randint(1, 3), 1), "avoid_obstacles", AvoidObstacles(1)),
+             Task(tid(rnd.randint(1, 3), 2), "surveillance", Surveillance(0, 0, 4, 4, 2))]
+    hand_in(agents, tasks)
+    bus.run(120.0, stop=lambda: _invariants(agents, bus.now, opts) or False)
+    for t in tasks:
+        job = agents[t.id >> 16].auction.jobs.get(t.id)
+        assert job is not None and job.state == SERVED, (t.kind, job and job.state)
+        assert set(holders(agents, t.id)) == job.robots and job.robots
+        assert 1 in job.robots if t.kind == "avoid_obstacles" else True
+    bus.send = send                                         # the losses end: every stray pre-allocation lapses
+    bus.run(bus.now + opts.auction_timeout + opts.award_grace + 0.2)
+    assert all(not a.ledger.preallocated() for a in agents.values())
+
+
 def test_a_lost_award_is_re_sent_until_acknowledged():
     agents, bus = fleet({1: (), 2: ("laser",)}, {1: (0, 0, 0), 2: (2, 0, 0)})
     lost = []
@@ -241,6 +274,26 @@ def test_a_lost_award_is_re_sent_until_acknowledged():
     bus.run(6.0)
     assert lost and agents[1].auction.stats.resent >= 1
     assert set(holders(agents, tid(1, 1))) == {1, 2}
+
+
+def test_a_robot_that_never_acknowledges_loses_its_award_and_the_task_is_announced_again():
+    agents, bus = fleet({1: (), 2: ("laser",)}, {1: (0, 0, 0), 2: (2, 0, 0)})
+    send = bus.send
+    deaf_until = 4.0                                   # every award to robot 2 is lost for longer than ack_timeout
+
+    def deaf(msgs, now):
+        send([m for m in msgs if not (isinstance(m, M.CmAward) and now < deaf_until)], now)
+
+    bus.send = deaf
+    task = Task(tid(1, 1), "avoid_obstacles", AvoidObstacles(1))
+    hand_in(agents, [task])
+    bus.run(deaf_until)
+    released = [e for e in agents[1].events if e.what == "released"]
+    assert released and "did not acknowledge" in released[0].detail
+    assert not agents[2].bidder.holdings and not agents[1].bidder.holdings
+    bus.run(15.0)
+    assert agents[1].auction.jobs[task.id].state == SERVED and set(holders(agents, task.id)) == {1, 2}
+    assert agents[1].auction.stats.announced >= 2
 
 
 def test_a_lost_provider_sends_the_task_back_to_auction_and_another_provider_takes_it():

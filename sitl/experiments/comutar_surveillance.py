@@ -7,7 +7,8 @@ beside Fig. 4's +-8 m trajectories), each to be visited at least once; visits ar
 a waypoint wins.  Robots are Pioneer-sized discs (0.25 m radius, 0.25 m/s, 2 rad/s) commanded through the
 21 x 21 c-space window (T_f = 0.2 s) with the survey constraint (Alg. 2) alone, as in the paper (agents tick
 at 10 Hz); contact
-between robots is resolved by sliding (counted).  Scenarios: A, robots spread evenly on a circle of 9.5 m
+between robots is resolved by sliding, keeping right when head-on (counted), and a robot waiting for a
+waypoint (every open one claimed by others) stands aside from the open ones.  Scenarios: A, robots spread evenly on a circle of 9.5 m
 around the region, facing its centre (+-30 deg); B, robots packed in a block off the bottom-right corner,
 headings at random; C, robots at random over 18 x 18 m.  Every run draws its own start (seeded).  The task is
 handed to robot 1 at t = 0; its execution time T is when the last waypoint is first visited.

@@ -16,8 +16,10 @@ Each frame (the window's ``T_f``):
 4. robots move on exact arcs.  Robot-robot contact: a robot whose new disc would overlap another robot's
    (at its new position if it already moved this frame, else its old one) or a static obstacle is pushed
    back out along the contact normal, so it slides along the other disc as rigid bodies without friction
-   would; if that still overlaps something it stays put.  Each such move is counted as a contact.  So discs
-   never overlap;
+   would; if that still overlaps something it stays put.  A head-on contact (the slide keeps less than a quarter of
+   the move: the normal cancels it, and two robots, or a robot and a parked one, would push forever) keeps
+   right: the move turned -90 deg is tried and taken if it gets further.  Each such move is counted as a
+   contact.  So discs never overlap;
 5. a robot holding a surveillance task within ``visit_radius`` of an open waypoint reports it visited.
 
 No sensing noise, no wheel slip: runs differ by their start poses and the bus's seeded jitter.
@@ -241,26 +243,36 @@ class KinematicFleet:
             discs = np.column_stack([others, np.full(len(others), self.radius)])
             if len(self.static):
                 discs = np.vstack([discs, self.static])
-            pos, touched = want.copy(), False
-            for _ in range(3):
-                gap = np.hypot(discs[:, 0] - pos[0], discs[:, 1] - pos[1]) - discs[:, 2] - self.radius
-                j = int(np.argmin(gap)) if len(gap) else -1
-                if j < 0 or gap[j] >= -1e-9:
-                    break
-                touched = True
-                n = pos - discs[j, :2]
-                norm = np.hypot(*n)
-                n = n / norm if norm > 1e-12 else (old[i, :2] - discs[j, :2]) / max(np.hypot(*(old[i, :2] - discs[j, :2])), 1e-12)
-                pos = discs[j, :2] + n * (discs[j, 2] + self.radius + 1e-9)
-            else:
-                gap = np.hypot(discs[:, 0] - pos[0], discs[:, 1] - pos[1]) - discs[:, 2] - self.radius
-                if len(gap) and gap.min() < -1e-9:
-                    pos = old[i, :2]
+            pos, touched = self._slide(old[i, :2], want, discs)
+            step = want - old[i, :2]
+            if touched and np.dot(pos - old[i, :2], step) < 0.25 * np.dot(step, step):
+                # head-on: the contact normal cancels the move; keep right (rotate the move -90 deg)
+                right = old[i, :2] + np.array([step[1], -step[0]])
+                alt, _ = self._slide(old[i, :2], right, discs)
+                if np.hypot(*(alt - old[i, :2])) > np.hypot(*(pos - old[i, :2])):
+                    pos = alt
             if touched:
                 self.contacts += 1
             final[i, :2] = pos
         self.driven += np.hypot(final[:, 0] - old[:, 0], final[:, 1] - old[:, 1])
         self.poses = final
+
+    def _slide(self, start: np.ndarray, want: np.ndarray, discs: np.ndarray) -> tuple[np.ndarray, bool]:
+        """``want`` pushed out of every disc it overlaps along the contact normal (at most 3 pushes); ``start``
+        if it still overlaps one.  Returns (position, touched)."""
+        pos, touched = want.copy(), False
+        for _ in range(3):
+            gap = np.hypot(discs[:, 0] - pos[0], discs[:, 1] - pos[1]) - discs[:, 2] - self.radius
+            j = int(np.argmin(gap)) if len(gap) else -1
+            if j < 0 or gap[j] >= -1e-9:
+                return pos, touched
+            touched = True
+            n = pos - discs[j, :2]
+            norm = np.hypot(*n)
+            n = n / norm if norm > 1e-12 else (start - discs[j, :2]) / max(np.hypot(*(start - discs[j, :2])), 1e-12)
+            pos = discs[j, :2] + n * (discs[j, 2] + self.radius + 1e-9)
+        gap = np.hypot(discs[:, 0] - pos[0], discs[:, 1] - pos[1]) - discs[:, 2] - self.radius
+        return (start.copy() if len(gap) and gap.min() < -1e-9 else pos), touched
 
     def _visit(self) -> None:
         rad = self.options.visit_radius

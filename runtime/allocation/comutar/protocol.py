@@ -136,9 +136,17 @@ class ComutarAgent:
         return self.available and self.pose is not None
 
     def survey_target(self, task_id: int) -> tuple[float, float] | None:
-        """The waypoint this robot heads for in surveillance task ``task_id`` (None: none left, or not held)."""
+        """Where this robot heads in surveillance task ``task_id``: its claimed waypoint; while it waits (every
+        open waypoint claimed by others), a point clear of the open waypoints if it stands too near one for
+        another robot to reach it (:meth:`Board.clear_of`); None: stay (nothing to do, or not held)."""
         board = self.boards.get(task_id)
-        return None if board is None or task_id not in self.bidder.holdings else board.point()
+        if board is None or task_id not in self.bidder.holdings:
+            return None
+        point = board.point()
+        if point is None and self.pose is not None:
+            radius = self.estimator.profile.radius
+            point = board.clear_of(self.position, 2 * radius + self.options.visit_radius)
+        return point
 
     def region(self, task_id: int) -> tuple[int, float, float, float] | None:
         """(robot, x, y, radius): the region a reader of mine keeps in view for ``task_id``'s consumer."""

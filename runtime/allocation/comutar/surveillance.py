@@ -155,6 +155,24 @@ class Board:
     def point(self) -> tuple[float, float] | None:
         return None if self.target is None else (float(self.points[self.target, 0]), float(self.points[self.target, 1]))
 
+    def clear_of(self, xy, clearance: float) -> tuple[float, float] | None:
+        """Where a robot with no waypoint of its own (waiting) should stand aside to: a robot parked within
+        ``clearance`` of an open waypoint keeps its claimant from ever reaching it (discs cannot overlap), so
+        it backs off to ``clearance`` + 0.1 m from that waypoint, straight away from it.  None: it is clear
+        (or it has a target, or nothing is open)."""
+        if self.target is not None or self.complete:
+            return None
+        p = np.asarray(xy, float)
+        open_ = [i for i in range(len(self.points)) if i not in self.visited]
+        d = np.hypot(*(self.points[open_] - p).T)
+        k = int(np.argmin(d))
+        if d[k] >= clearance:
+            return None
+        w = self.points[open_[k]]
+        away = (p - w) / d[k] if d[k] > 1e-9 else np.array([1.0, 0.0])
+        q = w + away * (clearance + 0.1)
+        return float(q[0]), float(q[1])
+
     def nearest_open(self, xy) -> float:
         """Distance (m) from ``xy`` to the nearest waypoint not visited (inf when none is left)."""
         open_ = [i for i in range(len(self.points)) if i not in self.visited]

@@ -27,7 +27,7 @@ import math
 from dataclasses import dataclass
 
 MAX_SLOTS = 48             # slot references one message can name (uint32[48])
-MAX_VISITED = 200          # waypoints a SurveyStatus can name (uint8[200], index + 1)
+MAX_VISITED = 200          # waypoints a CmSurvey can name (uint8[200], index + 1)
 
 
 def _int(v) -> bool:
@@ -184,39 +184,30 @@ class CmAward:
 
 
 @dataclass(frozen=True)
-class CmAck:
+class _TaskNote:
+    """A note about one task under one auction: the fields of CmAck, CmResign, CmCancel and CmDone."""
+    sender: int
+    dest: int
+    auction: int
+    task: int
+
+    def invalid(self) -> str | None:
+        return _auction(self)
+
+
+@dataclass(frozen=True)
+class CmAck(_TaskNote):
     """The sender allocated its slots of the award."""
-    sender: int
-    dest: int
-    auction: int
-    task: int
-
-    def invalid(self) -> str | None:
-        return _auction(self)
 
 
 @dataclass(frozen=True)
-class CmResign:
+class CmResign(_TaskNote):
     """The sender gives ``task`` up (its slots no longer fit, a provider was lost, it failed or was disarmed)."""
-    sender: int
-    dest: int
-    auction: int
-    task: int
-
-    def invalid(self) -> str | None:
-        return _auction(self)
 
 
 @dataclass(frozen=True)
-class CmCancel:
+class CmCancel(_TaskNote):
     """The auctioneer takes the award of ``auction`` back: the receiver releases its slots of it."""
-    sender: int
-    dest: int
-    auction: int
-    task: int
-
-    def invalid(self) -> str | None:
-        return _auction(self)
 
 
 @dataclass(frozen=True)
@@ -234,15 +225,8 @@ class CmHold:
 
 
 @dataclass(frozen=True)
-class CmDone:
+class CmDone(_TaskNote):
     """The auctioneer: ``task`` is complete; holders release it."""
-    sender: int
-    dest: int
-    auction: int
-    task: int
-
-    def invalid(self) -> str | None:
-        return _auction(self)
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ KIND = "surveillance"
 EXECUTOR = "runtime.execution.surveillance:SurveillanceExecutor"      # phase 2
 MAV_CMD_SPATIAL_USER_1 = 31005
 COMMANDS = (MAV_CMD_SPATIAL_USER_1,)
-MAX_WAYPOINTS = 200          # SurveyStatus carries visited waypoints as a uint8 array (index + 1)
+MAX_WAYPOINTS = 200          # CmSurvey carries visited waypoints as a uint8 array (index + 1)
 MAX_SIDE = 1000.0
 
 
@@ -89,7 +89,7 @@ def to_item(spec: Surveillance) -> tuple[int, tuple[float, float, float, float]]
 class Board:
     """One robot's copy of a surveillance task's state: waypoints visited, and each robot's claim (the waypoint
     it heads for and when it claimed it).  A claim made earlier wins (ties: the lower robot id); visits and
-    claims spread by broadcast status (:class:`~runtime.allocation.comutar.messages.SurveyStatus`)."""
+    claims spread by broadcast status (:class:`~runtime.allocation.comutar.messages.CmSurvey`)."""
     points: np.ndarray
     me: int
     visited: set = field(default_factory=set)

@@ -39,6 +39,11 @@ def test_a_head_on_contact_keeps_right_instead_of_pushing_forever():
     fleet._move(want)
     assert _min_gap(fleet) >= -1e-9 and fleet.contacts == 1
     assert fleet.poses[0, 1] < -0.01                                      # it stepped to its right
+    wedged = KinematicFleet({1: (0.0, 0.0, 0.0), 2: (0.5, 0.0, math.pi), 3: (0.0, -0.5, 0.0)})   # right blocked
+    want = wedged.poses.copy()
+    want[0, :2] = (0.05, 0.0)
+    wedged._move(want)
+    assert _min_gap(wedged) >= -1e-9 and wedged.poses[0, 1] > 0.01          # so it stepped to its left
 
 
 def test_a_waiting_robot_parked_by_an_open_waypoint_stands_aside_so_its_claimant_can_reach_it():

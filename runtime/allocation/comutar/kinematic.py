@@ -18,7 +18,8 @@ Each frame (the window's ``T_f``):
    back out along the contact normal, so it slides along the other disc as rigid bodies without friction
    would; if that still overlaps something it stays put.  A head-on contact (the slide keeps less than a quarter of
    the move: the normal cancels it, and two robots, or a robot and a parked one, would push forever) keeps
-   right: the move turned -90 deg is tried and taken if it gets further.  Each such move is counted as a
+   right: the move turned -90 deg is tried and taken if it gets further (else turned +90 deg, when a third
+   disc blocks the right).  Each such move is counted as a
    contact.  So discs never overlap;
 5. a robot holding a surveillance task within ``visit_radius`` of an open waypoint reports it visited.
 
@@ -246,11 +247,13 @@ class KinematicFleet:
             pos, touched = self._slide(old[i, :2], want, discs)
             step = want - old[i, :2]
             if touched and np.dot(pos - old[i, :2], step) < 0.25 * np.dot(step, step):
-                # head-on: the contact normal cancels the move; keep right (rotate the move -90 deg)
-                right = old[i, :2] + np.array([step[1], -step[0]])
-                alt, _ = self._slide(old[i, :2], right, discs)
-                if np.hypot(*(alt - old[i, :2])) > np.hypot(*(pos - old[i, :2])):
-                    pos = alt
+                # head-on: the contact normal cancels the move; keep right (the move turned -90 deg), or left
+                # when the right is blocked too
+                for side in (np.array([step[1], -step[0]]), np.array([-step[1], step[0]])):
+                    alt, _ = self._slide(old[i, :2], old[i, :2] + side, discs)
+                    if np.hypot(*(alt - old[i, :2])) > max(np.hypot(*(pos - old[i, :2])), 0.25 * np.hypot(*step)):
+                        pos = alt
+                        break
             if touched:
                 self.contacts += 1
             final[i, :2] = pos

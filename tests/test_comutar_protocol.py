@@ -8,7 +8,7 @@ import random
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import example, given, settings, strategies as st
 
 from runtime.allocation.agent import AWARDED, FAILED, AgentContext
 from runtime.allocation.bus import InMemoryBus
@@ -186,6 +186,7 @@ SENSOR_SETS = [(), ("laser",), ("sonar",), ("laser", "sonar")]
 
 @settings(max_examples=12, deadline=None)
 @given(seed=st.integers(0, 10_000), drop=st.sampled_from([0.0, 0.1, 0.25, 0.4]), dup=st.sampled_from([0.0, 0.1]))
+@example(seed=416, drop=0.4, dup=0.0)          # a holder released three times for lost reports
 def test_under_loss_every_task_ends_served_or_unservable_and_resources_stay_within_capacity(seed, drop, dup):
     rnd = random.Random(seed)
     n = rnd.randint(2, 4)
@@ -204,6 +205,11 @@ def test_under_loss_every_task_ends_served_or_unservable_and_resources_stay_with
         return False
 
     bus.run(150.0, stop=settled)
+    # under loss a holder whose reports are lost member_timeout long is released and its task announced again
+    # (silence and loss look alike), so a snapshot may catch a task between two awards: the losses end, and
+    # every task must then settle
+    bus.drop = bus.duplicate = 0.0
+    bus.run(bus.now + 40.0, stop=settled)
     failed = {e.task: e for a in agents.values() for e in a.events if e.what == FAILED}
     assert tid(1, 99) in failed and failed[tid(1, 99)].detail.startswith("unservable")
     for t in tasks:

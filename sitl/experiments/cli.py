@@ -16,6 +16,7 @@ EXPERIMENTS = {
     "formation-twobox": ("sitl.experiments.formation_twobox", "paper 002 Fig. 9: the two-box distribution"),
     "formation-world": ("sitl.experiments.formation_world", "paper 002 Tables I-II: A*/RRT in the pybullet world"),
     "dr-calibration": ("sitl.experiments.dr_calibration", "paper 000 Fig. 2: interference calibration, 1-8 robots x 10 distances"),
+    "comutar-surveillance": ("sitl.experiments.comutar_surveillance", "paper 003 Figs. 4-7: surveillance and sensor sharing"),
 }
 
 

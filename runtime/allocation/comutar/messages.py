@@ -1,0 +1,288 @@
+"""Messages of the CoMutaR bidding protocol (paper 003 Alg. 1; the paper names none: these are the digest's).
+
+Plain frozen dataclasses named ``Cm*`` (their MAVLink names ``MRTA_CM_*`` stay clear of the other
+families'), ``sender`` and ``dest`` first (dest 0 = every peer), fields bool / int / float /
+``tuple[int, ...]`` as :mod:`runtime.comms.codec` carries them (``comutar.xml`` is their MAVLink block).
+Each class checks its own values once (``invalid()``); :func:`why_invalid` never raises.
+
+Names used below:
+
+* ``auction``: ``auctioneer id << 16 | its count``: one announcement of one task.
+* a *slot* is one action instance pre-allocated (or allocated) on one robot for one auction; its reference
+  is ``robot << 16 | number`` (never 0), so a coalition travels as a list of slot references.
+* ``info``: the code of an information type (:data:`~runtime.allocation.comutar.actions.INFO`).
+
+The exchange: ``CmAnnounce`` (auctioneer, broadcast) -> actions that can do the task pre-allocate and, for
+each unconnected input, ``CmQuery`` (broadcast; recursive down the input chain) -> ``CmCost`` (provider to
+requester: a sub-coalition and its cost) -> ``CmBid`` (to the auctioneer) -> ``CmAward`` (broadcast: every slot
+named allocates, every other slot of the auction is released) -> ``CmAck`` (each robot named), re-sent
+until acknowledged; ``CmResign`` (a holder gives the task up), ``CmCancel`` (the auctioneer takes it back),
+``CmHold`` (a holder's periodic report, so lost cancels and a new auctioneer are caught up), ``CmDone``.
+Execution: ``CmSurvey`` (visits and the claimed waypoint, broadcast) and ``CmRegion`` (a consumer
+tells its providers the region to keep in view).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+MAX_SLOTS = 48             # slot references one message can name (uint32[48])
+MAX_VISITED = 200          # waypoints a CmSurvey can name (uint8[200], index + 1)
+
+
+def _int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _finite(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _ids(msg) -> str | None:
+    if not (_int(msg.sender) and 1 <= msg.sender <= 250 and _int(msg.dest) and 0 <= msg.dest <= 250):
+        return "sender/dest: expected robot ids"
+    return None
+
+
+def _auction(msg) -> str | None:
+    why = _ids(msg)
+    if why:
+        return why
+    if not (_int(msg.auction) and 1 <= msg.auction >> 16 <= 250 and msg.auction <= 0xFFFFFFFF):
+        return f"auction {msg.auction}: expected an auctioneer id 1..250 in its upper 16 bits"
+    if not (_int(msg.task) and 1 <= msg.task >> 16 <= 250 and msg.task <= 0xFFFFFFFF):
+        return f"task {msg.task}: expected a fleet task id"
+    return None
+
+
+def slot_robot(ref: int) -> int:
+    return ref >> 16
+
+
+def _slots(slots, need: int | None = None) -> str | None:
+    if not isinstance(slots, tuple) or not slots:
+        return "slots: expected a non-empty list of slot references"
+    if len(slots) > MAX_SLOTS:
+        return f"slots: expected at most {MAX_SLOTS}, got {len(slots)}"
+    if not all(_int(s) and 1 <= s >> 16 <= 250 and s & 0xFFFF and s <= 0xFFFFFFFF for s in slots) \
+            or len(set(slots)) != len(slots):
+        return "slots: expected distinct references robot << 16 | n (robot 1..250, n 1..65535)"
+    if need is not None and slot_robot(slots[0]) != need:
+        return f"slots: expected the first to be the sender's ({need})"
+    return None
+
+
+def _cost(v) -> str | None:
+    return None if _finite(v) and v >= 0 else f"cost {v}: expected a finite number >= 0"
+
+
+@dataclass(frozen=True)
+class CmAnnounce:
+    """The auctioneer opens ``auction`` for ``task``; bids are taken for ``timeout`` seconds from now (a
+    duration, so no clocks need agree); ``attempt`` counts its announcements."""
+    sender: int
+    dest: int
+    auction: int
+    task: int
+    timeout: float
+    attempt: int
+
+    def invalid(self) -> str | None:
+        why = _auction(self)
+        if why:
+            return why
+        if not (_finite(self.timeout) and 0 < self.timeout <= 600):
+            return f"timeout {self.timeout}: expected 0..600 s"
+        return None if _int(self.attempt) and self.attempt >= 1 else "attempt: expected >= 1"
+
+
+@dataclass(frozen=True)
+class CmQuery:
+    """An action pre-allocated for ``auction`` asks who can produce ``info`` for it (query id ``query``, unique
+    per sender).  ``depth``: the requester's place in the input chain (1: the task's action); ``budget``: the
+    seconds the requester waits for answers; ``expires``: seconds until its pre-allocation lapses.  The
+    region (``x``, ``y`` in the fleet frame) is the surroundings of robot ``owner``, the chain's consumer: a
+    reader on another robot must keep it in view."""
+    sender: int
+    dest: int
+    auction: int
+    query: int
+    info: int
+    depth: int
+    budget: float
+    expires: float
+    owner: int
+    x: float
+    y: float
+
+    def invalid(self) -> str | None:
+        why = _ids(self)
+        if why:
+            return why
+        if not (_int(self.auction) and 1 <= self.auction >> 16 <= 250 and self.auction <= 0xFFFFFFFF):
+            return f"auction {self.auction}: expected an auctioneer id in its upper 16 bits"
+        if not (_int(self.query) and self.query >> 16 == self.sender and self.query & 0xFFFF):
+            return f"query {self.query}: expected sender << 16 | n"
+        if not (_int(self.info) and 1 <= self.info <= 255 and _int(self.depth) and 1 <= self.depth <= 8):
+            return "info/depth: expected 1..255 / 1..8"
+        if not (_finite(self.budget) and 0 <= self.budget <= 600 and _finite(self.expires) and 0 <= self.expires <= 600):
+            return "budget/expires: expected 0..600 s"
+        if not (_int(self.owner) and 1 <= self.owner <= 250 and _finite(self.x) and _finite(self.y)):
+            return "region: expected a robot id and a finite position"
+        return None
+
+
+@dataclass(frozen=True)
+class CmCost:
+    """Answer to ``query``: ``slots`` (the provider's slot producing the information first, then the inputs
+    it connected, recursively) can produce it for ``cost`` seconds, streaming ``rate`` Mb/s."""
+    sender: int
+    dest: int
+    auction: int
+    query: int
+    cost: float
+    rate: float
+    slots: tuple[int, ...]
+
+    def invalid(self) -> str | None:
+        why = _ids(self)
+        if why:
+            return why
+        if not (_int(self.auction) and _int(self.query) and 1 <= self.query >> 16 <= 250):
+            return "auction/query: expected ids"
+        if not (_finite(self.rate) and self.rate >= 0):
+            return f"rate {self.rate}: expected a finite number >= 0"
+        return _cost(self.cost) or _slots(self.slots, self.sender)
+
+
+@dataclass(frozen=True)
+class CmBid:
+    """The coalition ``slots`` (the sender's action for the task first) bids ``cost`` (s) for ``task``."""
+    sender: int
+    dest: int
+    auction: int
+    task: int
+    cost: float
+    slots: tuple[int, ...]
+
+    def invalid(self) -> str | None:
+        return _auction(self) or _cost(self.cost) or _slots(self.slots, self.sender)
+
+
+@dataclass(frozen=True)
+class CmAward:
+    """``task`` goes to the coalition(s) ``slots``: each slot named allocates its resources; a robot's other
+    slots of ``auction`` are released.  Broadcast once, then re-sent to robots that have not acknowledged."""
+    sender: int
+    dest: int
+    auction: int
+    task: int
+    slots: tuple[int, ...]
+
+    def invalid(self) -> str | None:
+        return _auction(self) or _slots(self.slots)
+
+
+@dataclass(frozen=True)
+class _TaskNote:
+    """A note about one task under one auction: the fields of CmAck, CmResign, CmCancel and CmDone."""
+    sender: int
+    dest: int
+    auction: int
+    task: int
+
+    def invalid(self) -> str | None:
+        return _auction(self)
+
+
+@dataclass(frozen=True)
+class CmAck(_TaskNote):
+    """The sender allocated its slots of the award."""
+
+
+@dataclass(frozen=True)
+class CmResign(_TaskNote):
+    """The sender gives ``task`` up (its slots no longer fit, a provider was lost, it failed or was disarmed)."""
+
+
+@dataclass(frozen=True)
+class CmCancel(_TaskNote):
+    """The auctioneer takes the award of ``auction`` back: the receiver releases its slots of it."""
+
+
+@dataclass(frozen=True)
+class CmHold:
+    """A holder's periodic report to the task's auctioneer: it holds ``task`` under ``auction`` with its
+    ``slots`` (so a lost cancel is repeated, and an auctioneer that took over rebuilds the award)."""
+    sender: int
+    dest: int
+    auction: int
+    task: int
+    slots: tuple[int, ...]
+
+    def invalid(self) -> str | None:
+        return _auction(self) or _slots(self.slots, self.sender)
+
+
+@dataclass(frozen=True)
+class CmDone(_TaskNote):
+    """The auctioneer: ``task`` is complete; holders release it."""
+
+
+@dataclass(frozen=True)
+class CmSurvey:
+    """A surveillance holder's copy of ``task``: the waypoints it knows visited (index + 1) and the one it
+    heads for (``target``, index + 1; 0: none) since ``claimed`` (s, the sender's clock: earlier claims win)."""
+    sender: int
+    dest: int
+    task: int
+    target: int
+    claimed: float
+    visited: tuple[int, ...] = ()
+
+    def invalid(self) -> str | None:
+        why = _ids(self)
+        if why:
+            return why
+        if not (_int(self.task) and 1 <= self.task >> 16 <= 250):
+            return f"task {self.task}: expected a fleet task id"
+        if not (_int(self.target) and 0 <= self.target <= MAX_VISITED and _finite(self.claimed)):
+            return "target/claimed: expected 0..200 and a finite time"
+        vis = self.visited
+        if not isinstance(vis, tuple) or len(vis) > MAX_VISITED or \
+                (vis and (set(map(type, vis)) != {int} or min(vis) < 1 or max(vis) > MAX_VISITED)):
+            return "visited: expected at most 200 waypoint numbers 1..200"
+        return None
+
+
+@dataclass(frozen=True)
+class CmRegion:
+    """The consumer of ``task``'s chain: keep the disc (``x``, ``y``, ``radius``) around me in view."""
+    sender: int
+    dest: int
+    task: int
+    x: float
+    y: float
+    radius: float
+
+    def invalid(self) -> str | None:
+        why = _ids(self)
+        if why:
+            return why
+        if not (_int(self.task) and 1 <= self.task >> 16 <= 250):
+            return f"task {self.task}: expected a fleet task id"
+        if not (_finite(self.x) and _finite(self.y) and _finite(self.radius) and 0 <= self.radius <= 100):
+            return "region: expected a finite position and a radius 0..100 m"
+        return None
+
+
+WIRE_MESSAGES = (CmAnnounce, CmQuery, CmCost, CmBid, CmAward, CmAck, CmResign, CmCancel, CmHold, CmDone, CmSurvey,
+                 CmRegion)
+
+
+def why_invalid(msg) -> str | None:
+    """``msg.invalid()`` for a message that did not come through the codec: never raises."""
+    try:
+        return msg.invalid()
+    except Exception as exc:          # values of types the protocol never sends
+        return f"malformed: {type(exc).__name__}"

@@ -1,0 +1,404 @@
+"""Paper 003 (CoMutaR) as a sans-IO allocation agent: one robot's actions bidding in Contract Net auctions
+under constraint functions (Alg. 1), and the auctioneer role for the tasks it took in.
+
+:class:`ComutarAgent` implements :class:`runtime.allocation.agent.Agent`.  It holds
+
+* this robot's :class:`~runtime.allocation.comutar.actions.Catalogue` (from its sensors) and the
+  :class:`~runtime.allocation.comutar.resources.Ledger` of its share-restricted resources: ``processor``
+  (share of a core), ``link`` (Mb/s given to data streams between robots) and ``cspace`` (its allowed
+  next-frame configurations);
+* the :class:`~runtime.allocation.comutar.bidder.Bidder` (its actions: announcements, queries, bids,
+  awards, holdings) and the :class:`~runtime.allocation.comutar.auctioneer.Auctioneer` (tasks it took in);
+* per surveillance task a :class:`~runtime.allocation.comutar.surveillance.Board` (visits and claims,
+  spread by ``CmSurvey``), and the regions consumers asked it to watch (``CmRegion``).
+
+It may hold several commitments at once (e.g. a surveillance task and an obstacle-avoidance task); each
+carries its actions and connections in ``params`` (see :meth:`ComutarAgent.commitments`).  What it needs from
+outside beyond the Agent protocol: :meth:`ComutarAgent.sense` each cycle (pose, and the obstacles the robot
+knows), and execution reading :meth:`survey_target`, :meth:`region` and reporting visits as
+``Progress(task, "visited", data={"waypoint": i})``.
+
+Messages it sends to itself (a bid to itself as the auctioneer, a query its own actions answer) are handled
+here without the wire; broadcasts go to the wire and to itself.  Messages from outside are checked once
+more (``invalid()``) and must come from a configured peer; what cannot be acted on is counted in
+:attr:`ComutarAgent.dropped` by reason, and never raises.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+from collections import Counter, deque
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from runtime.allocation.agent import AgentContext, Method, TaskEvent
+from runtime.allocation.comutar import actions as A
+from runtime.allocation.comutar import cspace as C
+from runtime.allocation.comutar.auctioneer import Auctioneer
+from runtime.allocation.comutar.bidder import Bidder, Slot
+from runtime.allocation.comutar.messages import (WIRE_MESSAGES, CmAck, CmAnnounce, CmAward, CmBid, CmCancel, CmCost,
+                                                 CmDone, CmHold, CmQuery, CmRegion, CmResign, CmSurvey, why_invalid)
+from runtime.allocation.comutar.options import ComutarOptions
+from runtime.allocation.comutar.resources import CSPACE, Ledger, Resource
+from runtime.allocation.comutar.surveillance import Board
+from runtime.log import get_logger
+from runtime.tasks import FAILED as P_FAILED, Commitment, Progress, Task
+
+BROADCAST = 0
+KINDS = ("surveillance", "avoid_obstacles")
+VISITED = "visited"                       # Progress event of a surveillance executor: data["waypoint"]
+CHOOSE_PERIOD = 0.25                      # s between re-evaluations of the nearest waypoint (at once on news)
+
+
+class ComutarAgent:
+    """One robot's CoMutaR agent (see the module docstring)."""
+
+    def __init__(self, ctx: AgentContext, sensors: Sequence[str] | None = None):
+        self.robot_id = int(ctx.robot_id)
+        self.options: ComutarOptions = ctx.options if ctx.options is not None else ComutarOptions()
+        self.estimator = ctx.estimator
+        self.log = get_logger("alloc.comutar", self.robot_id)
+        self.peers = frozenset(int(p) for p in ctx.peers) - {self.robot_id}
+        self.lost: set[int] = set()
+        self.catalogue = A.catalogue(self.options.sensors if sensors is None else sensors)
+        self.window = C.Window(v_max=self.options.speed, w_max=self.options.turn_rate)
+        self.ledger = Ledger()
+        me = self.robot_id
+        self.ledger.add(Resource(me, "processor", capacity=self.options.processor, unit=" cores"))
+        self.ledger.add(Resource(me, "link", capacity=self.options.link_capacity, unit=" Mb/s"))
+        self.ledger.add(Resource(me, "cspace", CSPACE))
+        self.tasks: dict[int, Task] = {}
+        self.fleet_version = 0               # bumped when the tasks or the live robots change
+        self.pose: tuple[float, float, float] | None = None
+        self.obstacles = np.zeros((0, 3))
+        self.boards: dict[int, Board] = {}
+        self.regions: dict[int, tuple[float, float, float]] = {}
+        self.available = True
+        self.events: list[TaskEvent] = []
+        self.dropped: Counter = Counter()
+        self.bidder = Bidder(self)
+        self.auction = Auctioneer(self)
+        self._status_at: dict[int, float] = {}
+        self._choose_at: dict[int, float] = {}
+        self._region_at: dict[int, float] = {}
+        self._refused: set[int] = set()
+
+    # ------------------------------------------------------------------ what the daemon reads
+    @property
+    def commitments(self) -> tuple[Commitment, ...]:
+        """One per task held.  ``role``: the actions, joined by "+"; ``params``: ``auction``, ``actions``
+        (names), ``inputs`` ((info, provider robot), ...), ``outputs`` ((info, consumer robot), ...), ``region``
+        ((robot, x, y, radius) a reader keeps in view, for readers serving another robot)."""
+        out = []
+        for tid, h in sorted(self.bidder.holdings.items()):
+            task = self.tasks.get(tid)
+            if task is None:
+                continue
+            slots = self.bidder.held_slots(tid)
+            ins, outs = self.bidder.links(tid)
+            robots = {r >> 16 for r in h.award} - {self.robot_id}
+            params = [("auction", h.auction), ("actions", tuple(s.spec.name for s in slots)),
+                      ("inputs", tuple(sorted(ins.items()))), ("outputs", tuple(sorted(outs.items())))]
+            region = self.region(tid)
+            if region is not None and any(s.spec.motion == A.SENSOR for s in slots):
+                params.append(("region", region))
+            out.append(Commitment(task, tuple(sorted(robots)), "+".join(s.spec.name for s in slots), tuple(params)))
+        return tuple(out)
+
+    @property
+    def converged(self) -> bool:
+        return not self.auction.busy and not self.bidder.pending
+
+    @property
+    def allocating(self) -> bool:
+        return self.bidder.pending
+
+    def pop_events(self) -> list[TaskEvent]:
+        out, self.events = self.events, []
+        return out
+
+    # ------------------------------------------------------------------ the robot's situation
+    def sense(self, pose, obstacles=None) -> None:
+        """This cycle's pose (x, y, heading; None: not localized) and the obstacles it knows ((M, 3) discs: x,
+        y, radius, fleet frame), which the obstacle avoider's constraint function reads at bid time."""
+        self.pose = None if pose is None else (float(pose[0]), float(pose[1]), float(pose[2]) if len(pose) > 2 else 0.0)
+        if obstacles is not None:
+            self.obstacles = np.asarray(obstacles, dtype=float).reshape(-1, 3)
+
+    @property
+    def position(self) -> tuple[float, float]:
+        return (self.pose[0], self.pose[1]) if self.pose is not None else (math.nan, math.nan)
+
+    @property
+    def can_bid(self) -> bool:
+        return self.available and self.pose is not None
+
+    def survey_target(self, task_id: int) -> tuple[float, float] | None:
+        """Where this robot heads in surveillance task ``task_id``: its claimed waypoint; while it waits (every
+        open waypoint claimed by others), a point clear of the open waypoints if it stands too near one for
+        another robot to reach it (:meth:`Board.clear_of`); None: stay (nothing to do, or not held)."""
+        board = self.boards.get(task_id)
+        if board is None or task_id not in self.bidder.holdings:
+            return None
+        point = board.point()
+        if point is None and self.pose is not None:
+            radius = self.estimator.profile.radius
+            point = board.clear_of(self.position, 2 * radius + self.options.visit_radius)
+        return point
+
+    def region(self, task_id: int) -> tuple[int, float, float, float] | None:
+        """(robot, x, y, radius): the region a reader of mine keeps in view for ``task_id``'s consumer."""
+        for slot in self.bidder.held_slots(task_id):
+            if slot.spec.motion == A.SENSOR and slot.region[0] != self.robot_id:
+                x, y, r = self.regions.get(task_id, (slot.region[1], slot.region[2], self.options.region_radius))
+                return slot.region[0], x, y, r
+        return None
+
+    def cspace_mask(self, slot: Slot, now: float):
+        """phi(now) of ``slot`` on this robot's c-space: its allowed candidates (None: forbids nothing)."""
+        if self.pose is None:
+            return None
+        pose = np.asarray(self.pose)[None, :]
+        if slot.spec.motion == A.AVOID and len(self.obstacles):
+            return C.avoid(self.window, pose, self.obstacles, self.estimator.profile.radius).allowed[0]
+        if slot.spec.motion == A.SENSOR and slot.region[0] != self.robot_id:
+            x, y, r = self.regions.get(slot.task, (slot.region[1], slot.region[2], self.options.region_radius))
+            return C.sensor_view(self.window, pose, [(x, y)], r, A.SENSORS[slot.spec.sensor]).allowed[0]
+        return None
+
+    # ------------------------------------------------------------------ pricing
+    def own_cost(self, slot: Slot) -> float:
+        """A slot's own share of a bid (s): its action's cost, its processor share, and its travel."""
+        spec = slot.spec
+        cost = spec.cost + spec.processor / max(self.options.processor, 1e-9)
+        if spec.motion == A.SURVEY:
+            board = self.boards.get(slot.task)
+            task = self.tasks.get(slot.task)
+            if board is None and task is not None:
+                board = Board(task.spec.waypoints(), self.robot_id)
+            if board is not None and self.pose is not None:
+                d = board.nearest_open(self.position)
+                cost += (d if math.isfinite(d) else 0.0) / self.options.speed
+        elif spec.motion == A.SENSOR and slot.region[0] != self.robot_id and self.pose is not None:
+            sensor = A.SENSORS[spec.sensor]
+            d = math.dist(self.position, slot.region[1:])
+            cost += max(0.0, d - sensor.far * sensor.range) / self.options.speed
+        return cost
+
+    def link_cost(self, rate: float, robot: int) -> float:
+        """A stream received from another robot: its share of this robot's link."""
+        return 0.0 if robot == self.robot_id else rate / max(self.options.link_capacity, 1e-9)
+
+    def in_range(self, spec: A.ActionSpec, x: float, y: float) -> bool:
+        """Is (x, y) within the range of ``spec``'s sensor from here?"""
+        return self.pose is not None and math.dist(self.position, (x, y)) <= A.SENSORS[spec.sensor].range
+
+    def serves(self, spec: A.ActionSpec, task: Task) -> bool:
+        """Can ``spec`` accomplish ``task`` on this robot (an avoider protects only its own robot)."""
+        return task.kind != "avoid_obstacles" or getattr(task.spec, "robot", None) == self.robot_id
+
+    # ------------------------------------------------------------------ fleet
+    def is_live(self, rid: int) -> bool:
+        return rid == self.robot_id or (rid in self.peers and rid not in self.lost)
+
+    def auctioneer_of(self, task_id: int) -> int:
+        """The robot that took the task in, or, if it is lost, the lowest-id live robot."""
+        origin = task_id >> 16
+        if self.is_live(origin):
+            return origin
+        return min([self.robot_id] + [p for p in self.peers if p not in self.lost])
+
+    # ------------------------------------------------------------------ inputs
+    def add_tasks(self, tasks: Sequence[Task], now: float) -> list:
+        for t in tasks:
+            if t.kind in KINDS:
+                self.tasks[t.id] = t
+                self.fleet_version += 1
+                if t.kind == "surveillance" and t.id not in self.boards:
+                    self.boards[t.id] = Board(t.spec.waypoints(), self.robot_id)
+            elif t.id not in self._refused:
+                self._refused.add(t.id)
+                self.log.warning("task %d is a %s: CoMutaR allocates %s tasks only", t.id, t.kind, "|".join(KINDS))
+                if t.id >> 16 == self.robot_id:
+                    self.events.append(TaskEvent(t.id, "failed", (self.robot_id,),
+                                                 f"{t.kind} tasks are not allocated by CoMutaR"))
+        return []
+
+    def withdraw_tasks(self, task_ids: Sequence[int], now: float) -> list:
+        self.fleet_version += 1
+        for t in task_ids:
+            self.tasks.pop(t, None)
+            self.boards.pop(t, None)
+            self.regions.pop(t, None)
+            self.bidder.drop(t)
+        self.auction.withdraw(task_ids)
+        return []
+
+    def set_available(self, available: bool, now: float) -> list:
+        self.available = bool(available)
+        if available:
+            return []
+        out = []
+        for t in list(self.bidder.holdings):
+            out += self.bidder.resign(t, "disarmed")
+        self.bidder.release([r for r, s in self.bidder.slots.items() if not s.held])
+        return self._route(out, now)
+
+    def on_peer_lost(self, robot_id: int, now: float) -> list:
+        if robot_id not in self.peers:
+            return []
+        self.lost.add(robot_id)
+        self.fleet_version += 1
+        for board in self.boards.values():
+            board.forget(robot_id)
+        out = []
+        for tid in list(self.bidder.holdings):
+            ins, outs = self.bidder.links(tid)
+            if robot_id in ins.values():
+                out += self.bidder.resign(tid, f"robot {robot_id}, a provider of its inputs, is lost")
+            elif robot_id in outs.values():
+                self.log.info("task %d: the consumer robot %d is lost: releasing", tid, robot_id)
+                self.bidder.drop(tid)
+        out += self.auction.on_peer_lost(robot_id, now)
+        return self._route(out, now)
+
+    def on_progress(self, p: Progress, now: float) -> list:
+        if p.task not in self.bidder.holdings:
+            return []
+        if p.event == VISITED:
+            board = self.boards.get(p.task)
+            i = p.data.get("waypoint")
+            if board is not None and isinstance(i, int) and board.visit(i):
+                self._status_at[p.task] = self._choose_at[p.task] = -math.inf
+            return []
+        if p.event == P_FAILED:
+            return self._route(self.bidder.resign(p.task, f"execution failed: {p.detail}"), now)
+        return []
+
+    def on_message(self, msg, now: float) -> list:
+        sender = getattr(msg, "sender", None)
+        if not isinstance(msg, WIRE_MESSAGES):
+            if type(msg).__name__ != "RobotState":          # the fleet's states pass every agent: not ours
+                self.dropped["not a CoMutaR message"] += 1
+            return []
+        if not (isinstance(sender, int) and sender in self.peers):
+            self.dropped["not a robot of the fleet"] += 1
+            return []
+        if getattr(msg, "dest", None) not in (BROADCAST, self.robot_id):
+            self.dropped["addressed to another robot"] += 1
+            return []
+        why = why_invalid(msg)
+        if why is not None:
+            self.dropped["invalid"] += 1
+            self.log.debug("dropped %s from robot %d: %s", type(msg).__name__, sender, why)
+            return []
+        if sender in self.lost:
+            self.lost.discard(sender)
+            self.fleet_version += 1
+        return self._route(self._dispatch(msg, now), now)
+
+    def on_tick(self, now: float) -> list:
+        out = self.bidder.tick(now)
+        out += self.auction.tick(now)
+        out += self._surveys(now)
+        out += self._region_updates(now)
+        return self._route(out, now)
+
+    # ------------------------------------------------------------------ surveillance and regions
+    def _surveys(self, now: float) -> list:
+        out = []
+        for tid, board in self.boards.items():
+            held = tid in self.bidder.holdings
+            if held and self.pose is not None and now >= self._choose_at.get(tid, -math.inf):
+                self._choose_at[tid] = now + CHOOSE_PERIOD
+                if board.choose(self.position, now, self.options.switch):
+                    self._status_at[tid] = -math.inf
+            if board.complete and tid in self.auction.jobs:
+                out += self.auction.complete(tid, now)
+            if held and now - self._status_at.get(tid, -math.inf) >= self.options.status_period:
+                self._status_at[tid] = now
+                target = 0 if board.target is None else board.target + 1
+                visited = tuple(sorted(i + 1 for i in board.visited))[:200]
+                out.append(CmSurvey(self.robot_id, BROADCAST, tid, target, float(board.claimed_at), visited))
+        return out
+
+    def _region_updates(self, now: float) -> list:
+        out = []
+        for tid in self.bidder.holdings:
+            ins, _ = self.bidder.links(tid)
+            remote = sorted({r for r in ins.values() if r != self.robot_id})
+            if not remote or self.pose is None or now - self._region_at.get(tid, -math.inf) < self.options.region_period:
+                continue
+            self._region_at[tid] = now
+            h = self.bidder.holdings[tid]
+            providers = sorted({r >> 16 for r in h.award} - {self.robot_id})
+            x, y = self.position
+            out += [CmRegion(self.robot_id, r, tid, x, y, self.options.region_radius) for r in providers]
+        return out
+
+    # ------------------------------------------------------------------ routing
+    def _dispatch(self, msg, now: float) -> list:
+        b, a = self.bidder, self.auction
+        if isinstance(msg, CmAnnounce):
+            a.on_announce(msg, now)
+            return b.on_announce(msg, now)
+        if isinstance(msg, CmQuery):
+            return b.on_query(msg, now)
+        if isinstance(msg, CmCost):
+            return b.on_cost(msg, now)
+        if isinstance(msg, CmBid):
+            a.on_bid(msg, now)
+            return []
+        if isinstance(msg, CmAward):
+            return b.on_award(msg, now)
+        if isinstance(msg, CmAck):
+            return a.on_ack(msg, now)
+        if isinstance(msg, CmResign):
+            return a.on_resign(msg, now)
+        if isinstance(msg, CmCancel):
+            b.on_cancel(msg, now)
+            return []
+        if isinstance(msg, CmHold):
+            return a.on_hold(msg, now)
+        if isinstance(msg, CmDone):
+            b.on_done(msg, now)
+            a.on_done(msg, now)
+            return []
+        if isinstance(msg, CmSurvey):
+            board = self.boards.get(msg.task)
+            if board is None or msg.sender == self.robot_id:
+                return []
+            target = msg.target - 1 if 0 < msg.target <= len(board.points) else None
+            if board.merge(msg.sender, map(int.__sub__, msg.visited, itertools.repeat(1)), target, msg.claimed):
+                self._status_at[msg.task] = self._choose_at[msg.task] = -math.inf
+            return []
+        if isinstance(msg, CmRegion):
+            if msg.task in self.bidder.holdings:
+                self.regions[msg.task] = (msg.x, msg.y, msg.radius)
+            return []
+        return []
+
+    def _route(self, msgs: list, now: float) -> list:
+        """The messages for the wire; those for this robot are handled here (broadcasts both)."""
+        wire, todo = [], deque(msgs)
+        while todo:
+            msg = todo.popleft()
+            if msg.dest != self.robot_id:
+                wire.append(msg)
+            if msg.dest in (self.robot_id, BROADCAST):
+                todo.extend(self._dispatch(msg, now))
+        return wire
+
+
+def make_agent(ctx: AgentContext, sensors: Sequence[str] | None = None) -> ComutarAgent:
+    """The agent for a robot; ``sensors`` default to ``ctx.options.sensors`` (phase 2: pass
+    :func:`~runtime.allocation.comutar.actions.sensors_of` (config.base, config.allocation))."""
+    return ComutarAgent(ctx, sensors)
+
+
+# Not in runtime/allocation/registry.py yet (phase 2 adds the line, and the task kinds to runtime.tasks.KINDS).
+COMUTAR = Method("comutar", "paper 003 CoMutaR: Contract Net over actions with constraint functions (several tasks "
+                 "per robot)", ComutarOptions, make_agent, KINDS, WIRE_MESSAGES,
+                 str(Path(__file__).with_name("comutar.xml")))

@@ -131,3 +131,29 @@ def test_bad_scenarios_are_refused_naming_the_key(tmp_path, changes, key):
     with pytest.raises(ConfigError) as info:
         _scenario(tmp_path, **changes)
     assert f": {key}: expected" in str(info.value) and "\n" not in str(info.value)
+
+
+@pytest.mark.slow
+def test_the_shipped_foraging_fleet_delivers_both_objects_and_o1_gets_a_new_leader_in_time(tmp_path):
+    """Paper 000 §6.4 in SITL, lock-step: four Pioneer daemons (odometry only, sonar avoidance) share two
+    objects by Double Round; O1's leader is killed and withdrawn at 25 s; a new leader speaks up within 15 s
+    and both objects are delivered."""
+    from sitl import launcher
+    from sitl.operator import RunView
+    from tests.sitl_util import shipped_fleet
+
+    f = launcher.build(shipped_fleet(tmp_path, FLEET.name), tmp_path / "run", seed=1)
+    run = launcher.Lockstep(f)
+    try:
+        goal = False
+        while f.world.t < 600.0 and not goal:
+            run.step()
+            goal = f.scenario.goal(RunView(run.op))
+        res = launcher.finish(f, run.op, "goal" if goal else "timeout")
+        why = f.scenario.shortfall(RunView(run.op))
+    finally:
+        run.close()
+        f.close()
+    assert goal, why
+    kill = res["kill"]
+    assert kill["robot"] not in (None, kill["new_leader"]) and kill["after"] <= 15.0, kill

@@ -196,7 +196,7 @@ def resolve_model(arg: str | None, out: Path) -> tuple[Path, str]:
         return path.resolve(), f"--model {arg}"
     shipped = shipped_model()
     if shipped is not None:
-        return shipped, f"shipped: {shipped.relative_to(ROOT)}"
+        return shipped, f"shipped: {_shown(shipped)}"
     if CALIBRATION_SAMPLES.is_file():
         model = InterferenceModel.from_samples(read_samples(CALIBRATION_SAMPLES), search=True,
                                                source=f"fitted by the dr experiments from {CALIBRATION_SAMPLES}")
@@ -206,8 +206,16 @@ def resolve_model(arg: str | None, out: Path) -> tuple[Path, str]:
         return path.resolve(), f"fitted from {CALIBRATION_SAMPLES} ({len(model.samples)} samples; C {model.C:g}, " \
                                f"gamma {model.gamma:g}), written to {path}"
     raise InputError(f"no interference model: expected --model PATH, a model file (*.json) in "
-                     f"{SHIPPED_MODELS.relative_to(ROOT)}/ or {CALIBRATION_SAMPLES} (run `mrta experiment "
+                     f"{_shown(SHIPPED_MODELS)}/ or {CALIBRATION_SAMPLES} (run `mrta experiment "
                      f"dr-calibration` first)")
+
+
+def _shown(path: Path) -> str:
+    """``path`` relative to the repository when it is inside it."""
+    try:
+        return str(path.relative_to(ROOT))
+    except ValueError:
+        return str(path)
 
 
 def read_samples(path: Path) -> list[tuple[float, float, float]]:

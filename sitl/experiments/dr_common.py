@@ -180,6 +180,52 @@ def run_all(jobs: Sequence[tuple[Cell, Setup, int]], model: Path | None, workers
     return out
 
 
+@dataclass
+class Execution:
+    """What one experiment command ran: every run's result, the model's source, the command line, wall time."""
+    results: list[dict]
+    source: str
+    command: str
+    wall: float
+    written: list[Path]
+
+    @property
+    def runs(self) -> list[dict]:
+        return [r["run"] for r in self.results]
+
+    @property
+    def objects(self) -> list[dict]:
+        return [o for r in self.results for o in r["objects"]]
+
+    def describe(self, jobs: int) -> str:
+        per_run = mean([r["wall_s"] for r in self.runs])
+        return (f"Command: `{self.command}` on commit {commit()}: wall time {self.wall:.0f} s ({per_run:.0f} s per "
+                f"run, {len(self.results)} runs, {jobs} jobs).")
+
+
+def execute(args, name: str, cells: Sequence[Cell], setup: Setup, extra: str = "") -> Execution:
+    """Resolve the model, run every (cell, seed), write the run and object CSVs under ``--out``."""
+    out = Path(args.out)
+    model, source = resolve_model(args.model, out)
+    jobs = [(cell, setup, seed) for seed in range(1, args.seeds + 1) for cell in cells]
+    t0 = time.perf_counter()
+    results = run_all(jobs, model, args.jobs)
+    wall = time.perf_counter() - t0
+    command = (f"mrta experiment {name.replace('_', '-')} --seeds {args.seeds} --jobs {args.jobs}{extra}"
+               + (" --quick" if args.quick else "") + (f" --time-limit {args.time_limit:g}" if args.time_limit else "")
+               + (" --no-sonar" if args.no_sonar else ""))
+    return Execution(results, source, command, wall, write_rows(out, name, results))
+
+
+def objects_setup(args, full: Setup) -> Setup:
+    """``full`` ending after ``--objects`` done (or the quick size with U_max in [50, 150]), then the common
+    options."""
+    if args.objects < 1:
+        raise InputError(f"--objects {args.objects}: expected at least 1")
+    setup = replace(QUICK, u_max=full.u_max) if args.quick else replace(full, max_objects=args.objects)
+    return apply_arguments(setup, args)
+
+
 # ---------------------------------------------------------------------- the interference model
 
 def shipped_model() -> Path | None:

@@ -10,7 +10,6 @@ mean +- sd over seeds.  The real dr agent, the real executive and transport exec
 from __future__ import annotations
 
 import argparse
-import time
 from pathlib import Path
 
 import numpy as np
@@ -100,21 +99,12 @@ def run(args: argparse.Namespace) -> int:
     C.check_arguments(args)
     setup = setup_of(args)
     out = Path(args.out)
-    model, source = C.resolve_model(args.model, out)
-    jobs = [(cell, setup, seed) for seed in range(1, args.seeds + 1) for cell in CELLS]
-    t0 = time.perf_counter()
-    results = C.run_all(jobs, model, args.jobs)
-    wall = time.perf_counter() - t0
-    runs = [r["run"] for r in results]
-    objects = [o for r in results for o in r["objects"]]
-    written = C.write_rows(out, NAME, results)
-    cmd = (f"mrta experiment dr-table3 --seeds {args.seeds} --jobs {args.jobs}" + (" --quick" if args.quick else "")
-           + (f" --time-limit {args.time_limit:g}" if args.time_limit else "") + (" --no-sonar" if args.no_sonar else ""))
-    per_run = np.mean([r["wall_s"] for r in runs])
+    ex = C.execute(args, NAME, CELLS, setup)
+    runs, objects, written = ex.runs, ex.objects, ex.written
     setup_text = (f"SR (single round; Greedy: every bidder awarded), hard deadline. {setup.describe()}. Interference "
-                  f"model: {source}. {args.seeds} seeds per strategy (seed = robot starts, object places and the "
-                  f"bus). Percentages are of the tasks done in a run, then mean ± sd over seeds. Command: `{cmd}` on "
-                  f"commit {C.commit()}: wall time {wall:.0f} s ({per_run:.0f} s per run, {args.jobs} jobs).")
+                  f"model: {ex.source}. {args.seeds} seeds per strategy (seed = robot starts, object places and the "
+                  f"bus). Percentages are of the tasks done in a run, then mean ± sd over seeds. "
+                  f"{ex.describe(args.jobs)}")
     sections = [("Setup", setup_text),
                 ("Table 3: % of tasks done within the deadline (SR, hard deadline)", table(runs) + "\n\n" + why(setup, runs)),
                 ("The paper's statements beside ours", C.claims_text(claims(runs))),

@@ -13,13 +13,10 @@ and 6: total utility per strategy relative to Greedy's, soft and hard; mean +- s
 from __future__ import annotations
 
 import argparse
-import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from runtime.errors import InputError
 from sitl.experiments import dr_common as C
 from sitl.experiments import report
 
@@ -44,10 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def setup_of(args) -> C.Setup:
-    if args.objects < 1:
-        raise InputError(f"--objects {args.objects}: expected at least 1")
-    setup = replace(C.QUICK, u_max=(50, 150)) if args.quick else replace(SETUP, max_objects=args.objects)
-    return C.apply_arguments(setup, args)
+    return C.objects_setup(args, SETUP)
 
 
 def strategy_of(cell: C.Cell) -> str:
@@ -137,24 +131,13 @@ def run(args: argparse.Namespace) -> int:
     C.check_arguments(args)
     setup = setup_of(args)
     out = Path(args.out)
-    model, source = C.resolve_model(args.model, out)
-    jobs = [(cell, setup, seed) for seed in range(1, args.seeds + 1) for cell in CELLS]
-    t0 = time.perf_counter()
-    results = C.run_all(jobs, model, args.jobs)
-    wall = time.perf_counter() - t0
-    runs = [r["run"] for r in results]
-    objects = [o for r in results for o in r["objects"]]
-    written = C.write_rows(out, NAME, results)
-    cmd = (f"mrta experiment dr-table4 --seeds {args.seeds} --jobs {args.jobs} --objects {args.objects}"
-           + (" --quick" if args.quick else "") + (f" --time-limit {args.time_limit:g}" if args.time_limit else "")
-           + (" --no-sonar" if args.no_sonar else ""))
-    per_run = np.mean([r["wall_s"] for r in runs])
+    ex = C.execute(args, NAME, CELLS, setup, f" --objects {args.objects}")
+    runs, objects, written = ex.runs, ex.objects, ex.written
     spread = C.pm([r["objects_done"] for r in runs])
     setup_text = (f"{setup.describe()}. The paper moves 400 objects per run; we stop at {setup.max_objects or '-'} "
                   f"(objects done per run over all cells: {spread}) to keep the command within about 30 min on 2 "
                   f"cores, so each run's shares rest on few tasks and the spread over seeds is wide. Interference "
-                  f"model: {source}. {args.seeds} seeds per cell. Command: `{cmd}` on commit {C.commit()}: wall "
-                  f"time {wall:.0f} s ({per_run:.0f} s per run, {len(jobs)} runs, {args.jobs} jobs).")
+                  f"model: {ex.source}. {args.seeds} seeds per cell. {ex.describe(args.jobs)}")
     why = ("Why ours differ: RoboCoT's robots and avoidance are not ours (Pioneer-sized discs under the real "
            "executive's sonar avoidance crowd at the delivery point and on the lines to the objects, so groups move "
            "less than eq. 5 says and much less than the paper's); the paper's 400 objects per run against our "

@@ -11,13 +11,10 @@ seeds, beside the paper's 10802 / 11851 / 6290 / 10226 (+9.7 % and +62.5 % for o
 from __future__ import annotations
 
 import argparse
-import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from runtime.errors import InputError
 from sitl.experiments import dr_common as C
 from sitl.experiments import report
 
@@ -43,10 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def setup_of(args) -> C.Setup:
-    if args.objects < 1:
-        raise InputError(f"--objects {args.objects}: expected at least 1")
-    setup = replace(C.QUICK, u_max=(50, 150)) if args.quick else replace(SETUP, max_objects=args.objects)
-    return C.apply_arguments(setup, args)
+    return C.objects_setup(args, SETUP)
 
 
 def table(runs: list[dict]) -> str:
@@ -112,24 +106,14 @@ def run(args: argparse.Namespace) -> int:
     C.check_arguments(args)
     setup = setup_of(args)
     out = Path(args.out)
-    model, source = C.resolve_model(args.model, out)
-    jobs = [(cell, setup, seed) for seed in range(1, args.seeds + 1) for cell in CELLS.values()]
-    t0 = time.perf_counter()
-    results = C.run_all(jobs, model, args.jobs)
-    wall = time.perf_counter() - t0
-    runs = [r["run"] for r in results]
-    written = C.write_rows(out, NAME, results)
-    cmd = (f"mrta experiment dr-table5 --seeds {args.seeds} --jobs {args.jobs} --objects {args.objects}"
-           + (" --quick" if args.quick else "") + (f" --time-limit {args.time_limit:g}" if args.time_limit else "")
-           + (" --no-sonar" if args.no_sonar else ""))
-    per_run = np.mean([r["wall_s"] for r in runs])
+    ex = C.execute(args, NAME, tuple(CELLS.values()), setup, f" --objects {args.objects}")
+    runs, written = ex.runs, ex.written
     setup_text = (f"DR, NM_I, soft deadline. {setup.describe()}. The paper moves {PAPER_OBJECTS} objects per run; "
                   f"we stop at {setup.max_objects or '-'} (done per run: {C.pm([r['objects_done'] for r in runs])}), "
                   f"so our totals are smaller by about that ratio: compare the utility per task done and the gains. "
                   f"With errors: eq. 5 with {C.ERROR_SPEED:.4f} m/s (0.8 du/tu). Each run starts from the off-line "
-                  f"model ({source}); on-line, every robot adds every finished task's sample (window 120). "
-                  f"{args.seeds} seeds per cell. Command: `{cmd}` on commit {C.commit()}: wall time {wall:.0f} s "
-                  f"({per_run:.0f} s per run, {args.jobs} jobs).")
+                  f"model ({ex.source}); on-line, every robot adds every finished task's sample (window 120). "
+                  f"{args.seeds} seeds per cell. {ex.describe(args.jobs)}")
     why = ("Why ours differ: fewer objects per run (so on-line learning has fewer samples to learn from: one per "
            "task done); RoboCoT's bodies and avoidance are not ours, so the off-line model (fitted on our calibration) "
            "and the interference met differ from the paper's; U_max distribution and run count not given.")

@@ -168,6 +168,12 @@ def test_table4_report_computes_gains_over_greedy():
     assert "| Greedy | 37.88 | 30.0 ± 0.0 | 48.48 | 40.0 ± 0.0 |" in dr_table4.table(runs, (dr_table4.GREEDY,))
 
 
+def test_a_difference_in_the_noise_is_not_a_claim_that_holds():
+    assert C.clearly_more(3.0, 2.0) is True
+    assert C.clearly_more(2.7401, 2.7399) is False
+    assert C.clearly_more(float("nan"), 2.0) is None
+
+
 def test_fig3_bins_are_labelled_by_the_edge_nearer_the_deadline():
     labels, share = C.histogram(np.array([-0.25, -0.05, 0.0, 0.05, 0.55, 0.6, 2.0, -3.0]))
     got = dict(zip(labels, share))

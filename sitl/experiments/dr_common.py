@@ -414,6 +414,12 @@ def holds(ok: bool, *values: float) -> bool | None:
     return None if any(isinstance(v, float) and math.isnan(v) for v in values) else bool(ok)
 
 
+def clearly_more(a: float, b: float, margin: float = 0.05) -> bool | None:
+    """``a`` above ``b`` by more than ``margin`` of ``b`` (two runs that behave alike differ by noise only); None
+    if either is NaN."""
+    return holds(a > b * (1 + margin), a, b)
+
+
 def claims_text(claims: Sequence[tuple[str, str, str, bool | None]]) -> str:
     from sitl.experiments.formation_common import claims_table
     return claims_table(claims)

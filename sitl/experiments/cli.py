@@ -17,6 +17,9 @@ EXPERIMENTS = {
     "formation-world": ("sitl.experiments.formation_world", "paper 002 Tables I-II: A*/RRT in the pybullet world"),
     "dr-calibration": ("sitl.experiments.dr_calibration", "paper 000 Fig. 2: interference calibration, 1-8 robots x 10 distances"),
     "comutar-surveillance": ("sitl.experiments.comutar_surveillance", "paper 003 Figs. 4-7: surveillance and sensor sharing"),
+    "dr-table3": ("sitl.experiments.dr_table3", "paper 000 Table 3 / Fig. 3: SR under hard deadlines, 5 strategies"),
+    "dr-table4": ("sitl.experiments.dr_table4", "paper 000 Table 4 / Figs. 4-6: DR, SR, Greedy, soft and hard utility"),
+    "dr-table5": ("sitl.experiments.dr_table5", "paper 000 Table 5: off-line vs on-line SVR, with and without errors"),
 }
 
 

@@ -1,0 +1,425 @@
+"""Shared parts of paper 000's experiment commands (dr-table3, dr-table4, dr-table5): the real ``dr`` agent in the
+pybullet foraging harness (:mod:`sitl.foraging.harness`), one run per (cell, seed).
+
+* A **cell** is one strategy of the paper's tables: the auction (dr | sr | greedy), the strategy (M_I | NM_I |
+  M_NI | NM_NI), the utility the leaders bid with (soft eq. 10 | hard), on-line learning and the speed belief
+  (eq. 5's v).  A **setup** is the scenario: robots, objects present at once, weight, deadline, U_max, time
+  limit, how many objects end the run.
+* :func:`run_one` runs one (cell, setup, seed) and returns its per-run row and per-object rows; :func:`run_all`
+  runs many in a process pool (``--jobs``) with a progress bar on the ``mrta.experiments`` logger.
+* :func:`resolve_model` finds the interference model: ``--model PATH``, else a model file shipped in
+  runtime/allocation/dr/, else one fitted from the calibration's samples (results/dr-calibration/samples.csv),
+  else a one-line InputError naming what to run.
+* Statistics: percentages and utilities per run, then mean +- sd over seeds (:func:`pm`).
+
+Units: m, s, wu; the paper's tu and du convert at 1 tu = 0.12 s, 1 du = 1 cm (:mod:`sitl.foraging.scenario`).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import subprocess
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from runtime.allocation.dr.interference import InterferenceModel
+from runtime.allocation.dr.options import DrOptions
+from runtime.errors import InputError
+from runtime.log import get_logger
+from sitl.experiments import report
+from sitl.foraging import harness, scenario
+from sitl.foraging.scenario import Dist
+
+log = get_logger("experiments.dr")
+
+ROOT = Path(__file__).resolve().parents[2]
+SHIPPED_MODELS = ROOT / "runtime" / "allocation" / "dr"          # *.json there: the shipped model
+CALIBRATION_SAMPLES = Path("results/dr-calibration/samples.csv")   # dr-calibration's output (relative to cwd)
+DL = 900 * scenario.TU                                             # 108 s
+LATE_CAP = 0.6                                                     # Fig. 3's last bin: >= 60 % late
+ERROR_SPEED = 0.8 * scenario.DU / scenario.TU                      # §6.3: 0.8 du/tu = 0.0667 m/s
+STRATEGIES = ("NM_NI", "NM_I", "M_NI", "M_I")
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One strategy of a table: a label and the dr options that make it."""
+    label: str
+    auction: str = "dr"
+    strategy: str = "NM_I"
+    utility: str = "hard"
+    online: bool = False
+    speed_belief: float | None = None
+
+    @property
+    def uses_model(self) -> bool:
+        return self.strategy.endswith("_I")
+
+
+@dataclass(frozen=True)
+class Setup:
+    """The scenario of a run (paper §6.2.1 by default: 10 robots, 3 objects of 40 wu, DL 108 s, 3600 s)."""
+    robots: int = 10
+    objects: int = 3
+    weight: float = 40.0
+    deadline: float = DL
+    u_max: tuple[int, int] = (100, 100)             # integers uniform in [lo, hi]
+    time_limit: float = 3600.0
+    max_objects: int | None = None                  # the run ends when this many are done (or at time_limit)
+    size: float = 10.0
+    sonar: bool = True
+
+    def describe(self) -> str:
+        lo, hi = self.u_max
+        u = f"U_max {lo}" if lo == hi else f"U_max integers uniform in [{lo}, {hi}]"
+        end = f"{self.time_limit:g} s" + ("" if self.max_objects is None else
+                                          f" or {self.max_objects} objects done, whichever comes first")
+        return (f"{self.robots} robots, {self.objects} objects present at once (each replaced at a random place as "
+                f"it is done) of {self.weight:g} wu, deadline {self.deadline:g} s ({self.deadline / scenario.TU:.0f} "
+                f"tu) after the object appears, {u}; a {self.size:g} x {self.size:g} m arena, delivery point at its "
+                f"centre; each run lasts {end}; robots avoid by {'sonar and bumpers' if self.sonar else 'bumpers'}")
+
+
+def options(cell: Cell, model: Path | None, setup: Setup) -> DrOptions:
+    return DrOptions(auction=cell.auction, strategy=cell.strategy, utility=cell.utility, online=cell.online,
+                     speed_belief=cell.speed_belief, delivery=(0.0, 0.0),
+                     model=str(model) if model is not None and (cell.uses_model or cell.online) else None)
+
+
+def config(cell: Cell, setup: Setup, seed: int, model: Path | None) -> harness.ForagingConfig:
+    lo, hi = setup.u_max
+    return harness.ForagingConfig(robots=setup.robots, method="dr", options=options(cell, model, setup), seed=seed,
+                                  time_limit=setup.time_limit, max_objects=setup.max_objects, objects=setup.objects,
+                                  weight=Dist.const(setup.weight), deadline=Dist.const(setup.deadline),
+                                  u_max=Dist.integers(lo, hi), size=setup.size, delivery=(0.0, 0.0),
+                                  sonar=setup.sonar)
+
+
+# ---------------------------------------------------------------------- one run
+
+def run_one(cell: Cell, setup: Setup, seed: int, model: Path | None) -> dict:
+    """One run: ``{"run": row, "objects": [row, ...]}`` (plain values, picklable, CSV-ready)."""
+    cfg = config(cell, setup, seed, model)
+    t0 = time.perf_counter()
+    fr = harness.ForagingRun(cfg)
+    try:
+        res = fr.run()
+        books = sum(f.delivered for rb in fr.robots.values() for f in rb.node.agent.finished.values())
+    finally:
+        fr.close()
+    wall = time.perf_counter() - t0
+    head = {"cell": cell.label, "auction": cell.auction, "strategy": cell.strategy, "utility": cell.utility,
+            "online": cell.online, "speed_belief": "" if cell.speed_belief is None else cell.speed_belief,
+            "seed": seed}
+    objects = [object_row(head, o, res.end) for o in res.objects]
+    done = [o for o in objects if o["done"]]
+    x = np.array([o["t_over_dl"] for o in done])
+    robots = list(res.robots.values())
+    run = {**head, "objects_done": len(done), "objects_appeared": len(objects),
+           "within_dl_pct": pct(x <= 1.0), "within_1.1dl_pct": pct(x < 1.1), "late60_pct": pct(x >= 1.0 + LATE_CAP),
+           "utility_soft": sum(o["utility_soft"] for o in done), "utility_hard": sum(o["utility_hard"] for o in done),
+           "utility_max": sum(o["u_max"] for o in done),
+           "mean_group": mean([o["mean_group"] for o in objects]), "max_group": max((o["max_group"] for o in objects), default=0),
+           "mean_time_s": mean([o["elapsed_s"] for o in done]),
+           "moved_wu": res.moved, "books_wu": books, "sim_s": res.end,
+           "stalled_s_mean": mean([r.stalled for r in robots]), "messages": res.messages.sent, "wall_s": wall}
+    return {"run": run, "objects": objects}
+
+
+def object_row(head: dict, o: harness.ObjectRecord, end: float) -> dict:
+    done = o.finished is not None
+    return {**head, "task": o.task, "x_m": o.x, "y_m": o.y, "d_m": math.hypot(o.x, o.y), "weight_wu": o.weight,
+            "deadline_s": o.deadline, "u_max": o.u_max, "appeared_s": o.appeared, "done": done,
+            "finished_s": o.finished if done else math.nan, "elapsed_s": o.elapsed if done else math.nan,
+            "t_over_dl": o.elapsed / o.deadline if done else math.nan, "delivered_wu": o.delivered,
+            "utility_soft": o.utility_soft, "utility_hard": o.utility_hard, "mean_group": o.mean_coalition(end),
+            "max_group": max(n for _, n in o.coalition)}
+
+
+def pct(mask: np.ndarray) -> float:
+    return 100.0 * float(np.mean(mask)) if len(mask) else math.nan
+
+
+def mean(values: Sequence[float]) -> float:
+    return float(np.mean(values)) if len(values) else math.nan
+
+
+# ---------------------------------------------------------------------- many runs
+
+def bar(done: int, total: int, width: int = 30) -> str:
+    k = int(width * done / total) if total else width
+    return "[" + "#" * k + "-" * (width - k) + f"] {done}/{total}"
+
+
+def run_all(jobs: Sequence[tuple[Cell, Setup, int]], model: Path | None, workers: int) -> list[dict]:
+    """Every (cell, setup, seed) run, ``workers`` at a time; results in the order of ``jobs``."""
+    out: list[dict | None] = [None] * len(jobs)
+    t0 = time.perf_counter()
+
+    def finished(k: int, res: dict) -> None:
+        out[k] = res
+        r = res["run"]
+        log.info("%s %s seed %d: %d objects done, %.0f wu moved, %.0f %% <= DL (%.0f s wall; %.0f s in all)",
+                 bar(sum(x is not None for x in out), len(out)), r["cell"], r["seed"], r["objects_done"],
+                 r["moved_wu"], r["within_dl_pct"], r["wall_s"], time.perf_counter() - t0)
+
+    if workers <= 1 or len(jobs) <= 1:
+        for k, (cell, setup, seed) in enumerate(jobs):
+            finished(k, run_one(cell, setup, seed, model))
+    else:
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+        with ProcessPoolExecutor(max_workers=min(workers, len(jobs))) as pool:
+            futures = {pool.submit(run_one, cell, setup, seed, model): k for k, (cell, setup, seed) in enumerate(jobs)}
+            for fut in as_completed(futures):
+                finished(futures[fut], fut.result())
+    return out
+
+
+@dataclass
+class Execution:
+    """What one experiment command ran: every run's result, the model's source, the command line, wall time."""
+    results: list[dict]
+    source: str
+    command: str
+    wall: float
+    written: list[Path]
+
+    @property
+    def runs(self) -> list[dict]:
+        return [r["run"] for r in self.results]
+
+    @property
+    def objects(self) -> list[dict]:
+        return [o for r in self.results for o in r["objects"]]
+
+    def describe(self, jobs: int) -> str:
+        per_run = mean([r["wall_s"] for r in self.runs])
+        return (f"Command: `{self.command}` on commit {commit()}: wall time {self.wall:.0f} s ({per_run:.0f} s per "
+                f"run, {len(self.results)} runs, {jobs} jobs).")
+
+
+def execute(args, name: str, cells: Sequence[Cell], setup: Setup, extra: str = "") -> Execution:
+    """Resolve the model, run every (cell, seed), write the run and object CSVs under ``--out``."""
+    out = Path(args.out)
+    model, source = resolve_model(args.model, out)
+    jobs = [(cell, setup, seed) for seed in range(1, args.seeds + 1) for cell in cells]
+    t0 = time.perf_counter()
+    results = run_all(jobs, model, args.jobs)
+    wall = time.perf_counter() - t0
+    command = (f"mrta experiment {name.replace('_', '-')} --seeds {args.seeds} --jobs {args.jobs}{extra}"
+               + (" --quick" if args.quick else "") + (f" --time-limit {args.time_limit:g}" if args.time_limit else "")
+               + (" --no-sonar" if args.no_sonar else ""))
+    return Execution(results, source, command, wall, write_rows(out, name, results))
+
+
+def objects_setup(args, full: Setup) -> Setup:
+    """``full`` ending after ``--objects`` done (or the quick size with U_max in [50, 150]), then the common
+    options."""
+    if args.objects < 1:
+        raise InputError(f"--objects {args.objects}: expected at least 1")
+    setup = replace(QUICK, u_max=full.u_max) if args.quick else replace(full, max_objects=args.objects)
+    return apply_arguments(setup, args)
+
+
+# ---------------------------------------------------------------------- the interference model
+
+def shipped_model() -> Path | None:
+    found = sorted(SHIPPED_MODELS.glob("*.json"))
+    return found[0] if found else None
+
+
+def resolve_model(arg: str | None, out: Path) -> tuple[Path, str]:
+    """(model file, where it came from): ``--model``, the shipped one, or one fitted (and written to ``out``) from
+    the calibration's samples; InputError when there is none."""
+    if arg:
+        path = Path(arg)
+        InterferenceModel.load(path)                       # a bad file: one line naming it and the key
+        return path.resolve(), f"--model {arg}"
+    shipped = shipped_model()
+    if shipped is not None:
+        return shipped, f"shipped: {_shown(shipped)}"
+    if CALIBRATION_SAMPLES.is_file():
+        model = InterferenceModel.from_samples(read_samples(CALIBRATION_SAMPLES), search=True,
+                                               source=f"fitted by the dr experiments from {CALIBRATION_SAMPLES}")
+        out.mkdir(parents=True, exist_ok=True)
+        path = out / "model.json"
+        model.save(path)
+        return path.resolve(), f"fitted from {CALIBRATION_SAMPLES} ({len(model.samples)} samples; C {model.C:g}, " \
+                               f"gamma {model.gamma:g}), written to {path}"
+    raise InputError(f"no interference model: expected --model PATH, a model file (*.json) in "
+                     f"{_shown(SHIPPED_MODELS)}/ or {CALIBRATION_SAMPLES} (run `mrta experiment "
+                     f"dr-calibration` first)")
+
+
+def _shown(path: Path) -> str:
+    """``path`` relative to the repository when it is inside it."""
+    try:
+        return str(path.relative_to(ROOT))
+    except ValueError:
+        return str(path)
+
+
+def read_samples(path: Path) -> list[tuple[float, float, float]]:
+    import csv
+    try:
+        with path.open() as fh:
+            rows = list(csv.DictReader(fh))
+        return [(float(r["n"]), float(r["d_m"]), float(r["I_wu_per_s"])) for r in rows]
+    except (KeyError, ValueError, TypeError) as exc:
+        raise InputError(f"{path}: expected columns n, d_m, I_wu_per_s with numbers ({exc})") from None
+
+
+# ---------------------------------------------------------------------- arguments
+
+def add_arguments(parser: argparse.ArgumentParser, seeds: int = 5) -> None:
+    parser.add_argument("--seeds", type=int, default=seeds, help="runs per cell, seeds 1..N (default %(default)s)")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="runs in this many processes")
+    parser.add_argument("--quick", action="store_true", help="a small size for tests (a few seconds)")
+    parser.add_argument("--model", default=None, metavar="PATH",
+                        help="interference model JSON (default: the shipped one in runtime/allocation/dr/, else "
+                             "one fitted from results/dr-calibration/samples.csv)")
+    parser.add_argument("--time-limit", type=float, default=None, help="simulated s per run (default: the table's)")
+    parser.add_argument("--no-sonar", action="store_true", help="robots avoid by their bumpers only")
+    parser.add_argument("--no-png", action="store_true", help="skip the figures")
+
+
+def check_arguments(args) -> None:
+    if args.seeds < 1:
+        raise InputError(f"--seeds {args.seeds}: expected at least 1")
+    if args.jobs < 1:
+        raise InputError(f"--jobs {args.jobs}: expected at least 1")
+    if args.time_limit is not None and not (math.isfinite(args.time_limit) and args.time_limit > 0):
+        raise InputError(f"--time-limit {args.time_limit!r}: expected seconds > 0")
+
+
+def apply_arguments(setup: Setup, args) -> Setup:
+    if args.time_limit is not None:
+        setup = replace(setup, time_limit=float(args.time_limit))
+    if args.no_sonar:
+        setup = replace(setup, sonar=False)
+    return setup
+
+
+QUICK = Setup(robots=5, objects=1, weight=4.0, deadline=60.0, time_limit=60.0, max_objects=None, size=6.0)
+
+
+# ---------------------------------------------------------------------- statistics and report
+
+def pm(values: Sequence[float], digits: int = 1) -> str:
+    """``mean +- sd`` over seeds (NaNs left out; sd 0 for one value; '-' for none)."""
+    v = [x for x in values if isinstance(x, (int, float)) and not math.isnan(x)]
+    if not v:
+        return "-"
+    sd = float(np.std(v, ddof=1)) if len(v) > 1 else 0.0
+    return f"{np.mean(v):.{digits}f} ± {sd:.{digits}f}"
+
+
+def by_cell(runs: Sequence[dict], label: str, key: str) -> list[float]:
+    return [float(r[key]) for r in runs if r["cell"] == label]
+
+
+def cell_means(runs: Sequence[dict], label: str, key: str) -> float:
+    return mean([x for x in by_cell(runs, label, key) if not math.isnan(x)])
+
+
+def histogram(x: np.ndarray, lo: float = -1.0, cap: float = LATE_CAP, width: float = 0.1) -> tuple[list[str], np.ndarray]:
+    """Fig. 3's bins of t/DL - 1, 0.1 wide, each labelled by its edge nearer the deadline: '-0.2' is (-0.3, -0.2],
+    '-0' is (-0.1, 0] (on time), '0' is (0, 0.1), '0.5' is [0.5, 0.6), '>=0.6' everything 60 % late or more;
+    shares in % of ``x``."""
+    k_lo = int(round(-lo / width))
+    k_hi = int(round(cap / width))
+    labels = [f"-{k * width:.1f}" if k else "-0" for k in range(k_lo - 1, -1, -1)]
+    labels[0] = "<=" + labels[0]
+    labels += [f"{k * width:.1f}" if k else "0" for k in range(k_hi)] + [f">={cap:g}"]
+    counts = np.zeros(len(labels))
+    for v in x:
+        if v >= cap:
+            k = len(labels) - 1
+        elif v <= 0:
+            k = k_lo - 1 - min(int(math.floor(-v / width)), k_lo - 1)
+        else:
+            k = k_lo + int(math.floor(v / width))
+        counts[k] += 1
+    return labels, 100.0 * counts / max(len(x), 1)
+
+
+def commit() -> str:
+    """The git commit the code ran on (and '+dirty' if the work tree differs), for the reports."""
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True,
+                              timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT,
+                               capture_output=True, text=True, timeout=10).stdout.strip()
+        return (head or "unknown") + ("+dirty" if dirty else "")
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def write_rows(out: Path, name: str, results: Sequence[dict], objects: bool = True) -> list[Path]:
+    written = [report.write_csv(out / f"{name}_runs.csv", [r["run"] for r in results])]
+    if objects:
+        written.append(report.write_csv(out / f"{name}_objects.csv", [o for r in results for o in r["objects"]]))
+    return written
+
+
+def savefig(fig, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def hist_figure(series: Sequence[tuple[str, np.ndarray]], path: Path, title: str) -> Path:
+    """Grouped bars of :func:`histogram` per series."""
+    fig, ax = report.figure()
+    width = 0.8 / max(len(series), 1)
+    labels: list[str] = []
+    for k, (name, x) in enumerate(series):
+        labels, share = histogram(x)
+        ax.bar(np.arange(len(labels)) + (k - (len(series) - 1) / 2) * width, share, width, label=f"{name} ({len(x)})")
+    ax.set_xticks(range(len(labels)), labels, fontsize=7)
+    ax.set_xlabel("t/DL - 1 (bins 0.1 wide, labelled by the edge nearer DL)")
+    ax.set_ylabel("% of tasks done")
+    ax.set_title(title, fontsize=9)
+    ax.grid(True, axis="y", alpha=0.3)
+    ax.legend(fontsize=7)
+    return savefig(fig, path)
+
+
+def bar_figure(groups: Sequence[tuple[str, float, float, float | None]], path: Path, title: str, ylabel: str) -> Path:
+    """One bar per (label, mean, sd, paper value or None), the paper's value as a marker."""
+    fig, ax = report.figure()
+    xs = np.arange(len(groups))
+    ax.bar(xs, [g[1] for g in groups], yerr=[g[2] for g in groups], capsize=3, color="C0", label="ours (mean ± sd)")
+    paper = [(x, g[3]) for x, g in zip(xs, groups) if g[3] is not None]
+    if paper:
+        ax.plot([p[0] for p in paper], [p[1] for p in paper], "r_", ms=18, mew=2, label="paper")
+    ax.set_xticks(xs, [g[0] for g in groups], fontsize=7, rotation=20)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=9)
+    ax.grid(True, axis="y", alpha=0.3)
+    ax.legend(fontsize=7)
+    return savefig(fig, path)
+
+
+def holds(ok: bool, *values: float) -> bool | None:
+    """``ok``, or None (not decided) when a value it compares is NaN (no task done in a cell)."""
+    return None if any(isinstance(v, float) and math.isnan(v) for v in values) else bool(ok)
+
+
+def clearly_more(a: float, b: float, margin: float = 0.05) -> bool | None:
+    """``a`` above ``b`` by more than ``margin`` of ``b`` (two runs that behave alike differ by noise only); None
+    if either is NaN."""
+    return holds(a > b * (1 + margin), a, b)
+
+
+def claims_text(claims: Sequence[tuple[str, str, str, bool | None]]) -> str:
+    from sitl.experiments.formation_common import claims_table
+    return claims_table(claims)

@@ -347,3 +347,12 @@ def test_check_says_ok_for_a_config_the_daemon_takes(tmp_path, capsys):
     assert world.exists()
     assert main(["daemon", str(path), "--check"]) == 0
     assert capsys.readouterr().out.startswith(f"{path}: ok (robot 1")
+
+
+def test_building_the_cli_loads_no_simulator():
+    """`mrta daemon --check` and every other command build the whole CLI, experiments included: none of them
+    may import pybullet (its banner on stderr breaks the one-line error, and a robot has no use for it)."""
+    code = "from runtime.cli import main"
+    proc = subprocess.run([sys.executable, "-c", code + "; main(['experiment', '--help'])"], cwd=ROOT, timeout=60,
+                          capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert "pybullet build time" not in proc.stderr + proc.stdout, proc.stderr[-300:]

@@ -32,7 +32,7 @@ from runtime.allocation.dr.options import DrOptions
 from runtime.errors import InputError
 from runtime.log import get_logger
 from sitl.experiments import report
-from sitl.foraging import harness, scenario
+from sitl.foraging import scenario
 from sitl.foraging.scenario import Dist
 
 log = get_logger("experiments.dr")
@@ -91,7 +91,9 @@ def options(cell: Cell, model: Path | None, setup: Setup) -> DrOptions:
                      model=str(model) if model is not None and (cell.uses_model or cell.online) else None)
 
 
-def config(cell: Cell, setup: Setup, seed: int, model: Path | None) -> harness.ForagingConfig:
+def config(cell: Cell, setup: Setup, seed: int, model: Path | None) -> "harness.ForagingConfig":
+    from sitl.foraging import harness          # pybullet: loaded when a run starts, not when the CLI is built
+
     lo, hi = setup.u_max
     return harness.ForagingConfig(robots=setup.robots, method="dr", options=options(cell, model, setup), seed=seed,
                                   time_limit=setup.time_limit, max_objects=setup.max_objects, objects=setup.objects,
@@ -104,6 +106,8 @@ def config(cell: Cell, setup: Setup, seed: int, model: Path | None) -> harness.F
 
 def run_one(cell: Cell, setup: Setup, seed: int, model: Path | None) -> dict:
     """One run: ``{"run": row, "objects": [row, ...]}`` (plain values, picklable, CSV-ready)."""
+    from sitl.foraging import harness
+
     cfg = config(cell, setup, seed, model)
     t0 = time.perf_counter()
     fr = harness.ForagingRun(cfg)

@@ -219,6 +219,7 @@ class Daemon:
         disarmed); their progress goes back to the agent."""
         ex = self.executive
         ex.sync(self.agent.commitments if self.node.armed else (), now)
+        ex.make_way = self.node.armed
         (v, w), progress = ex.step(self.pose(), self.base.sensors, now)
         self.base.set_velocity(v, w, now)
         out = []

@@ -216,6 +216,7 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
         data = C.deep_merge(template, overrides)
         if method and (template.get("allocation") or {}).get("method") not in (None, method):
             data["allocation"] = {"method": method}        # the template's options belong to its own method
+        _anchor_paths(data, Path(fleet.template(r.id)).parent)
         cfg_path = run_dir / f"robot_{r.id}.yaml"
         cfg_path.write_text(yaml.safe_dump(data, sort_keys=False))
         C.load_robot(cfg_path)   # what we wrote must load
@@ -228,6 +229,17 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
     out.scenario = scenarios.module(fleet.scenario.type).Scenario(fleet, world_cfg)
     write_manifest(out, speedup if speedup is not None else fleet.speedup, seed, key_path)
     return out
+
+
+TEMPLATE_PATHS = (("allocation", "model"),)      # file paths a robot template may give relative to itself
+
+
+def _anchor_paths(data: dict, template_dir: Path) -> None:
+    """The template's relative file paths made absolute: the robot config is written elsewhere (the run dir)."""
+    for section, key in TEMPLATE_PATHS:
+        value = (data.get(section) or {}).get(key)
+        if isinstance(value, str) and value and not Path(value).is_absolute():
+            data[section][key] = str((template_dir / value).resolve())
 
 
 def write_manifest(f: Fleet, speedup: float, seed: int, key_path: Path | None) -> None:

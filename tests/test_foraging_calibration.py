@@ -49,6 +49,10 @@ def test_quick_run_writes_the_samples_and_the_report(tmp_path):
         assert (tmp_path / "out" / name).stat().st_size > 0
     md = (tmp_path / "out" / "dr_calibration.md").read_text()
     assert "Fraction of the ideal capacity" in md and "interference grows with the number of robots" in md
+    from runtime.allocation.dr.interference import InterferenceModel
+    model = InterferenceModel.load(tmp_path / "out" / "model.json")          # fitted on these samples, not shipped
+    assert len(model.samples) == 6 and "The interference model fitted" in md
+    assert model.predict(4, 1.4) > model.predict(1, 1.4)
     # resuming from the CSV runs nothing again and gives the same samples
     args = parser.parse_args(["--out", str(tmp_path / "out"), "--quick", "--jobs", "1", "--samples", str(samples),
                               "--resume", str(tmp_path / "out" / "dr_calibration.csv")])

@@ -85,7 +85,7 @@ def test_objects_are_replaced_as_they_are_delivered_until_the_total(tmp_path):
 
 
 def test_the_leader_is_withdrawn_once_due_and_its_successor_timed(tmp_path):
-    sc = _scenario(tmp_path)                                  # kill_leader: object 1 at 25 s, within 15 s
+    sc = _scenario(tmp_path)                  # kill_leader: object 1 at 25 s with a member, a successor within 15 s
     first = sc.handovers()
     view = View()
     o1, o2 = (_name(h, 1, k + 1) for k, h in enumerate(first))
@@ -112,6 +112,8 @@ def test_a_successor_later_than_the_limit_fails_the_goal(tmp_path):
     view.states = {o1: DONE, o2: DONE}
     view.states[o1] = OPEN
     view.said = {2: [(26.0, "task 1.1 awarded to R2")]}
+    assert sc.on_poll(view, 27.0) == []                       # members: 1 -> not while it is alone
+    view.said[2].append((26.5, "task 1.1 awarded to R2+R3"))
     assert sc.on_poll(view, 27.0) == [("withdraw", 2)]
     view.said[1] = [(40.0, "task 1.1 awarded to R1")]
     sc.on_poll(view, 41.0)

@@ -145,3 +145,19 @@ def test_a_robot_that_gets_nowhere_backs_out_and_replans():
     assert all(v > 0 for t, v in cmds if t < STALL_TIME)
     assert all(v < 0 for t, v in cmds if STALL_TIME + 0.15 < t < STALL_TIME + ESCAPE_TIME - 0.15)
     assert all(v > 0 for t, v in cmds if t > STALL_TIME + ESCAPE_TIME + 0.15)
+
+
+def test_an_idle_robot_makes_way_only_when_armed_and_not_boxed_in():
+    ctx = ExecContext(RobotPlanner(None, "euclid", 0.25, 0, 1), Tunables(0.25, 0.3, 2.0, 0.12),
+                      logging.getLogger("test"), 0.25)
+    ex = Executive(ctx)
+    front = BaseSensors(ranges=((0.0, 0.4),))                      # something 0.15 m off its front
+    assert ex.step((0.0, 0.0, 0.0), front, 0.0)[0] == (0.0, 0.0)   # not armed: never moves
+    ex.make_way = True
+    v, w = ex.step((0.0, 0.0, 0.0), front, 0.1)[0]
+    assert v < 0 and w == 0.0                                       # backs off
+    v, w = ex.step((0.0, 0.0, 0.0), BaseSensors(ranges=((math.pi, 0.4),)), 0.2)[0]
+    assert v > 0                                                    # from behind: drives off forward
+    boxed = BaseSensors(ranges=((0.0, 0.4), (math.pi, 0.35)))
+    assert ex.step((0.0, 0.0, 0.0), boxed, 0.3)[0] == (0.0, 0.0)
+    assert ex.step((0.0, 0.0, 0.0), BaseSensors(ranges=((0.0, 2.0),)), 0.4)[0] == (0.0, 0.0)

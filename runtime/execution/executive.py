@@ -48,6 +48,9 @@ STALL_TIME = 4.0          # s over which a stall is judged
 STALL_MOVE = 0.1          # m the path follower asked for, at least, in that time (turns at the robot's radius) ...
 STALL_SHARE = 0.25        # ... of which the robot got less than this share: stalled
 ESCAPE_TIME = 2.0         # s backing up and turning
+MAKE_WAY_GAP = 0.35       # m from an idle robot's body: something this close makes it move off
+MAKE_WAY_CLEAR = 0.2      # m: ... if the side it moves to is clear this far
+MAKE_WAY_SPEED = 0.1      # m/s
 
 
 @dataclass
@@ -56,6 +59,8 @@ class Executive:
     executors: dict[int, object] = field(default_factory=dict)      # task id -> executor
     arbiter: Arbiter | None = None
     escapes: int = 0                  # stalls escaped by backing up
+    make_way: bool = False            # idle, move off when something comes this close (the daemon: when armed)
+    made_way: int = 0                 # cycles spent making way
 
     def __post_init__(self) -> None:
         self.avoid = AvoidObstacles(radius=self.ctx.radius)
@@ -122,7 +127,7 @@ class Executive:
     def step(self, pose, sensors, now: float) -> tuple[tuple[float, float], list[Progress]]:
         """The command for this cycle and the progress to report.  ``pose`` None or no executor: stand still."""
         if pose is None or not self.executors:
-            return (0.0, 0.0), []
+            return self._make_way(sensors, now), []
         for e in self.executors.values():
             e.begin(pose, now)
         self.avoid.on_bumpers(sensors.bump_left, sensors.bump_right, now)
@@ -146,6 +151,26 @@ class Executive:
         if cmd is not None and not backing and d.arc == self.arbiter.arcs.nearest(*cmd):
             return cmd, progress          # the path follower won: pass its exact command, not the arc's grid value
         return (d.v, d.w), progress
+
+    def _make_way(self, sensors, now: float) -> tuple[float, float]:
+        """An idle robot stands still, unless (``make_way``) something is within ``MAKE_WAY_GAP`` of its body:
+        then it creeps straight away from the nearest reading, if that side is clear.  A robot with nothing to do
+        parked on a mark (the delivery point, a goal) moves off when another robot comes to it."""
+        ranges = getattr(sensors, "ranges", None)
+        if not self.make_way or not ranges:
+            return 0.0, 0.0
+        r = self.ctx.radius
+        near = [(b, d) for b, d in ranges if math.isfinite(b) and math.isfinite(d) and 0 <= d < r + MAKE_WAY_GAP]
+        if not near:
+            return 0.0, 0.0
+        b, d = min(near, key=lambda x: x[1])
+        ahead = math.cos(b) > 0
+        away = [(bb, dd) for bb, dd in ranges if math.isfinite(bb) and (math.cos(bb) > 0) != ahead
+                and math.isfinite(dd) and 0 <= dd < r + MAKE_WAY_CLEAR]
+        if away:
+            return 0.0, 0.0                      # boxed in: stay
+        self.made_way += 1
+        return (-MAKE_WAY_SPEED if ahead else MAKE_WAY_SPEED), 0.0
 
     def _check_stall(self, pose, now: float) -> None:
         """A robot whose path follower has asked for at least ``STALL_MOVE`` m of driving (turning counts at the

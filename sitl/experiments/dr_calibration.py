@@ -36,6 +36,7 @@ EXTRA_DU = (100, 500, 600)                          # ours: the rest of the aren
 DURATION = 40000 * scenario.TU                      # 4800 s
 LOAD, SPEED, LOAD_TIME = 2.0, 0.25, scenario.TU     # wu, m/s, s per wu
 PAPER_FRACTION_8_AT_140 = 0.413                     # Fig. 2 text: 8 robots at D1 reach 41.3 % of ideal
+SHIPPED_MODEL = "runtime/allocation/dr/interference_pioneer3dx.json"   # the model the configs and experiments use
 CHECK_CASE = (4, 140)                               # the point measured again at a finer physics step
 SETTINGS = ("duration_s", "dt_s", "control_s", "seed", "lookahead_m", "max_turn_rate", "reach_m", "sonar")
 
@@ -52,6 +53,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="cases run in this many processes")
     parser.add_argument("--quick", action="store_true",
                         help="a small size for tests: robots 1,2,4 at 140 and 400 du for 300 s, no dt check")
+    parser.add_argument("--ship", action="store_true",
+                        help=f"also write the fitted model over the shipped one ({SHIPPED_MODEL})")
     parser.add_argument("--samples", default="results/dr-calibration/samples.csv",
                         help="where the model's training samples go (default %(default)s)")
     parser.add_argument("--resume", default=None, metavar="CSV",
@@ -299,6 +302,8 @@ def run(args: argparse.Namespace) -> int:
                 "d_du": r["d_du"], "fraction_of_ideal": r["fraction_of_ideal"], "moved_wu": r["moved_wu"],
                 "duration_s": r["duration_s"]} for r in main]
     written.append(report.write_csv(args.samples, samples))
+    model, model_text = fit_model(samples, out, args)
+    written += model
     cmd = (f"mrta experiment dr-calibration --robots {','.join(map(str, robots))} --distances {','.join(map(str, distances))} "
            f"--duration {args.duration:g} --seed {args.seed} --dt {args.dt:g} --check-dt {args.check_dt:g} "
            f"--jobs {args.jobs}")
@@ -313,6 +318,7 @@ def run(args: argparse.Namespace) -> int:
                 ("Paper's statements (section 4.2.1, Fig. 2) beside ours", _claims_table(claims(main))),
                 ("Fraction of the ideal capacity (eq. 4) reached", fraction_table(main)),
                 ("Physics step check", dt_check(rows, args.dt, args.check_dt)),
+                ("The interference model fitted on these samples", model_text),
                 ("Every case", moved_table(main))]
     written.append(report.write_markdown(out / "dr_calibration.md", "Paper 000 section 4.2.1: interference calibration",
                                          sections))
@@ -320,6 +326,33 @@ def run(args: argparse.Namespace) -> int:
         written.append(figure(main, out / "dr_calibration.png"))
     print("wrote " + ", ".join(map(str, written)))
     return 0
+
+
+def fit_model(samples: list[dict], out: Path, args) -> tuple[list[Path], str]:
+    """The SVR of paper 000 section 4.2 fitted on the samples (C and gamma by cross-validated grid search),
+    written to ``out``/model.json and, with ``--ship``, over the shipped model; and a paragraph saying what it
+    predicts."""
+    from runtime.allocation.dr.interference import InterferenceModel
+
+    triples = [(float(r["n"]), float(r["d_m"]), float(r["I_wu_per_s"])) for r in samples]
+    if len(triples) < 2:
+        return [], "Too few samples to fit a model."
+    model = InterferenceModel.from_samples(
+        triples, search=True, source=f"mrta experiment dr-calibration: {len(triples)} samples of "
+                                     f"{args.duration:g} s each (seed {args.seed})")
+    paths = [out / "model.json"]
+    model.save(paths[0])
+    if args.ship:
+        model.save(Path(SHIPPED_MODEL))
+        paths.append(Path(SHIPPED_MODEL))
+    ds = sorted({r["d_m"] for r in samples})
+    ns = sorted({int(r["n"]) for r in samples})
+    head = "| n | " + " | ".join(f"{d:.2f} m" for d in ds) + " |\n|---|" + "---|" * len(ds) + "\n"
+    body = "".join(f"| {n} | " + " | ".join(f"{model.predict(n, d):.3f}" for d in ds) + " |\n" for n in ns)
+    text = (f"epsilon-SVR, RBF kernel, inputs scaled to [0, 1], target standardised; C {model.C:g}, gamma "
+            f"{model.gamma:g} chosen by cross-validation on {len(triples)} samples; written to "
+            f"{', '.join(map(str, paths))}. Predicted I (wu/s) per group size and distance:\n\n{head}{body}")
+    return paths, text
 
 
 def _claims_table(rows) -> str:

@@ -396,6 +396,7 @@ class ForagingRun:
             b = clock()
             ex = rb.executive
             ex.sync(rb.commitments, now)
+            ex.make_way = rb.node is not None and rb.node.armed
             (v, w), progress = ex.step(rb.pose, sensors[r], now)
             c = clock()
             self.world.command(r, v, w)

@@ -4,7 +4,11 @@ reports it done a new one appears at once.  The goal is met when ``total`` objec
 
 ``kill_leader`` replays the paper's real-robot fault (§6.4): at ``at`` s (or as soon after as the object has a
 leader) the daemon of the ``object``-th object's leader dies and (``withdraw``, the default) its body is taken
-out of the arena, as the paper's robot was.  The leader is the robot that announces the
+out of the arena, as the paper's robot was; with ``members: k``, not before the leader's group has k other robots
+(the issue's fault: its members leave, one of them or a free robot takes over).  The paper withdrew a leader
+that was alone on its object; a new leader then needs a free robot, and with every other robot in a group
+until its object is done there is none (the digest's "puzzle"), so a lone leader's successor comes when a
+group finishes.  The leader is the robot that announces the
 object's group ("task 1.2 awarded to R3+R4": the STATUSTEXT a `dr` leader sends a ground station); the run
 then measures how long the object takes to get a new leader (the paper: 15 s) and the goal also requires one
 within ``new_leader_within`` s.
@@ -22,7 +26,7 @@ from runtime.config.world import check_inside
 from runtime.fleet.messages import DONE, STATE_NAMES
 from runtime.tasks.transport import Transport, to_item
 
-AWARD_TEXT = re.compile(r"task (\d+)\.(\d+) awarded to ")
+AWARD_TEXT = re.compile(r"task (\d+)\.(\d+) awarded to ((?:R\d+\+?)*)")
 
 
 @dataclass(frozen=True)
@@ -30,6 +34,7 @@ class KillLeader:
     object: int = field(default=1, metadata=rng(1, 1000))       # the n-th object to appear
     at: float = field(default=20.0, metadata=rng(0.0, None))    # s of sim time, at the earliest
     withdraw: bool = True          # and take its body out of the arena (the paper's robot was carried away)
+    members: int = field(default=0, metadata=rng(0, 100))       # once its group has at least this many others
 
 
 @dataclass(frozen=True)
@@ -103,6 +108,7 @@ class Scenario:
         self.to = self.cfg.to if self.cfg.to is not None else min(r.id for r in fleet.robots)
         self.objects: list[Placed] = []
         self.leaders: dict[int, list[tuple[float, int]]] = {}     # fleet task id -> [(when, leader)]
+        self.groups: dict[int, tuple[int, ...]] = {}             # fleet task id -> its leader's last group
         self._texts_seen: set = set()
         self.killed: tuple[float, int, int] | None = None          # (when, robot, task)
 
@@ -151,7 +157,9 @@ class Scenario:
             o = self.objects[k.object - 1]
             tid = o.task_id
             said = self.leaders.get(tid) if tid is not None else None
-            if said and not self._done(run, o) and said[-1][1] in run.live_robots():
+            members = len(self.groups.get(tid, ())) - 1
+            if (said and not self._done(run, o) and said[-1][1] in run.live_robots()
+                    and members >= k.members):
                 self.killed = (now, said[-1][1], tid)
                 out.append(("withdraw" if k.withdraw else "kill", said[-1][1]))
         return out
@@ -167,6 +175,7 @@ class Scenario:
                 if m:
                     tid = int(m.group(1)) << 16 | int(m.group(2))
                     self.leaders.setdefault(tid, []).append((t, rid))
+                    self.groups[tid] = tuple(int(r) for r in re.findall(r"R(\d+)", m.group(3)))
 
     def new_leader(self) -> tuple[int, float] | None:
         """After the kill: the object's next leader and how long after the kill it spoke up."""

@@ -114,6 +114,7 @@ class InterferenceModel:
         return float(grid.best_params_["C"]), float(grid.best_params_["gamma"])
 
     def _refit(self) -> None:
+        self._memo = {}
         if not self.samples:
             self._svr = None
             return
@@ -131,9 +132,16 @@ class InterferenceModel:
         samples."""
         if self._svr is None:
             return 0.0
-        lo, span, mean, sd = self._scale
-        x = (np.array([[float(n), float(d)]]) - lo) / span
-        return float(self._svr.predict(x)[0]) * sd + mean
+        key = (float(n), float(d))
+        memo = self.__dict__.setdefault("_memo", {})      # leaders ask the same (n, d) again and again: a
+        got = memo.get(key)                               # model changes only when refitted, which clears it
+        if got is None:
+            lo, span, mean, sd = self._scale
+            x = (np.array([key]) - lo) / span
+            got = memo[key] = float(self._svr.predict(x)[0]) * sd + mean
+            if len(memo) > 4096:
+                memo.clear()
+        return got
 
     def add(self, n: float, d: float, I: float) -> None:
         """On-line learning: append ``(n, d, I)``, keep the newest :attr:`window` samples, refit with the

@@ -281,8 +281,9 @@ class AvoidObstacles:
         pts, d2 = pts[near], d2[near]
         a = k.rays @ pts.T                                            # (nw * steps, points)
         m = a * a + np.minimum(clearance * clearance - d2, -1e-12)
-        rows, cols = np.nonzero(m >= 0)                               # only these can hold an interval
-        a, root, g = a[rows, cols], np.sqrt(np.maximum(m[rows, cols], 0.0)), k.g[rows]
+        at = np.flatnonzero(m.ravel() >= 0)                           # only these can hold an interval
+        rows = at // len(pts)
+        a, root, g = a.ravel()[at], np.sqrt(np.maximum(m.ravel()[at], 0.0)), k.g[rows]
         lo = np.searchsorted(k.speeds, (a - root) / g, side="left")  # first speed in the interval ...
         hi = np.searchsorted(k.speeds, (a + root) / g, side="right")  # ... and one past the last
         if k.nv <= _WORD:

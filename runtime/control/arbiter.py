@@ -416,27 +416,29 @@ class Arbiter:
                 raise InputError(f"arbiter behaviour {b.name} weight: expected a finite number >= 0, got {b.weight!r}")
 
     def decide(self, now: float) -> Decision:
-        total = np.zeros(len(self.arcs.v))
-        veto = np.zeros(len(self.arcs.v), dtype=bool)
-        for b in self.behaviours:
-            ballot = b.ballot(self.arcs, now)
-            votes = ballot.votes
-            if not np.isfinite(votes).all():
-                votes = np.nan_to_num(votes, nan=0.0)
-            total += b.weight * _clip1(votes)
+        arcs = self.arcs
+        ballots = [(b.ballot(arcs, now), b) for b in self.behaviours]
+        total = np.zeros(len(arcs.v))
+        veto = np.zeros(len(arcs.v), dtype=bool)
+        for ballot, b in ballots:
+            total += b.weight * _clip1(ballot.votes)      # clipping maps +-inf to +-1, as nan_to_num then clip does
             if ballot.veto is not None:
                 veto |= ballot.veto
-        grid = total.reshape(self.arcs.shape)
+        if np.isnan(total).any():                       # a NaN vote (or weight): sum again with NaN votes as 0
+            total[:] = 0.0
+            for ballot, b in ballots:
+                total += b.weight * _clip1(np.nan_to_num(ballot.votes, nan=0.0))
+        grid = total.reshape(arcs.shape)
         if self.smoothing > 0:
             if self._smoothers[0] != self.smoothing:
-                nv, nw = self.arcs.shape
+                nv, nw = arcs.shape
                 self._smoothers = (self.smoothing, smoothing_matrix(nv, self.smoothing),
                                    smoothing_matrix(nw, self.smoothing))
             grid = self._smoothers[1] @ grid @ self._smoothers[2].T
         scores = np.where(veto, -np.inf, grid.ravel())
-        if np.all(veto):
+        if veto.all():
             self.vetoed_all += 1
-            stop = self.arcs.nearest(0.0, 0.0)
+            stop = arcs.nearest(0.0, 0.0)
             return Decision(0.0, 0.0, stop, scores)
-        k = int(np.argmax(scores))
-        return Decision(float(self.arcs.v[k]), float(self.arcs.w[k]), k, scores)
+        k = int(scores.argmax())
+        return Decision(float(arcs.v[k]), float(arcs.w[k]), k, scores)

@@ -266,8 +266,9 @@ class AvoidObstacles:
         are not tested one by one: at a given turn rate and time every speed's sample lies on one ray from the
         robot, ``q = v g u`` (unit ``u``, length ``g`` per unit speed), and both conditions, ``|q - p|^2 <= c^2``
         and ``|q - p|^2 < |p|^2 - 1e-12``, hold (as real numbers) for ``(v g - a)^2 <= a^2 + min(c^2 - |p|^2, -1e-12)``
-        with ``a = u . p``: an interval of speeds.  So a cycle costs (turn rates x steps x points) intervals and
-        one pass over the samples, not (arcs x steps x points) distances."""
+        with ``a = u . p``: an interval of speeds.  So a cycle costs (turn rates x steps x points) intervals (only
+        where ``m >= 0`` can hold one: those are counted against the speeds) and a bitmask of the speeds hit per
+        (turn rate, time) row, not (arcs x steps x points) distances."""
         pts = self._points
         if len(pts) == 0:
             return np.full(len(arcs.v), np.inf)

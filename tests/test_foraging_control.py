@@ -35,8 +35,9 @@ def brute_force(avoid: AvoidObstacles, arcs: ArcSet, horizon: float, steps: int)
 
 @pytest.mark.parametrize("arcs", [ArcSet.uniform(max_speed=0.25, max_turn_rate=2.0),
                                   ArcSet.uniform(max_speed=0.5, max_reverse=0.2, max_turn_rate=2.0, n_speeds=11),
-                                  ArcSet((-0.1, 0.0, 0.07, 0.3), (-1.0, -0.1, 0.0, 0.5, 3.0))],   # uneven axes
-                         ids=["pioneer", "create", "uneven"])
+                                  ArcSet((-0.1, 0.0, 0.07, 0.3), (-1.0, -0.1, 0.0, 0.5, 3.0)),    # uneven axes
+                                  ArcSet.uniform(max_speed=0.5, max_reverse=0.2, n_speeds=100, n_turns=3)],
+                         ids=["pioneer", "create", "uneven", "more-speeds-than-a-word"])
 def test_time_to_collision_equals_the_brute_force_oracle(arcs):
     rng = np.random.default_rng(7)
     for trial in range(25):

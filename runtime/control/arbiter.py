@@ -266,35 +266,33 @@ class AvoidObstacles:
         are not tested one by one: at a given turn rate and time every speed's sample lies on one ray from the
         robot, ``q = v g u`` (unit ``u``, length ``g`` per unit speed), and both conditions, ``|q - p|^2 <= c^2``
         and ``|q - p|^2 < |p|^2 - 1e-12``, hold (as real numbers) for ``(v g - a)^2 <= a^2 + min(c^2 - |p|^2, -1e-12)``
-        with ``a = u . p``: an interval of speeds.  So a cycle costs (turn rates x steps x points) intervals and
-        one pass over the samples, not (arcs x steps x points) distances."""
-        out = np.full(len(arcs.v), np.inf)
-        if len(self._points) == 0:
-            return out
-        clearance = self.radius + self.margin
-        reach = float(np.max(np.abs(arcs.v))) * horizon + clearance
-        d2 = (self._points * self._points).sum(axis=1)
-        near = d2 <= reach * reach
-        pts, d2 = self._points[near], d2[near]
+        with ``a = u . p``: an interval of speeds.  So a cycle costs (turn rates x steps x points) intervals (only
+        where ``m >= 0`` can hold one: those are counted against the speeds) and a bitmask of the speeds hit per
+        (turn rate, time) row, not (arcs x steps x points) distances."""
+        pts = self._points
         if len(pts) == 0:
-            return out
-        t, rays, g, axis = _arc_rays(arcs, float(horizon), int(steps))
-        nv, nw = arcs.shape
-        a = rays @ pts.T                                              # (nw * steps, points)
+            return np.full(len(arcs.v), np.inf)
+        k = _arc_rays(arcs, float(horizon), int(steps))
+        clearance = self.radius + self.margin
+        reach = k.reach + clearance
+        d2 = (pts * pts).sum(axis=1)
+        near = d2 <= reach * reach
+        if not near.any():
+            return np.full(len(arcs.v), np.inf)
+        pts, d2 = pts[near], d2[near]
+        a = k.rays @ pts.T                                            # (nw * steps, points)
         m = a * a + np.minimum(clearance * clearance - d2, -1e-12)
-        root = np.sqrt(np.maximum(m, 0.0))
-        lo = axis.count_below((a - root) / g)                       # first speed in the interval ...
-        hi = axis.count_upto((a + root) / g)                        # ... and one past the last
-        rows, cols = np.nonzero((m >= 0) & (hi > lo))
-        if len(rows) == 0:
-            return out
-        lo, hi = lo[rows, cols], hi[rows, cols]
-        n = (nv + 1) * len(rays)
-        edges = np.bincount(lo * len(rays) + rows, minlength=n) - np.bincount(hi * len(rays) + rows, minlength=n)
-        hit = (np.cumsum(edges.reshape(nv + 1, len(rays)), axis=0)[:nv] > 0).reshape(nv * nw, len(t))
-        any_hit = hit.any(axis=1)
-        out[any_hit] = t[np.argmax(hit[any_hit], axis=1)]
-        return out
+        at = np.flatnonzero(m.ravel() >= 0)                           # only these can hold an interval
+        rows = at // len(pts)
+        a, root, g = a.ravel()[at], np.sqrt(np.maximum(m.ravel()[at], 0.0)), k.g[rows]
+        lo = np.searchsorted(k.speeds, (a - root) / g, side="left")  # first speed in the interval ...
+        hi = np.searchsorted(k.speeds, (a + root) / g, side="right")  # ... and one past the last
+        if k.nv <= _WORD:
+            steps_hit = _steps_hit(k, rows, lo, hi)[:, :k.nv]
+        else:                                                         # speeds in words of _WORD
+            steps_hit = np.concatenate([_steps_hit(k, rows, np.clip(lo - s, 0, _WORD), np.clip(hi - s, 0, _WORD))
+                                        for s in range(0, k.nv, _WORD)], axis=1)[:, :k.nv]
+        return k.first[steps_hit].T.ravel()                           # (nw, nv) -> arc order (speed-major)
 
     def ballot(self, arcs: ArcSet, now: float) -> Ballot:
         n = len(arcs.v)
@@ -335,11 +333,43 @@ class AvoidObstacles:
         return float(min(max(1.0 - gap / self.ahead_range, 0.0), 1.0))
 
 
+@dataclass(frozen=True)
+class _Rays:
+    """What :meth:`AvoidObstacles.time_to_collision` needs of an arc set, horizon and step count."""
+    rays: np.ndarray          # (nw * steps, 2): unit direction of every speed's sample, per (turn rate, time) row
+    g: np.ndarray             # (nw * steps,): sample length per unit speed (the sample of speed v is v g u)
+    speeds: np.ndarray        # the sorted speed axis
+    bit: np.ndarray           # uint64 2**i for i in 0.._WORD: the speeds in [lo, hi) are bit[hi] - bit[lo]
+    first: np.ndarray         # time of the first hit by how many of the steps hit: [inf, t[-1], ..., t[0]]
+    reach: float              # farthest any arc goes within the horizon
+    nv: int
+    nw: int
+    steps: int
+    count: type               # dtype that counts steps
+
+
+_WORD = 63                # speeds per word of bits
+
+
+def _steps_hit(k: "_Rays", rows: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(nw, _WORD): per turn rate and speed (within a word, lo and hi in 0.._WORD), how many of the steps hit,
+    given intervals [lo, hi) of speeds hit in rows (turn rate, step).  Each row's speeds hit become bits (speed i:
+    bit i; an empty interval adds none); OR along the steps gives the speeds hit by each step, and as that only
+    grows, the steps with a speed's bit set count back from the last to its first hit."""
+    hit = np.zeros(len(k.rays), dtype=np.uint64)
+    np.bitwise_or.at(hit, rows, k.bit[hi] - k.bit[lo])
+    by_then = np.bitwise_or.accumulate(hit.reshape(k.nw, k.steps), axis=1).astype("<u8", copy=False)
+    bits = np.unpackbits(np.ascontiguousarray(by_then.T).view(np.uint8).reshape(k.steps, k.nw * 8), axis=1,
+                         bitorder="little")
+    return np.add.reduce(bits, axis=0, dtype=k.count).reshape(k.nw, 64)[:, :_WORD]
+
+
 @lru_cache(maxsize=16)
-def _arc_rays(arcs: ArcSet, horizon: float, steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _arc_rays(arcs: ArcSet, horizon: float, steps: int) -> _Rays:
     """Sample times in (0, horizon] and, per (turn rate, time) row, the unit direction from the robot (robot frame)
     on which every speed's sample lies and its length per unit speed (the sample of speed v is ``v g u``), and
     the sorted speeds; computed once per arc set, horizon and step count."""
+    nv, nw = arcs.shape
     t = np.linspace(horizon / steps, horizon, steps)
     w = np.asarray(arcs.turn_rates)[:, None]
     th = w * t
@@ -351,39 +381,12 @@ def _arc_rays(arcs: ArcSet, horizon: float, steps: int) -> tuple[np.ndarray, np.
     home = g < 1e-12                      # a full turn: every speed's sample is back at the start, hitting nothing
     g = np.where(home, 1.0, g)
     rays = np.where(home[:, None], 0.0, np.column_stack((ux / g, uy / g)))
-    return _frozen(t), _frozen(rays), _frozen(g[:, None].copy()), _SortedAxis(np.asarray(arcs.speeds, dtype=float))
-
-
-class _SortedAxis:
-    """Counts of a sorted axis's values below (or up to) each of many numbers, as ``np.searchsorted`` gives them,
-    faster for an evenly spaced axis (the arc sets are): a guess from the spacing, corrected by one step each
-    way against the values themselves, so the counts are exact."""
-
-    def __init__(self, values: np.ndarray):
-        self.values = _frozen(values)
-        n = len(values)
-        self.step = float(values[-1] - values[0]) / (n - 1) if n > 1 else 0.0
-        even = n > 2 and self.step > 0 and np.max(np.abs(values - (values[0] + self.step * np.arange(n)))) < self.step / 4
-        self._padded = _frozen(np.concatenate(([-np.inf], values, [np.inf]))) if even else None
-
-    def _count(self, x: np.ndarray, below: bool) -> np.ndarray:
-        if self._padded is None:
-            return np.searchsorted(self.values, x, side="left" if below else "right")
-        n, pad = len(self.values), self._padded
-        k = np.minimum(np.maximum(np.floor((x - self.values[0]) / self.step) + 1, 0), n).astype(np.intp)  # about
-        if below:                                     # count of values < x: values[k-1] < x <= values[k]
-            k -= pad[k] >= x
-            k += pad[k + 1] < x
-        else:                                         # count of values <= x
-            k -= pad[k] > x
-            k += pad[k + 1] <= x
-        return k
-
-    def count_below(self, x: np.ndarray) -> np.ndarray:
-        return self._count(x, True)
-
-    def count_upto(self, x: np.ndarray) -> np.ndarray:
-        return self._count(x, False)
+    bit = np.left_shift(np.uint64(1), np.arange(_WORD + 1, dtype=np.uint64))
+    first = np.concatenate(([np.inf], t[::-1]))
+    reach = float(np.max(np.abs(arcs.v))) * horizon
+    return _Rays(_frozen(rays), _frozen(g), _frozen(np.asarray(arcs.speeds, dtype=float)), _frozen(bit),
+                 _frozen(first), reach, nv, nw, steps,
+                 np.uint8 if steps < 256 else np.intp)
 
 
 def _clip1(votes: np.ndarray) -> np.ndarray:
@@ -414,27 +417,29 @@ class Arbiter:
                 raise InputError(f"arbiter behaviour {b.name} weight: expected a finite number >= 0, got {b.weight!r}")
 
     def decide(self, now: float) -> Decision:
-        total = np.zeros(len(self.arcs.v))
-        veto = np.zeros(len(self.arcs.v), dtype=bool)
-        for b in self.behaviours:
-            ballot = b.ballot(self.arcs, now)
-            votes = ballot.votes
-            if not np.isfinite(votes).all():
-                votes = np.nan_to_num(votes, nan=0.0)
-            total += b.weight * _clip1(votes)
+        arcs = self.arcs
+        ballots = [(b.ballot(arcs, now), b) for b in self.behaviours]
+        total = np.zeros(len(arcs.v))
+        veto = np.zeros(len(arcs.v), dtype=bool)
+        for ballot, b in ballots:
+            total += b.weight * _clip1(ballot.votes)      # clipping maps +-inf to +-1, as nan_to_num then clip does
             if ballot.veto is not None:
                 veto |= ballot.veto
-        grid = total.reshape(self.arcs.shape)
+        if np.isnan(total).any():                       # a NaN vote (or weight): sum again with NaN votes as 0
+            total[:] = 0.0
+            for ballot, b in ballots:
+                total += b.weight * _clip1(np.nan_to_num(ballot.votes, nan=0.0))
+        grid = total.reshape(arcs.shape)
         if self.smoothing > 0:
             if self._smoothers[0] != self.smoothing:
-                nv, nw = self.arcs.shape
+                nv, nw = arcs.shape
                 self._smoothers = (self.smoothing, smoothing_matrix(nv, self.smoothing),
                                    smoothing_matrix(nw, self.smoothing))
             grid = self._smoothers[1] @ grid @ self._smoothers[2].T
         scores = np.where(veto, -np.inf, grid.ravel())
-        if np.all(veto):
+        if veto.all():
             self.vetoed_all += 1
-            stop = self.arcs.nearest(0.0, 0.0)
+            stop = arcs.nearest(0.0, 0.0)
             return Decision(0.0, 0.0, stop, scores)
-        k = int(np.argmax(scores))
-        return Decision(float(self.arcs.v[k]), float(self.arcs.w[k]), k, scores)
+        k = int(scores.argmax())
+        return Decision(float(arcs.v[k]), float(arcs.w[k]), k, scores)

@@ -8,6 +8,7 @@ path that passes near itself is not short-cut; a different path resets it.
 """
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field
 from typing import Sequence
@@ -36,6 +37,7 @@ class PurePursuit:
     _progress: float = field(default=0.0, init=False, repr=False)
     _fresh: bool = field(default=True, init=False, repr=False)
     _segs: tuple = field(default=(), init=False, repr=False)
+    _lists: tuple = field(default=([0.0], [(0.0, 0.0)]), init=False, repr=False)    # _cum and _pts as floats
 
     def __post_init__(self) -> None:
         for name in ("lookahead", "cruise_speed", "max_turn_rate", "goal_tolerance"):
@@ -68,6 +70,7 @@ class PurePursuit:
         seg = np.hypot(*np.diff(pts, axis=0).T) if len(pts) > 1 else np.zeros(0)
         self._path, self._pts = key, pts
         self._cum = np.concatenate(([0.0], np.cumsum(seg)))
+        self._lists = (self._cum.tolist(), [tuple(p) for p in pts.tolist()])
         self._progress = 0.0
         self._fresh = True
         # per-segment constants of the projection, computed once per path instead of every cycle
@@ -75,49 +78,50 @@ class PurePursuit:
         d = pts[1:] - a
         seg_len2 = np.einsum("ij,ij->i", d, d)
         seg_len = np.sqrt(seg_len2)
-        self._segs = (a, d, seg_len2, np.where(seg_len2 > 0, seg_len2, 1.0), seg_len,
-                      np.where(seg_len > 0, seg_len, 1.0))
+        self._segs = (a, d, np.where(seg_len2 > 0, seg_len2, 1.0), seg_len, np.where(seg_len > 0, seg_len, 1.0),
+                      self._cum[:-1].copy(), self._cum[1:].copy())
 
     def _project(self, x: float, y: float) -> float:
         """Arc length of the closest path point; after the first call, only within a window around progress."""
-        pts, cum = self._pts, self._cum
-        if len(pts) == 1:
+        if len(self._pts) == 1:
             return 0.0
-        a, d, seg_len2, len2_div, seg_len, len_div = self._segs
-        t = np.einsum("ij,ij->i", np.array([x, y]) - a, d) / len2_div
+        a, d, len2_div, seg_len, len_div, start, end = self._segs
+        xy = np.array([x, y])
+        t = np.einsum("ij,ij->i", xy - a, d) / len2_div
         t = np.minimum(np.maximum(t, 0.0), 1.0)
-        proj = a + d * t[:, None]
-        dist2 = np.einsum("ij,ij->i", proj - (x, y), proj - (x, y))
-        s = cum[:-1] + t * seg_len
+        s = start + t * seg_len
         if self._fresh:
             self._fresh = False
-            i = int(np.argmin(dist2))
-            return float(s[i])
+            return float(s[int(np.argmin(self._dist2(a, d, t, xy)))])
         # Tracking: prefer the part of the path in [progress - lookahead, progress + 3 * lookahead], so a
         # later leg that passes close by is not jumped to; if the robot is more than a lookahead away from
         # that window (pushed, pose jump), take the closest point anywhere ahead of progress - lookahead.
         lo, hi = self._progress - self.lookahead, self._progress + 3.0 * self.lookahead
-        tw = np.minimum(np.maximum((np.minimum(np.maximum(s, lo), hi) - cum[:-1]) / len_div, 0.0), 1.0)
-        pw = a + d * tw[:, None]
-        dw = np.einsum("ij,ij->i", pw - (x, y), pw - (x, y))
-        dw = np.where((cum[1:] < lo) | (cum[:-1] > hi), np.inf, dw)
+        tw = np.minimum(np.maximum((np.minimum(np.maximum(s, lo), hi) - start) / len_div, 0.0), 1.0)
+        dw = np.where((end < lo) | (start > hi), np.inf, self._dist2(a, d, tw, xy))
         i = int(np.argmin(dw))
         if dw[i] <= self.lookahead ** 2:
-            return float(cum[i] + tw[i] * seg_len[i])
-        dist2 = np.where(s >= lo, dist2, np.inf)
+            return float(start[i] + tw[i] * seg_len[i])
+        dist2 = np.where(s >= lo, self._dist2(a, d, t, xy), np.inf)
         i = int(np.argmin(dist2))
         return float(s[i]) if math.isfinite(dist2[i]) else self._progress
 
+    @staticmethod
+    def _dist2(a: np.ndarray, d: np.ndarray, t: np.ndarray, xy: np.ndarray) -> np.ndarray:
+        """Squared distance from ``xy`` to the point at fraction ``t`` of each segment (start ``a``, span ``d``)."""
+        off = a + d * t[:, None] - xy
+        return np.einsum("ij,ij->i", off, off)
+
     def _point_at(self, s: float) -> tuple[float, float]:
-        cum, pts = self._cum, self._pts
+        cum, pts = self._lists                      # Python floats: a handful of scalars, no numpy calls
         if s >= cum[-1]:
-            return float(pts[-1, 0]), float(pts[-1, 1])
-        i = int(np.searchsorted(cum, s, side="right")) - 1
+            return pts[-1]
+        i = bisect.bisect_right(cum, s) - 1
         i = min(max(i, 0), len(pts) - 2)
         span = cum[i + 1] - cum[i]
         t = 0.0 if span <= 0 else (s - cum[i]) / span
-        p = pts[i] + t * (pts[i + 1] - pts[i])
-        return float(p[0]), float(p[1])
+        (x0, y0), (x1, y1) = pts[i], pts[i + 1]
+        return x0 + t * (x1 - x0), y0 + t * (y1 - y0)
 
     # ------------------------------------------------------------------ control
     def command(self, pose: Pose, path: Sequence[Sequence[float]]) -> Command:
@@ -126,7 +130,7 @@ class PurePursuit:
         if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(heading)):
             raise InputError(f"pure pursuit pose: expected finite (x, y, heading), got {tuple(pose)!r}")
         self._set_path(path)
-        gx, gy = self._pts[-1]
+        gx, gy = self._lists[1][-1]
         to_goal = math.hypot(gx - x, gy - y)
         if to_goal <= self.goal_tolerance:
             return 0.0, 0.0, True

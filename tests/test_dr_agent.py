@@ -122,6 +122,23 @@ def test_every_bidder_is_awarded_when_the_deadline_cannot_be_met_and_greedy_awar
             assert awards[0].value == pytest.approx(M.utility_soft(a.lead.predict([WC] * 4, now + 1.25)[0], 80, 50))
 
 
+def test_late_fastest_awards_a_late_task_only_the_bidders_that_bring_its_finish_forward():
+    """With interference growing steeply (I(n) = 0.8 n^2 WC / 4 here), the 3rd and 4th robots make the group slower:
+    ``late: fastest`` stops at the fastest group; ``late: all`` (the paper) awards every bidder."""
+    class Steep(InterferenceModel):
+        def predict(self, n, d):
+            return 0.2 * n * n * WC if n > 1 else 0.0
+
+    for late, want in [("fastest", [3]), ("all", [2, 3, 4])]:
+        a = agent(1, pos=(1.4, 0.0), strategy="NM_I", late=late)
+        a.model = Steep()                        # (set_model would copy it into a plain model)
+        a.add_tasks([transport(T1, 1.4, 0.0, weight=300.0, deadline=80.0, u_max=50.0)], 0.0)
+        now, rid = elect(a, T1)
+        _bids(a, rid, now + 0.1, [(2, WC, 3.0), (3, WC, 1.0), (4, WC, 5.0)])
+        awards = of(a.on_tick(now + 1.25), DrAward)
+        assert sorted(m.dest for m in awards) == want, late
+
+
 def _leader_with_awards(**options):
     a = agent(1, pos=(1.4, 0.0), strategy="NM_NI", **options)
     a.add_tasks([transport(T1, 1.4, 0.0, weight=30.0, deadline=80.0)], 0.0)

@@ -4,7 +4,9 @@ group and works like the others, runs the task's auctions, keeps its group, hold
 * **Auction for a task** (Alg. 2).  ``DrBidRequest`` to every peer; bids for ``time_auction``; then, from the
   group (the leader, its members, robots awarded and not answered yet), the bidders are added by work capacity
   (highest first, ties: nearer, then lower id) until eq. 8 holds; each gets ``DrAward`` carrying U_j at the
-  predicted finish.  If eq. 8 cannot hold, every bidder is awarded.  ``auction: greedy`` awards every bidder.
+  predicted finish.  If eq. 8 cannot hold, every bidder is awarded (``late: all``, the paper), or (``late:
+  fastest``, ours) only while each one brings the predicted finish forward: with real interference a larger
+  group can be slower, and the paper's rule then piles every free robot onto the first late object.  ``auction: greedy`` awards every bidder.
   A bidder joins when its ``DrRobotAlive`` arrives; the award is resent to the silent ones and dropped after
   ``award_wait`` (a later confirmation is still taken: the award stood); a ``DrRefuse`` drops it at once.
 * **Eq. 8 mid-task** (§5.6): ``(t - t_appeared) + WL(t) / groupCapacity <= DL`` with groupCapacity = the
@@ -189,9 +191,13 @@ class Leader:
         for b in bids:
             if meets and self.o.auction != "greedy":
                 break
+            after, meets_after = self.predict(caps + [b.capacity], now)
+            if (self.o.late == "fastest" and self.o.auction != "greedy" and not meets_after
+                    and after >= finish - 1e-9):
+                break                    # one more robot would not bring the finish forward: interference ate it
             chosen.append(b)
             caps.append(b.capacity)
-            finish, meets = self.predict(caps, now)
+            finish, meets = after, meets_after
         value = self.utility(finish)
         self.host.log.info("task %d round %d.%d: %d bids, awarding %s (predicted fT %.1f s, U %.2f, eq. 8 %s)",
                            self.task, self.me, r.id & 0xFFFF, len(bids), [b.sender for b in chosen], finish, value,

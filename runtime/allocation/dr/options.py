@@ -21,6 +21,8 @@ class DrOptions:
     strategy: Literal["M_I", "NM_I", "M_NI", "NM_NI"] = "NM_I"   # M: monitoring; I: interference model
     utility: Literal["soft", "hard"] = "soft"                    # eq. 10 | Fig. 1a
     online: bool = False                                         # on-line SVR learning (§4.2.2)
+    late: Literal["all", "fastest"] = "all"                      # eq. 8 cannot hold: award every bidder (the
+                                                                 # paper) | only those that bring fT forward
     speed_belief: Optional[float] = field(default=None, metadata=rng(0.001, 10))   # m/s in eq. 5; null: cruise
     load_capacity: float = field(default=2.0, metadata=rng(0.0, 1e6, lo_open=True))   # wu per trip
     load_time: float = field(default=0.12, metadata=rng(0.0, 3600))     # s per wu to load, and again to unload

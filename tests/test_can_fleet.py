@@ -88,11 +88,18 @@ def test_the_stock_can_logger_records_a_running_robot_through_the_hub(tmp_path):
             run.step()
         time.sleep(0.3)
     finally:
-        logger.send_signal(signal.SIGINT)
-        out = logger.communicate(timeout=20)[0].decode()
-        if run is not None:
-            run.close()
-        f.close()
+        try:
+            logger.send_signal(signal.SIGINT)
+            try:
+                out = logger.communicate(timeout=20)[0].decode()
+            except subprocess.TimeoutExpired:          # never leave it (and the shared hub) behind for the next test
+                logger.kill()
+                out = logger.communicate()[0].decode()
+                raise AssertionError(f"can.logger did not stop within 20 s of SIGINT: {out[-300:]}") from None
+        finally:
+            if run is not None:
+                run.close()
+            f.close()
     frames = [(m.arbitration_id, bytes(m.data)) for m in can.LogReader(str(log_path))]
     assert frames, out
     kinds = {}

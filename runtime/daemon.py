@@ -282,6 +282,7 @@ def run(daemon: Daemon, clock: Clock, duration: float | None = None, stats_path:
     def _stop(signum, frame):
         raise _Stop(signal.Signals(signum).name)
 
+    before = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGINT)}
     signal.signal(signal.SIGTERM, _stop)
     signal.signal(signal.SIGINT, _stop)
     t0 = clock.now()
@@ -325,6 +326,8 @@ def run(daemon: Daemon, clock: Clock, duration: float | None = None, stats_path:
             _dump(stats_path, daemon.snapshot())
         daemon.log.info("stopped after %d cycles, %d missed deadlines", daemon.stats.cycles,
                         daemon.stats.missed_deadlines)
+        for s, handler in before.items():      # ignored signals would be inherited by every later child process
+            signal.signal(s, handler)
     return code
 
 

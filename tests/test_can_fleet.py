@@ -69,13 +69,21 @@ def test_can_2_reaches_its_formation_with_daemon_processes(tmp_path):
 
 # ----------------------------------------------------------------------------- python -m can.logger
 @pytest.mark.slow
+def _default_sigint():
+    """In the logger's process: SIGINT at its default, whatever this process left it at (an ignored signal is
+    inherited, and Python keeps it ignored), so the logger's Ctrl-C stop works as in a terminal."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 def test_the_stock_can_logger_records_a_running_robot_through_the_hub(tmp_path):
     f = launcher.build(shipped_fleet(tmp_path, "can_2.yaml"), tmp_path / "run")
     hub = f.robots[1].base_dev.hub
     log_path = tmp_path / "can1.log"
     logger = subprocess.Popen([sys.executable, "-m", "can.logger", "-i", "socketcand", "-c", "can1",
                                "--bus-kwargs", f"host={hub.host}", f"port={hub.port}", "-f", str(log_path)],
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env={**os.environ})
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env={**os.environ},
+                              preexec_fn=_default_sigint)
     run = None
     try:
         deadline = time.monotonic() + 30

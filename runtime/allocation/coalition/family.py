@@ -22,11 +22,10 @@ be told from a genuine one without signing, the fleet's default.  See docs/coali
 """
 from __future__ import annotations
 
-from collections import deque
 from pathlib import Path
 from typing import Sequence
 
-from runtime.allocation.agent import FAILED, AgentContext, Method, TaskEvent
+from runtime.allocation.agent import FAILED, AgentContext, Method, TaskEvent, route
 from runtime.allocation.coalition.auctioneer import Auctioneer
 from runtime.allocation.coalition.member import Member
 from runtime.allocation.coalition.options import CoalitionOptions
@@ -161,14 +160,7 @@ class CoalitionAgent:
 
     def _route(self, msgs: list, now: float) -> list:
         """The messages for the wire; those for this robot are handled here (broadcasts both)."""
-        wire, todo = [], deque(msgs)
-        while todo:
-            msg = todo.popleft()
-            if msg.dest != self.robot_id:
-                wire.append(msg)
-            if msg.dest in (self.robot_id, BROADCAST):
-                todo.extend(self._dispatch(msg, now))
-        return wire
+        return route(msgs, self.robot_id, lambda m: self._dispatch(m, now))
 
 
 def _make(ctx: AgentContext) -> CoalitionAgent:

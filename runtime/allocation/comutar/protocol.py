@@ -27,13 +27,13 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections import Counter, deque
+from collections import Counter
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-from runtime.allocation.agent import AgentContext, Method, TaskEvent
+from runtime.allocation.agent import AgentContext, Method, TaskEvent, route
 from runtime.allocation.comutar import actions as A
 from runtime.allocation.comutar import cspace as C
 from runtime.allocation.comutar.auctioneer import Auctioneer
@@ -382,14 +382,7 @@ class ComutarAgent:
 
     def _route(self, msgs: list, now: float) -> list:
         """The messages for the wire; those for this robot are handled here (broadcasts both)."""
-        wire, todo = [], deque(msgs)
-        while todo:
-            msg = todo.popleft()
-            if msg.dest != self.robot_id:
-                wire.append(msg)
-            if msg.dest in (self.robot_id, BROADCAST):
-                todo.extend(self._dispatch(msg, now))
-        return wire
+        return route(msgs, self.robot_id, lambda m: self._dispatch(m, now))
 
 
 def make_agent(ctx: AgentContext, sensors: Sequence[str] | None = None) -> ComutarAgent:

@@ -86,11 +86,12 @@ class Daemon:
         self.estimator = TravelEstimator(self.planner, Profile(speed=c.cruise_speed, radius=radius), self.pose)
         self.method = registry.method(cfg.allocation.method)
         self.agent = self.method.make(AgentContext(self.id, tuple(p.id for p in cfg.comms.peers), self.estimator,
-                                                   cfg.allocation))
+                                                   cfg.allocation, cfg.base))
         self.node = FleetNode(self.id, self.agent, armed=cfg.robot.armed, peers=[p.id for p in cfg.comms.peers])
         self.executive = Executive(ExecContext(self.planner, Tunables(c.cruise_speed, c.lookahead, c.max_turn_rate,
                                                                       c.goal_tolerance), self.log, radius,
-                                               seed=self.id))
+                                               seed=self.id, agent=self.agent))
+        self._sense_agent = getattr(self.agent, "sense", None)    # agents that read the robot's pose and sensors
         self.ground = GroundServices(self)
         self.period = 1.0 / c.rate
         self._last_step: float | None = None
@@ -192,6 +193,11 @@ class Daemon:
         return out
 
     def _allocate(self, now: float) -> None:
+        if self._sense_agent is not None:
+            from runtime.allocation.comutar.protocol import echo_discs
+            pose = self.pose()
+            ranges = getattr(self.base.sensors, "ranges", ())
+            self._sense_agent(pose, echo_discs(pose, ranges), now)      # the driver leaves out no-echo readings
         self._send(self._comms(now), now)
 
     def _send(self, out: list, now: float) -> None:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import logging
 import os
 import signal
 import subprocess
@@ -227,6 +228,8 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
     out = Fleet(fleet, world_cfg, robots, world, run_dir, manifest_path, key=key,
                 fresh_key=key_path if fresh_key else None)
     out.scenario = scenarios.module(fleet.scenario.type).Scenario(fleet, world_cfg)
+    if hasattr(out.scenario, "build"):
+        out.scenario.build(world)                 # the scenario's own bodies (unmapped obstacles)
     write_manifest(out, speedup if speedup is not None else fleet.speedup, seed, key_path)
     return out
 
@@ -453,7 +456,7 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
     for stale in f.run_dir.glob("clock*"):
         stale.unlink()
     for r in f.robots.values():
-        cmd = [sys.executable, "-m", "runtime.cli", "daemon", str(r.config_path),
+        cmd = [sys.executable, "-m", "runtime.cli", *_verbosity(), "daemon", str(r.config_path),
                "--speedup", repr(speedup), "--clock-file", str(clock_file),
                "--stats", str(f.run_dir / f"robot_{r.id}.stats.json")]
         with open(f.run_dir / f"robot_{r.id}.log", "w") as log_fh:
@@ -537,6 +540,12 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
         res["idle_cpu_share"] = {rid: (_cpu_seconds(f.robots[rid].proc.pid) - c0) / wall
                                  for rid, c0 in idle_from[1].items()}
     return res
+
+
+def _verbosity() -> list[str]:
+    """The daemons log as much as the launcher does (``mrta -v sitl run``: INFO in every robot's log)."""
+    level = logging.getLogger().getEffectiveLevel()
+    return ["-vv"] if level <= logging.DEBUG else ["-v"] if level <= logging.INFO else []
 
 
 def _kill_process(f: Fleet, rid: int) -> None:

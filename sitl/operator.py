@@ -12,6 +12,7 @@ stale or their process dies).  Scenarios judge the run through :class:`RunView`.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 from runtime.comms.gcs import GroundStation
@@ -36,7 +37,11 @@ class Operator:
         self.gcs = GroundStation(robots=self.addresses, signing_key=signing_key)
         self.handovers = scenario.handovers()
         self.log = get_logger("sitl.operator")
-        self.trace = RunTrace(world=fleet.world_cfg, title=f"{fleet.fleet.source}")
+        world = fleet.world_cfg
+        unmapped = tuple(getattr(scenario, "unmapped", ()))      # the scenario's own obstacles, drawn with the map's
+        if unmapped:
+            world = dataclasses.replace(world, obstacles=tuple(world.obstacles) + unmapped)
+        self.trace = RunTrace(world=world, title=f"{fleet.fleet.source}")
         for rid, r in fleet.robots.items():
             self.trace.robots[rid] = RobotTrack(rid, base=r.base_type, radius=r.radius)
         self.dead: set[int] = set()

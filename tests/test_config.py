@@ -141,7 +141,7 @@ def test_random_config_data_never_crashes(data):
 
 
 @pytest.mark.parametrize("data, key, allowed", [
-    ({"allocation": {"method": "greedy"}}, "allocation.method", "bs|rtma|auction|coalition|dr"),
+    ({"allocation": {"method": "greedy"}}, "allocation.method", "bs|rtma|auction|coalition|dr|comutar"),
     ({"base": {"type": "roomba"}}, "base.type", "|".join(BASES)),
 ])
 def test_a_wrong_union_tag_names_the_allowed_values(tmp_path, data, key, allowed):

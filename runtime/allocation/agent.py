@@ -42,6 +42,7 @@ class AgentContext:
     peers: tuple[int, ...]             # configured peers (robot ids), not this robot
     estimator: Estimator
     options: Any                       # the method's options dataclass (the config's allocation section)
+    base: Any = None                   # the robot config's base section (what the robot is and senses), if known
 
 
 class Agent(Protocol):

@@ -14,6 +14,7 @@ METHODS: dict[str, str] = {
     "auction": "runtime.allocation.formation.family:AUCTION",    # epsilon-scaling auction (optimal)
     "coalition": "runtime.allocation.coalition.family:COALITION",  # paper 001 simultaneous coalition auction
     "dr": "runtime.allocation.dr.family:DR",                     # paper 000 Double Round auction
+    "comutar": "runtime.allocation.comutar.protocol:COMUTAR",    # paper 003 CoMutaR (several tasks per robot)
 }
 DEFAULT = "auction"
 

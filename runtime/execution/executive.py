@@ -11,6 +11,8 @@ import math
 import random
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from runtime.control.arbiter import Arbiter, ArcSet, AvoidObstacles, Stop
 from runtime.control.pure_pursuit import PurePursuit
 from runtime.execution import executor_class
@@ -33,6 +35,7 @@ class ExecContext:
     log: object
     radius: float                     # m, the base's footprint (obstacle avoidance)
     seed: int = 0                     # the robot's own random choices (escape turns): its id on a robot
+    agent: object = None              # the allocation agent, for executors that read it (CoMutaR's)
 
     @property
     def goal_tolerance(self) -> float:
@@ -61,6 +64,7 @@ class Executive:
     escapes: int = 0                  # stalls escaped by backing up
     make_way: bool = False            # idle, move off when something comes this close (the daemon: when armed)
     made_way: int = 0                 # cycles spent making way
+    cspace: object = None             # CoMutaR's c-space behaviour, once an executor has constraints
 
     def __post_init__(self) -> None:
         self.avoid = AvoidObstacles(radius=self.ctx.radius)
@@ -78,19 +82,28 @@ class Executive:
         lead = self._lead()
         follows = [b for e in self.executors.values() for b in e.behaviours]
         stop = [Stop(lead.follow)] if lead is not None else []
+        cspace = [e for e in self.executors.values() if hasattr(e, "constraints")]
+        if cspace:
+            if self.cspace is None:
+                from runtime.execution.cspace_vote import CspaceVote
+                self.cspace = CspaceVote(cspace[0].window, self.ctx.log)
+            follows.append(self.cspace)
         if self.arbiter is None:
             self.arbiter = Arbiter(self._arcs(), follows + [self.avoid] + stop)
         else:
             self.arbiter.behaviours = follows + [self.avoid] + stop
 
     def _lead(self):
-        return next(iter(self.executors.values()), None)
+        """The executor whose path follower leads (the first that has one), or None."""
+        return next((e for e in self.executors.values() if hasattr(e, "follow")), None)
 
     def tune(self, **changes) -> None:
         """Apply changed tunables now: running executors' followers and the arbiter's arcs too."""
         for k, v in changes.items():
             setattr(self.ctx.tunables, k, v)
         for e in self.executors.values():
+            if not hasattr(e, "follow"):
+                continue
             p = e.follow.follower
             t = self.ctx.tunables
             p.lookahead, p.cruise_speed, p.max_turn_rate, p.goal_tolerance = (t.lookahead, t.cruise_speed,
@@ -134,9 +147,11 @@ class Executive:
         ranges = getattr(sensors, "ranges", None)
         if ranges:
             self.avoid.on_ranges(ranges, now)
-        path = self._lead().follow.path
+        lead = self._lead()
+        path = lead.follow.path if lead is not None else None
         self.avoid.goal_distance = math.hypot(path[-1][0] - pose[0], path[-1][1] - pose[1]) if path else math.inf
-        self._check_stall(pose, now)
+        if lead is not None:
+            self._check_stall(pose, now)
         backing = self.avoid.backing_up(now)
         if self._backing and not backing:
             for e in self.executors.values():
@@ -145,8 +160,14 @@ class Executive:
         progress = []
         for e in self.executors.values():
             progress += e.update(pose, now)
+        if self.cspace is not None:
+            self.cspace.set([c for e in self.executors.values() if hasattr(e, "constraints") for c in e.constraints()])
         d = self.arbiter.decide(now)
-        lead = self._lead()
+        if lead is None:
+            c = self.cspace.choice if self.cspace is not None else None
+            if c is not None and not backing and np.isfinite(d.scores[self.arbiter.arcs.nearest(c.v[0], c.w[0])]):
+                return (float(c.v[0]), float(c.w[0])), progress   # the c-space's choice, where nothing else vetoes it
+            return (d.v, d.w), progress
         cmd = lead.follow.command
         if cmd is not None and not backing and d.arc == self.arbiter.arcs.nearest(*cmd):
             return cmd, progress          # the path follower won: pass its exact command, not the arc's grid value

@@ -408,7 +408,8 @@ def to_arc_ballot(win: Window, choice: Choice, arcs, robot: int = 0, reach: floa
     """One robot's choice as the DAMN arbiter's votes and vetoes over ``arcs`` (an ``ArcSet``: ``.v``, ``.w``):
     each arc takes the score of the nearest candidate in (v / v_max, w / w_max); votes 2 score - 1 in [-1, 1];
     an arc is vetoed when that candidate is not allowed, or when no candidate lies within ``reach`` candidate
-    spacings of it (it leaves the window).  A conflict (nothing allowed) vetoes every arc but stop."""
+    spacings of it (it leaves the window).  A conflict (nothing allowed), or nothing allowed but standing
+    still, vetoes every arc but stop (turning on the spot included)."""
     av, aw = np.asarray(arcs.v, float), np.asarray(arcs.w, float)
     cv, cw = win.v / win.v_max, win.w / win.w_max
     d = np.hypot(av[:, None] / win.v_max - cv[None, :], aw[:, None] / win.w_max - cw[None, :])
@@ -417,8 +418,10 @@ def to_arc_ballot(win: Window, choice: Choice, arcs, robot: int = 0, reach: floa
     allowed = choice.allowed[robot]
     score = choice.score[robot]
     veto = ~allowed[near] | (d[np.arange(len(av)), near] > reach * spacing)
-    votes = np.where(veto, -1.0, 2.0 * np.where(np.isfinite(score[near]), score[near], 0.0) - 1.0)
-    if choice.conflict[robot]:
+    # an arc between candidates keeps its nearest candidate's vote (vetoed all the same): the arbiter smooths votes
+    # over neighbouring arcs, and -1 on every arc between the sparse candidates would drown the best of them
+    votes = np.where(~allowed[near], -1.0, 2.0 * np.where(np.isfinite(score[near]), score[near], 0.0) - 1.0)
+    if choice.conflict[robot] or not allowed[np.arange(len(allowed)) != win.stop].any():
         stop = (av == 0) & (aw == 0)
         veto = ~stop
         votes = np.where(stop, 1.0, -1.0)

@@ -18,8 +18,9 @@ requester: a sub-coalition and its cost) -> ``CmBid`` (to the auctioneer) -> ``C
 named allocates, every other slot of the auction is released) -> ``CmAck`` (each robot named), re-sent
 until acknowledged; ``CmResign`` (a holder gives the task up), ``CmCancel`` (the auctioneer takes it back),
 ``CmHold`` (a holder's periodic report, so lost cancels and a new auctioneer are caught up), ``CmDone``.
-Execution: ``CmSurvey`` (visits and the claimed waypoint, broadcast) and ``CmRegion`` (a consumer
-tells its providers the region to keep in view).
+Execution: ``CmSurvey`` (visits and the claimed waypoint, broadcast), ``CmRegion`` (a consumer
+tells its providers the region to keep in view) and ``CmStream`` (a provider's range data or obstacle list for
+its consumer).
 """
 from __future__ import annotations
 
@@ -276,8 +277,62 @@ class CmRegion:
         return None
 
 
+MAX_DISCS = 32             # discs one CmStream carries (uint32[32])
+DISC_XY = 0.02             # m per unit of a packed disc's x and y (12 bits, signed: +-40.96 m from the origin)
+DISC_R = 0.01              # m per unit of its radius (8 bits: 0.01 .. 2.55 m)
+
+
+def pack_disc(x: float, y: float, r: float, ox: float, oy: float) -> int | None:
+    """One disc (fleet frame, m) as a uint32 relative to the origin (ox, oy); None when it is too far from it."""
+    ix, iy = round((x - ox) / DISC_XY), round((y - oy) / DISC_XY)
+    if not (-2048 <= ix < 2048 and -2048 <= iy < 2048):
+        return None
+    ir = min(255, max(1, round(r / DISC_R)))
+    return ((ix & 0xFFF) << 20) | ((iy & 0xFFF) << 8) | ir
+
+
+def unpack_disc(v: int, ox: float, oy: float) -> tuple[float, float, float]:
+    ix, iy, ir = (v >> 20) & 0xFFF, (v >> 8) & 0xFFF, v & 0xFF
+    ix, iy = ix - 4096 if ix >= 2048 else ix, iy - 4096 if iy >= 2048 else iy
+    return ox + ix * DISC_XY, oy + iy * DISC_XY, ir * DISC_R
+
+
+@dataclass(frozen=True)
+class CmStream:
+    """A provider's output for ``task``'s consumer: ``info`` 1 (range data: one disc per echo) or 2 (an
+    obstacle list), sensed at ``stamp`` (the provider's clock), as discs packed relative to (``ox``, ``oy``)
+    (:func:`pack_disc`; an empty list is news too: nothing seen)."""
+    sender: int
+    dest: int
+    task: int
+    info: int
+    stamp: float
+    ox: float
+    oy: float
+    discs: tuple[int, ...] = ()
+
+    def invalid(self) -> str | None:
+        why = _ids(self)
+        if why:
+            return why
+        if not (_int(self.task) and 1 <= self.task >> 16 <= 250 and self.task <= 0xFFFFFFFF):
+            return f"task {self.task}: expected a fleet task id"
+        if self.info not in (1, 2):
+            return f"info {self.info}: expected 1 (range data) or 2 (obstacle list)"
+        if not (_finite(self.stamp) and _finite(self.ox) and _finite(self.oy)):
+            return "stamp/origin: expected finite numbers"
+        d = self.discs
+        if not isinstance(d, tuple) or len(d) > MAX_DISCS or not all(_int(v) and 0 < v <= 0xFFFFFFFF and v & 0xFF
+                                                                      for v in d):
+            return f"discs: expected at most {MAX_DISCS} packed discs with a radius"
+        return None
+
+    def unpacked(self) -> list[tuple[float, float, float]]:
+        return [unpack_disc(v, self.ox, self.oy) for v in self.discs]
+
+
 WIRE_MESSAGES = (CmAnnounce, CmQuery, CmCost, CmBid, CmAward, CmAck, CmResign, CmCancel, CmHold, CmDone, CmSurvey,
-                 CmRegion)
+                 CmRegion, CmStream)
 
 
 def why_invalid(msg) -> str | None:

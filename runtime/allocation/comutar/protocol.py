@@ -39,7 +39,8 @@ from runtime.allocation.comutar import cspace as C
 from runtime.allocation.comutar.auctioneer import Auctioneer
 from runtime.allocation.comutar.bidder import Bidder, Slot
 from runtime.allocation.comutar.messages import (WIRE_MESSAGES, CmAck, CmAnnounce, CmAward, CmBid, CmCancel, CmCost,
-                                                 CmDone, CmHold, CmQuery, CmRegion, CmResign, CmSurvey, why_invalid)
+                                                 CmDone, CmHold, CmQuery, CmRegion, CmResign, CmStream, CmSurvey,
+                                                 MAX_DISCS, pack_disc, why_invalid)
 from runtime.allocation.comutar.options import ComutarOptions
 from runtime.allocation.comutar.resources import CSPACE, Ledger, Resource
 from runtime.allocation.comutar.surveillance import Board
@@ -50,6 +51,8 @@ BROADCAST = 0
 KINDS = ("surveillance", "avoid_obstacles")
 VISITED = "visited"                       # Progress event of a surveillance executor: data["waypoint"]
 CHOOSE_PERIOD = 0.25                      # s between re-evaluations of the nearest waypoint (at once on news)
+STREAM_PERIOD = {A.RANGE_DATA: 0.1, A.OBSTACLE_LIST: 0.2}   # s: the 10 Hz and 5 Hz of ActionSpec.rates
+SELF_ECHO = 0.12                          # m past a consumer's body: a streamed disc this close is the consumer itself
 
 
 class ComutarAgent:
@@ -73,6 +76,9 @@ class ComutarAgent:
         self.fleet_version = 0               # bumped when the tasks or the live robots change
         self.pose: tuple[float, float, float] | None = None
         self.obstacles = np.zeros((0, 3))
+        self.sensed_at = -math.inf
+        self.feeds: dict[tuple[int, str], tuple[float, int, np.ndarray]] = {}   # (task, info) -> (heard, from, discs)
+        self._stream_at: dict[tuple[int, str, int], float] = {}
         self.boards: dict[int, Board] = {}
         self.regions: dict[int, tuple[float, float, float]] = {}
         self.available = True
@@ -120,12 +126,62 @@ class ComutarAgent:
         return out
 
     # ------------------------------------------------------------------ the robot's situation
-    def sense(self, pose, obstacles=None) -> None:
-        """This cycle's pose (x, y, heading; None: not localized) and the obstacles it knows ((M, 3) discs: x,
-        y, radius, fleet frame), which the obstacle avoider's constraint function reads at bid time."""
+    def sense(self, pose, obstacles=None, now: float | None = None) -> None:
+        """This cycle's pose (x, y, heading; None: not localized) and what its own range sensor sees ((M, 3)
+        discs: x, y, radius, fleet frame; one per echo on a robot, see :func:`echo_discs`).  The obstacle
+        detector's output is these discs; the obstacle avoider's constraint function reads them at bid time, and
+        they are what this robot streams to the consumers of its readers and detectors."""
         self.pose = None if pose is None else (float(pose[0]), float(pose[1]), float(pose[2]) if len(pose) > 2 else 0.0)
         if obstacles is not None:
             self.obstacles = np.asarray(obstacles, dtype=float).reshape(-1, 3)
+            if now is not None:
+                self.sensed_at = float(now)
+
+    # ------------------------------------------------------------------ what execution reads
+    def obstacle_input(self, task_id: int, now: float) -> np.ndarray | None:
+        """The obstacle list this robot's avoider in ``task_id`` works from now ((M, 3) discs, fleet frame), or
+        None when it has none fresh: its provider's stream (obstacle list, or range data its own detector turns
+        into one) is older than ``options.feed_timeout``, or this robot does not hold the task.  A robot's own
+        sensor counts as fresh.  Streamed discs on the robot's own body are dropped; the robots this one serves
+        (regions it keeps in view) are added."""
+        if task_id not in self.bidder.holdings:
+            return None
+        ins, _ = self.bidder.links(task_id)
+        src = ins.get(A.OBSTACLE_LIST)
+        info = A.OBSTACLE_LIST
+        if src == self.robot_id:
+            src, info = ins.get(A.RANGE_DATA, self.robot_id), A.RANGE_DATA
+        if src is None or src == self.robot_id:
+            return self._with_consumers(self.obstacles)
+        feed = self.feeds.get((task_id, info))
+        if feed is None or feed[1] != src or now - feed[0] > self.options.feed_timeout:
+            return None
+        discs = feed[2]
+        if len(discs) and self.pose is not None:
+            gap = np.hypot(discs[:, 0] - self.pose[0], discs[:, 1] - self.pose[1])
+            discs = discs[gap > self.estimator.profile.radius + SELF_ECHO]
+        return self._with_consumers(discs)
+
+    def obstacle_input_any(self, now: float) -> np.ndarray:
+        """Every obstacle this robot knows now: its avoiders' inputs (empty when none is fresh)."""
+        lists = [d for tid in self.bidder.holdings for d in [self.obstacle_input(tid, now)] if d is not None]
+        return np.vstack(lists) if lists else np.zeros((0, 3))
+
+    def _with_consumers(self, discs: np.ndarray) -> np.ndarray:
+        """``discs`` and the robots I keep in view for others (a low robot may pass under my sonar)."""
+        mine = [(x, y, self.estimator.profile.radius) for tid in self.bidder.holdings
+                for r in [self.region(tid)] if r is not None for x, y in [r[1:3]]]
+        return np.vstack([discs.reshape(-1, 3), np.asarray(mine, float)]) if mine else discs.reshape(-1, 3)
+
+    def protected(self, now: float) -> bool:
+        """False while an ``avoid_obstacles`` task for this robot exists and its avoider is not running on fresh
+        data (not allocated yet, its provider lost or silent): a robot that must avoid obstacles and cannot does
+        not move (the surveillance executor stops)."""
+        for tid, t in self.tasks.items():
+            if t.kind == "avoid_obstacles" and getattr(t.spec, "robot", None) == self.robot_id:
+                if self.obstacle_input(tid, now) is None:
+                    return False
+        return True
 
     @property
     def position(self) -> tuple[float, float]:
@@ -192,8 +248,21 @@ class ComutarAgent:
         return 0.0 if robot == self.robot_id else rate / max(self.options.link_capacity, 1e-9)
 
     def in_range(self, spec: A.ActionSpec, x: float, y: float) -> bool:
-        """Is (x, y) within the range of ``spec``'s sensor from here?"""
-        return self.pose is not None and math.dist(self.position, (x, y)) <= A.SENSORS[spec.sensor].range
+        """Is (x, y) within the range of ``spec``'s sensor from here, or within ``options.reader_reach`` m more
+        (the robot drives over: its reader's cost counts the way; it streams once the region is in view)?"""
+        return self.pose is not None and \
+            math.dist(self.position, (x, y)) <= A.SENSORS[spec.sensor].range + self.options.reader_reach
+
+    def _sees(self, task_id: int) -> bool:
+        """Is the consumer of ``task_id`` (the centre of the region this robot keeps in view for it) within its
+        sensor's range?  A reader still on its way does not stream: its consumer would take the silence of an
+        unwatched region for a clear one.  (Alg. 3 keeps the whole region within ``far`` of the range: this
+        looser test keeps a stream from flickering at that margin.)"""
+        region = self.region(task_id)
+        if region is None or self.pose is None:
+            return region is None
+        reach = max((A.SENSORS[s].range for s in self.catalogue.sensors), default=0.0)
+        return math.dist(self.position, region[1:3]) <= reach
 
     def serves(self, spec: A.ActionSpec, task: Task) -> bool:
         """Can ``spec`` accomplish ``task`` on this robot (an avoider protects only its own robot)."""
@@ -232,6 +301,7 @@ class ComutarAgent:
             self.tasks.pop(t, None)
             self.boards.pop(t, None)
             self.regions.pop(t, None)
+            self.feeds = {k: v for k, v in self.feeds.items() if k[0] != t}
             self.bidder.drop(t)
         self.auction.withdraw(task_ids)
         return []
@@ -304,7 +374,33 @@ class ComutarAgent:
         out += self.auction.tick(now)
         out += self._surveys(now)
         out += self._region_updates(now)
+        out += self._streams(now)
         return self._route(out, now)
+
+    def _streams(self, now: float) -> list:
+        """What my readers and detectors serving other robots send them: my sensor's discs (range data: one per
+        echo; the obstacle list: the same discs, and my own body), at 10 Hz and 5 Hz, from a fresh reading."""
+        if self.pose is None or now - self.sensed_at > self.options.feed_timeout:
+            return []
+        out = []
+        for tid in self.bidder.holdings:
+            _, outs = self.bidder.links(tid)
+            if not self._sees(tid):
+                continue
+            for info, consumer in outs.items():
+                if consumer == self.robot_id or now - self._stream_at.get((tid, info, consumer), -math.inf) \
+                        < STREAM_PERIOD.get(info, 0.2) - 1e-9:
+                    continue
+                self._stream_at[(tid, info, consumer)] = now
+                discs = self.obstacles
+                if info == A.OBSTACLE_LIST:
+                    discs = np.vstack([discs, [[self.pose[0], self.pose[1], self.estimator.profile.radius]]])
+                ox, oy = self.position
+                order = np.argsort(np.hypot(discs[:, 0] - ox, discs[:, 1] - oy))
+                packed = [v for v in (pack_disc(*discs[i], ox, oy) for i in order) if v is not None]
+                out.append(CmStream(self.robot_id, consumer, tid, A.INFO[info], float(now), ox, oy,
+                                    tuple(packed[:MAX_DISCS])))
+        return out
 
     # ------------------------------------------------------------------ surveillance and regions
     def _surveys(self, now: float) -> list:
@@ -378,6 +474,13 @@ class ComutarAgent:
             if msg.task in self.bidder.holdings:
                 self.regions[msg.task] = (msg.x, msg.y, msg.radius)
             return []
+        if isinstance(msg, CmStream):
+            info = A.INFO_NAMES[msg.info]
+            if msg.task in self.bidder.holdings and self.bidder.links(msg.task)[0].get(info) == msg.sender:
+                self.feeds[(msg.task, info)] = (now, msg.sender, np.asarray(msg.unpacked(), float).reshape(-1, 3))
+            else:
+                self.dropped["stream for a chain I do not hold"] += 1
+            return []
         return []
 
     def _route(self, msgs: list, now: float) -> list:
@@ -386,12 +489,27 @@ class ComutarAgent:
 
 
 def make_agent(ctx: AgentContext, sensors: Sequence[str] | None = None) -> ComutarAgent:
-    """The agent for a robot; ``sensors`` default to ``ctx.options.sensors`` (phase 2: pass
-    :func:`~runtime.allocation.comutar.actions.sensors_of` (config.base, config.allocation))."""
+    """The agent for a robot; ``sensors`` default to what its base has (``ctx.base``: a Pioneer's sonar ring)
+    plus ``ctx.options.sensors`` (:func:`~runtime.allocation.comutar.actions.sensors_of`)."""
+    if sensors is None and ctx.base is not None:
+        sensors = A.sensors_of(ctx.base, ctx.options)
     return ComutarAgent(ctx, sensors)
 
 
-# Not in runtime/allocation/registry.py yet (phase 2 adds the line, and the task kinds to runtime.tasks.KINDS).
+def echo_discs(pose, ranges, max_range: float = math.inf) -> np.ndarray:
+    """A robot's range readings ((bearing rad, robot frame; distance m) pairs) as discs in the fleet frame, one
+    per echo: centred where it was heard, as wide as a sonar's 25 degree beam is there (at least 5 cm, at most
+    30 cm).  Readings at or beyond ``max_range`` (no echo) and non-finite ones are left out."""
+    if pose is None or not ranges:
+        return np.zeros((0, 3))
+    r = np.asarray([(b, d) for b, d in ranges if math.isfinite(b) and math.isfinite(d) and 0 < d < max_range - 1e-6],
+                   float).reshape(-1, 2)
+    x, y, th = pose
+    a = th + r[:, 0]
+    rad = np.clip(r[:, 1] * math.tan(math.radians(12.5)), 0.05, 0.3)
+    return np.column_stack([x + r[:, 1] * np.cos(a), y + r[:, 1] * np.sin(a), rad])
+
+
 COMUTAR = Method("comutar", "paper 003 CoMutaR: Contract Net over actions with constraint functions (several tasks "
                  "per robot)", ComutarOptions, make_agent, KINDS, WIRE_MESSAGES,
                  str(Path(__file__).with_name("comutar.xml")))

@@ -1,0 +1,61 @@
+"""Carry out an ``avoid_obstacles`` commitment (paper 003, Figs. 6-7): whichever actions of its coalition this
+robot runs, as constraint functions over the next-frame window.
+
+* ``obstacle_avoider`` (Alg. 4, on the robot kept clear): the obstacle list it works from is the agent's
+  :meth:`~runtime.allocation.comutar.protocol.ComutarAgent.obstacle_input` (this robot's own sensor, or the
+  stream of the robot whose sensor it borrows).  When that is stale or missing the constraint allows only
+  standing still: the robot stops at the next control cycle and stays stopped until the task has a provider
+  again (the agent resigns the task when the provider is lost, and it is auctioned again).
+* a ``*_reader`` keeping another robot's region in view (Alg. 3): the agent's :meth:`region`.
+* ``obstacle_detector`` alone: no motion constraint (the agent streams its output).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from runtime.allocation.comutar import actions as A
+from runtime.allocation.comutar import cspace as C
+from runtime.execution.cspace_vote import CspaceExecutor, stop_only
+from runtime.tasks import Commitment, Progress
+
+MARGIN = 0.15        # m kept between the robot's body and an obstacle disc (pose errors between two robots' frames)
+NEAR = 0.3           # m of clearance under which the avoider's heights fall (Alg. 4's dist_max)
+LOOKAHEAD = 0.4      # m ahead of a candidate where its clearance is also judged (turning away counts)
+
+
+class AvoidanceExecutor(CspaceExecutor):
+    def __init__(self, commitment: Commitment, ctx):
+        super().__init__(commitment, ctx)
+        self.blind = False
+        self.recommit(commitment, 0.0)
+
+    def recommit(self, commitment: Commitment, now: float) -> None:
+        self.commitment = commitment
+        self.actions = tuple(commitment.param("actions", ()))
+        reader = next((a for a in self.actions if a.endswith("_reader")), None)
+        self.reader = A.catalogue(tuple(A.SENSORS)).by_name(reader) if reader else None
+
+    def update(self, pose, now: float) -> list[Progress]:
+        agent = self.agent
+        p = np.asarray([pose], float)
+        cons = []
+        if A.AVOIDER.name in self.actions:
+            obstacles = agent.obstacle_input(self.task.id, now)
+            blind = obstacles is None
+            if blind != self.blind:
+                self.blind = blind
+                self.ctx.log.warning("avoid_obstacles %d: %s", self.task.id,
+                                     "no fresh obstacle data: stopping" if blind else "obstacle data again")
+            if blind:
+                cons.append(stop_only(self.window, "avoider without obstacle data"))
+            else:
+                c = C.avoid(self.window, p, obstacles, self.ctx.radius + MARGIN, near=NEAR, lookahead=LOOKAHEAD)
+                c.weight = A.AVOIDER.weight
+                cons.append(c)
+        region = agent.region(self.task.id)
+        if region is not None and self.reader is not None:
+            c = C.sensor_view(self.window, p, [region[1:3]], region[3], A.SENSORS[self.reader.sensor])
+            c.weight = self.reader.weight
+            cons.append(c)
+        self._cons = cons
+        return []

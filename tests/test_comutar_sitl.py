@@ -1,0 +1,73 @@
+"""Paper 003 in SITL (issue 17's acceptance): a Create 2 with no range sensor surveys a region among unmapped
+pillars while avoiding them with a Pioneer's sonar, both tasks at once; the Pioneer's daemon is killed; the
+Create stands still, and its avoidance goes to the third robot."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from runtime import config as C
+from runtime.config.build import ConfigError
+
+ROOT = Path(__file__).resolve().parents[1]
+FLEET = ROOT / "configs" / "fleets" / "comutar_3.yaml"
+
+
+def _load(tmp_path, **changes):
+    data = yaml.safe_load(FLEET.read_text())
+    for key in ("world", "robot"):
+        data[key] = str((FLEET.parent / data[key]).resolve())
+    for r in data["robots"]:
+        if r.get("robot"):
+            r["robot"] = str((FLEET.parent / r["robot"]).resolve())
+    data["scenario"].update(changes)
+    path = tmp_path / "fleet.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return C.load_fleet(path)
+
+
+@pytest.mark.parametrize("changes, key", [({"borrower": 9}, "scenario.borrower"), ({"avoid": [1, 7]}, "scenario.avoid[1]"),
+                                          ({"region": [0, 0, 40, 4]}, "scenario.region"),
+                                          ({"region": [0, 0, 4, 4], "spacing": 0.1}, "scenario.region"),
+                                          ({"pillars": [{"center": [9, 9]}]}, "scenario.pillars[0]")])
+def test_bad_scenarios_are_refused_naming_the_key(tmp_path, changes, key):
+    with pytest.raises(ConfigError) as e:
+        _load(tmp_path, **changes)
+    assert key in str(e.value)
+
+
+def test_the_shipped_robot_configs_build_comutar_agents_with_the_bases_sensors():
+    from runtime.allocation import registry
+    from runtime.allocation.agent import AgentContext
+    from runtime.allocation.comutar.actions import sensors_of
+
+    for name, sensors in (("create2_comutar.yaml", ()), ("pioneer3dx_comutar.yaml", ("sonar",))):
+        cfg = C.load_robot(ROOT / "configs" / "robots" / name)
+        assert cfg.allocation.method == "comutar"
+        assert sensors_of(cfg.base, cfg.allocation) == sensors
+        agent = registry.method("comutar").make(AgentContext(1, (2,), None, cfg.allocation, cfg.base))
+        assert agent.catalogue.sensors == sensors
+
+
+@pytest.mark.slow
+def test_the_borrower_surveys_without_touching_stops_when_its_sensor_dies_and_gets_another(tmp_path):
+    """Daemons as processes at 2x real time (about 100 s of wall time)."""
+    from sitl import launcher
+    from tests.sitl_util import shipped_fleet
+
+    f = launcher.build(shipped_fleet(tmp_path, FLEET.name), tmp_path / "run")
+    try:
+        res = launcher.run_processes(f, 2.0, timeout=400)
+    finally:
+        f.close()
+    print({k: res[k] for k in ("verdict", "least_clearance", "kill", "sim_time")})
+    assert res["goal_met"], res["verdict"]
+    assert res["least_clearance"] > 0.0
+    k = res["kill"]
+    assert k["robot"] == 2 and k["new_provider"] == 3, k
+    assert k["stood_still_after"] <= 1.0 and k["after"] <= 15.0, k
+    survey = res["tasks"][-1]
+    assert survey["label"] == "survey" and survey["state"] == "done"
+    assert [who for _, who in res["tasks"][0]["awards"]][:2] == ["R1+R2", "R1+R3"]

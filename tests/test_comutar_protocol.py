@@ -231,11 +231,10 @@ def test_under_loss_every_task_ends_served_or_unservable_and_resources_stay_with
 SETTLING = (M.CmAward, M.CmAck, M.CmCancel, M.CmDone, M.CmResign)
 
 
-@settings(max_examples=10, deadline=None)
-@given(seed=st.integers(0, 10_000), lose=st.sampled_from([0.3, 0.6]))
-def test_when_awards_and_acks_are_lost_the_task_is_still_served_by_those_who_hold_it(seed, lose):
-    """Digest §7: a lost award must not leave a task unserved (TCP hid it; UDP will not).  Only the messages
-    that settle an auction are lost here, each copy with probability ``lose``."""
+def _lossy_run(seed: int, lose: float):
+    """Robot 1 (no sensor), 2 (laser) and 3 (sonar): an avoidance task for robot 1 and a surveillance task,
+    each copy of a settling message lost with probability ``lose``; run until it must have settled.  Checks
+    the invariants throughout, and returns the agents, the bus and the tasks."""
     rnd = random.Random(seed)
     agents, bus = fleet({1: (), 2: ("laser",), 3: ("sonar",)},
                         {r: (rnd.uniform(-3, 3), rnd.uniform(-3, 3), rnd.uniform(-3, 3)) for r in (1, 2, 3)},
@@ -250,7 +249,9 @@ def test_when_awards_and_acks_are_lost_the_task_is_still_served_by_those_who_hol
     tasks = [Task(tid(rnd.randint(1, 3), 1), "avoid_obstacles", AvoidObstacles(1)),
              Task(tid(rnd.randint(1, 3), 2), "surveillance", Surveillance(0, 0, 4, 4, 2))]
     hand_in(agents, tasks)
-    bus.run(120.0, stop=lambda: _invariants(agents, bus.now, opts) or False)
+    # at 85 % a two-robot award is acknowledged in fewer than half of its rounds, and rounds back off: give it
+    # twice as long (1000 seeds: 2 were still between awards at 120 s)
+    bus.run(120.0 if lose < 0.8 else 240.0, stop=lambda: _invariants(agents, bus.now, opts) or False)
     for t in tasks:
         job = agents[t.id >> 16].auction.jobs.get(t.id)
         assert job is not None and job.state == SERVED, (t.kind, job and job.state)
@@ -259,13 +260,93 @@ def test_when_awards_and_acks_are_lost_the_task_is_still_served_by_those_who_hol
     bus.send = send                                         # the losses end: every stray pre-allocation lapses
     bus.run(bus.now + opts.auction_timeout + opts.award_grace + 0.2)
     assert all(not a.ledger.preallocated() for a in agents.values())
+    return agents, bus, tasks
 
 
-@pytest.mark.xfail(strict=True, reason="open (issue 17): at 85 % loss of the settling messages, seed 9403, the "
-                   "obstacle-avoidance task is reported unservable after 6 announcements and its job is gone")
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 10_000), lose=st.sampled_from([0.3, 0.6, 0.85]))
+@example(seed=9403, lose=0.85)                 # issue 17: reported unservable after 6 announcements
+def test_when_awards_and_acks_are_lost_the_task_is_still_served_by_those_who_hold_it(seed, lose):
+    """Digest §7: a lost award must not leave a task unserved (TCP hid it; UDP will not).  Only the messages
+    that settle an auction are lost here, each copy with probability ``lose``."""
+    _lossy_run(seed, lose)
+
+
 def test_at_85_percent_loss_seed_9403_the_avoidance_task_is_still_served():
-    test_when_awards_and_acks_are_lost_the_task_is_still_served_by_those_who_hold_it.hypothesis.inner_test(
-        seed=9403, lose=0.85)
+    """Issue 17: its awards went unacknowledged round after round (and a holder whose cancel was lost answered
+    the next announcement with a report, not a bid); "unservable" must mean that no robot can do it."""
+    agents, bus, (avoid, survey) = _lossy_run(9403, 0.85)
+    events = [e for a in agents.values() for e in a.events if e.task == avoid.id]
+    assert not [e for e in events if e.what == FAILED]
+    assert [e for e in events if e.what == "released" and "did not acknowledge" in e.detail]
+
+
+def test_a_holder_whose_cancel_was_lost_bids_when_its_auctioneer_announces_the_task_anew():
+    """Robot 1's acknowledgements, reports and cancels are lost until 3.5 s: its award (auction 2.1) is
+    cancelled at 3 s without its knowing, and the task announced again.  It still holds 2.1, but the
+    auctioneer of 2.1 announcing the task anew tells it that award is over: it bids at once."""
+    agents, bus = fleet({1: ("sonar",), 2: ()}, {1: (0, 0, 0), 2: (2, 0, 0)})
+    send = bus.send
+
+    def deaf(msgs, now):
+        send([m for m in msgs if not (now < 3.5 and isinstance(m, (M.CmAck, M.CmHold, M.CmCancel)))], now)
+
+    bus.send = deaf
+    task = Task(tid(2, 1), "avoid_obstacles", AvoidObstacles(1))
+    hand_in(agents, [task])
+    bus.run(8.0)
+    job = agents[2].auction.jobs[task.id]
+    assert [e.what for e in agents[2].events] == ["released", AWARDED]
+    assert job.state == SERVED and job.auction == 2 << 16 | 2 and agents[2].auction.stats.announced == 2
+    assert agents[1].bidder.holdings[task.id].auction == job.auction
+
+
+def test_a_round_that_only_a_holder_of_an_older_award_answers_does_not_count_towards_unservable():
+    """max_announces 1: one round without a bid would make the task unservable, but robot 1 reports holding
+    it under an older auction (of an auctioneer since lost, say): it can serve it once cancelled."""
+    agents, bus = fleet({1: (), 2: ("laser",)}, {1: (0, 0, 0), 2: (2, 0, 0)}, ComutarOptions(max_announces=1))
+    send = bus.send
+    bus.send = lambda msgs, now: send([m for m in msgs if not (now < 1.05 and isinstance(m, M.CmBid))], now)
+    task = Task(tid(2, 1), "avoid_obstacles", AvoidObstacles(1))
+    hand_in(agents, [task])
+    bus.run(0.5)
+    bus.send(agents[2].on_message(M.CmHold(1, 2, 3 << 16 | 7, task.id, (1 << 16 | 40,)), bus.now), bus.now)
+    bus.run(10.0)
+    assert FAILED not in {e.what for e in agents[2].events}
+    assert agents[2].auction.jobs[task.id].state == SERVED and set(holders(agents, task.id)) == {1, 2}
+
+
+def _deaf_robot_2(max_backoff: float, until: float = 60.0):
+    """Every award of robot 1's avoidance task (which needs robot 2's laser) is lost until ``until``; robot 1
+    also has robot 2's avoidance task to auction.  Returns the agents, the bus, the two tasks and how often
+    the first was announced while its awards were lost."""
+    opts = ComutarOptions(max_backoff=max_backoff)
+    agents, bus = fleet({1: (), 2: ("laser",)}, {1: (0, 0, 0), 2: (2, 0, 0)}, opts)
+    mine, other = Task(tid(1, 1), "avoid_obstacles", AvoidObstacles(1)), Task(tid(1, 2), "avoid_obstacles",
+                                                                             AvoidObstacles(2))
+    announced = []
+    send = bus.send
+
+    def deaf(msgs, now):
+        announced.extend(m for m in msgs if isinstance(m, M.CmAnnounce) and m.task == mine.id)
+        send([m for m in msgs if not (now < until and isinstance(m, M.CmAward) and m.task == mine.id)], now)
+
+    bus.send = deaf
+    hand_in(agents, [mine, other])
+    bus.run(until, stop=lambda: _invariants(agents, bus.now, opts) or False)
+    return agents, bus, (mine, other), len(announced)
+
+
+def test_awards_lost_for_a_minute_back_off_never_make_the_task_unservable_nor_starve_another():
+    agents, bus, (mine, other), n = _deaf_robot_2(ComutarOptions().max_backoff)
+    _, _, _, n_flat = _deaf_robot_2(0.0)                   # no back-off: announced again as soon as cancelled
+    job = agents[1].auction.jobs[mine.id]
+    assert job.state != SERVED and job.unacked >= ComutarOptions().max_announces        # 6 lost in a row (6 of 60 s)
+    assert FAILED not in {e.what for a in agents.values() for e in a.events}
+    assert agents[1].auction.jobs[other.id].state == SERVED                              # not starved
+    assert n_flat >= 15 and n <= n_flat / 2, (n, n_flat)
+    bus.run(bus.now + 2 * 2 * ComutarOptions().max_backoff + 10.0)                      # the losses end
+    assert agents[1].auction.jobs[mine.id].state == SERVED and set(holders(agents, mine.id)) == {1, 2}
 
 
 def test_a_lost_award_is_re_sent_until_acknowledged():

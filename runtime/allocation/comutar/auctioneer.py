@@ -14,11 +14,15 @@ robot is lost, the lowest-id live robot adopts it (after ``2 * report_period`` o
   cheapest bid, up to the task's ``robots`` (0: all), cheapest first; their waypoints are shared.
 * **Award.**  ``CmAward`` broadcast, re-sent to every robot that has not acknowledged each ``resend``
   seconds.  After ``ack_timeout`` the silent robots' part is cancelled (``CmCancel``): for a one-coalition
-  task the whole award goes, for a team only their share; a task left with nobody is announced again.
-* **Unservable.**  A task that drew no bid in ``max_announces`` announcements (``retry`` to 2 ``retry`` s
-  apart, at random) is reported
-  FAILED with the reason.  A holder that resigns, falls silent for ``member_timeout`` or is lost releases
-  its share the same way (RELEASED, then announced again).
+  task the whole award goes, for a team only their share; a task left with nobody is announced again, with
+  no limit on how often: at once after its first unacknowledged award, then after ``retry`` x 2^(k-2) (at
+  most ``max_backoff``) times 1-2 at random for the k-th in a row, so that its other tasks get their turn.
+* **Unservable.**  Only a *dry* round counts: one that drew no bid and in which no robot reported holding
+  the task (a holder of an older award of it can serve it, and is cancelled so that it bids next time).
+  A task with ``max_announces`` dry rounds in a row (``retry`` to 2 ``retry`` s apart, at random) is
+  reported FAILED with the reason; a round with a bid starts the count again.  Lost awards, acknowledgements
+  or cancels therefore never make a task unservable.  A holder that resigns, falls silent for
+  ``member_timeout`` or is lost releases its share the same way (RELEASED, then announced again).
 * **Done.**  A surveillance task when every waypoint is visited (the agent says so), an avoidance task after
   its duration: DONE, and ``CmDone`` to everyone (again to any holder that reports later).
 """
@@ -39,7 +43,10 @@ TEAM_KINDS = ("surveillance",)          # kinds served by every robot that can, 
 class Job:
     task: object
     state: str = QUEUED
-    attempts: int = 0
+    attempts: int = 0                      # announcements since it was last served (CmAnnounce.attempt)
+    dry: int = 0                           # rounds in a row with no bid and no holder heard: "unservable" at max
+    unacked: int = 0                       # awards in a row cancelled for want of acknowledgements (back-off)
+    claimed: bool = False                  # a robot reported holding the task during the current round
     not_before: float = 0.0
     adopting: bool = False                 # adopted from a lost auctioneer: listening for holders first
     auction: int = 0
@@ -130,7 +137,7 @@ class Auctioneer:
         self.count = self.count % 0xFFFF + 1
         job.auction = self.me << 16 | self.count
         job.attempts += 1
-        job.state, job.closes, job.bids = BIDDING, now + self.o.auction_timeout, []
+        job.state, job.closes, job.bids, job.claimed = BIDDING, now + self.o.auction_timeout, [], False
         self.next_insert = now + self.o.insert_interval
         self.stats.announced += 1
         self.a.log.info("auction %s: task %d (%s), attempt %d", _name(job.auction), job.task.id, job.task.kind,
@@ -142,7 +149,7 @@ class Auctioneer:
         slots = self._winners(job, live)
         if not slots:
             return self._no_bids(job, now)
-        job.state, job.slots = AWARDING, slots
+        job.state, job.slots, job.dry = AWARDING, slots, 0
         job.robots = {slot_robot(r) for r in slots}
         job.acked, job.heard = set(), {r: now for r in job.robots}
         job.awarded_at = job.resent = now
@@ -172,25 +179,28 @@ class Auctioneer:
         return tuple(chosen)
 
     def _no_bids(self, job: Job, now: float) -> list:
-        if job.attempts >= self.o.max_announces:
+        if not job.claimed:
+            job.dry += 1
+        if job.dry >= self.o.max_announces:
             job.state = UNSERVABLE
             self.failed.add(job.task.id)
             del self.jobs[job.task.id]
-            why = (f"unservable: no coalition of actions bid for this {job.task.kind} task in {job.attempts} "
-                   f"announcements (no robot has the actions, or their resources do not fit)")
+            why = (f"unservable: no coalition of actions bid for this {job.task.kind} task in {job.dry} "
+                   f"announcements in a row (no robot has the actions, or their resources do not fit)")
             self.a.log.warning("task %d %s", job.task.id, why)
             self.a.events.append(TaskEvent(job.task.id, FAILED, (self.me,), why))
             return []
         wait = self.o.retry * (1.0 + self.rng.random())
         job.state, job.not_before = QUEUED, now + wait
-        self.a.log.info("auction %s: no bids for task %d; announcing again in %.1f s", _name(job.auction),
-                        job.task.id, wait)
+        self.a.log.info("auction %s: no bids for task %d%s; announcing again in %.1f s", _name(job.auction),
+                        job.task.id, " (a robot still holds an older award of it)" if job.claimed else "", wait)
         return []
 
     def _chase(self, job: Job, now: float) -> list:
         silent = job.robots - job.acked
         if now - job.awarded_at >= self.o.ack_timeout:
-            return self._drop(job, silent, now, f"robots {sorted(silent)} did not acknowledge in {self.o.ack_timeout:g} s")
+            why = f"robots {sorted(silent)} did not acknowledge in {self.o.ack_timeout:g} s"
+            return self._drop(job, silent, now, why, unacked=True)
         if now - job.resent >= self.o.resend:
             job.resent = now
             self.stats.resent += len(silent)
@@ -207,15 +217,15 @@ class Auctioneer:
         return []
 
     def _served(self, job: Job, now: float) -> None:
-        job.state, job.served_at, job.attempts = SERVED, now, 0
+        job.state, job.served_at, job.attempts, job.dry, job.unacked = SERVED, now, 0, 0, 0
         if not job.reported:
             job.reported = True
             self.a.events.append(TaskEvent(job.task.id, AWARDED, tuple(sorted(job.robots)),
                                            f"auction {_name(job.auction)}"))
 
-    def _drop(self, job: Job, robots: set, now: float, why: str) -> list:
+    def _drop(self, job: Job, robots: set, now: float, why: str, unacked: bool = False) -> list:
         """Take ``robots``' share of the award back; a task left with nobody (or a one-coalition task) is
-        announced again."""
+        announced again (after a back-off if ``unacked``: its award went unacknowledged)."""
         if not robots:
             self._served(job, now)
             return []
@@ -226,13 +236,22 @@ class Auctioneer:
         self.a.log.warning("task %d: %s; releasing %s", job.task.id, why, sorted(gone))
         self.a.events.append(TaskEvent(job.task.id, RELEASED, tuple(sorted(gone)), why))
         if whole:
-            job.state, job.not_before, job.robots, job.slots = QUEUED, now, set(), ()
+            job.not_before = now + self._backoff(job) if unacked else now
+            job.state, job.robots, job.slots = QUEUED, set(), ()
             return out
         job.robots -= robots
         job.slots = tuple(r for r in job.slots if slot_robot(r) not in robots)
         if job.state == AWARDING and job.acked >= job.robots:
             self._served(job, now)
         return out
+
+    def _backoff(self, job: Job) -> float:
+        """Seconds before announcing again a task whose award went unacknowledged: none the first time, then
+        ``retry`` doubling per award lost in a row, at most ``max_backoff``, times 1-2 at random."""
+        job.unacked += 1
+        if job.unacked == 1:
+            return 0.0
+        return min(self.o.retry * 2.0 ** (job.unacked - 2), self.o.max_backoff) * (1.0 + self.rng.random())
 
     def complete(self, task_id: int, now: float) -> list:
         job = self.jobs.pop(task_id, None)
@@ -295,6 +314,7 @@ class Auctioneer:
             return []
         if job.adopting and job.state == QUEUED or (job.state == SERVED and job.auction == m.auction):
             return self._adopt(job, m, now)
+        job.claimed = True                      # it holds an older award: it can serve, once cancelled
         return [CmCancel(self.me, m.sender, m.auction, m.task)]
 
     def _adopt(self, job: Job, m, now: float) -> list:

@@ -17,7 +17,8 @@ bid, and allocate what they are awarded.  Sans-IO: every input carries ``now``; 
 * **Award.**  Slots named allocate (an expired one is admitted afresh if it still fits) and the robot
   acknowledges; its other slots of the auction are released.  If a slot no longer fits, the robot releases
   everything of the award and resigns.  A held task is reported (``CmHold``) to its auctioneer every
-  ``report_period``.
+  ``report_period``.  When the auctioneer of my award announces the task in a later auction, it has let that
+  award go (its cancel was lost): I drop it and bid; another auctioneer's announcement gets a ``CmHold``.
 
 Every pre-allocation expires: slots not awarded vanish at their expiry (the record is kept a while so a late
 award can still be taken up, afresh).  An action's processor share is held once for its running instance,
@@ -214,7 +215,13 @@ class Bidder:
             self.stats.ignored += 1
             return []
         held = self.holdings.get(m.task)
-        if held is not None:                  # re-announced (a new auctioneer, or an "all" team): say I hold it
+        if held is not None and held.auction >> 16 == m.sender and _later(m.auction, held.auction):
+            # the auctioneer of my award announces the task anew: it has let that award go (its cancel was lost)
+            self.a.log.info("task %d: announced again as auction %s: my award %s is over", m.task,
+                            _auction_name(m.auction), _auction_name(held.auction))
+            self.drop(m.task)
+            held = None
+        if held is not None:                  # announced by another auctioneer (adopting it): say I hold it
             return [CmHold(self.me, m.sender, held.auction, m.task, held.mine)]
         if not self.a.can_bid:
             return []
@@ -449,6 +456,11 @@ class Bidder:
     def pending(self) -> bool:
         """Slots still pre-allocated (an auction of theirs not settled)."""
         return any(not s.held and not s.expired for s in self.slots.values())
+
+
+def _later(a: int, b: int) -> bool:
+    """Is auction ``a`` later than ``b`` of the same auctioneer (16-bit serial numbers, which wrap)?"""
+    return 0 < (a - b) & 0xFFFF < 0x8000
 
 
 def _auction_name(auction: int) -> str:

@@ -31,8 +31,10 @@ class ComutarOptions:
     resend: float = field(default=0.3, metadata=rng(0.01, 10.0))             # s between award re-sends
     report_period: float = field(default=1.0, metadata=rng(0.05, 60.0))      # s between a holder's reports
     member_timeout: float = field(default=5.0, metadata=rng(0.1, 600.0))     # s of silence before a holder is gone
-    max_announces: int = field(default=6, metadata=rng(1, 1000))             # announcements before "unservable"
+    max_announces: int = field(default=6, metadata=rng(1, 1000))             # dry rounds in a row: "unservable"
     retry: float = field(default=2.0, metadata=rng(0.0, 600.0))             # s before a task is announced again
+    # s: the longest back-off (before the 1-2 x jitter) after awards of a task went unacknowledged in a row
+    max_backoff: float = field(default=8.0, metadata=rng(0.0, 600.0))
     status_period: float = field(default=1.0, metadata=rng(0.05, 60.0))      # s between survey status broadcasts
     region_period: float = field(default=0.5, metadata=rng(0.05, 60.0))     # s between region updates to providers
     reader_reach: float = field(default=0.0, metadata=rng(0.0, 1000.0))     # m a reader drives to see a region

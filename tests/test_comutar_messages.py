@@ -78,6 +78,10 @@ MESSAGES = st.one_of(
     st.builds(M.CmSurvey, robot, dest, fleet_id, st.integers(0, 200), st.floats(0, 1e6, width=32),
               st.lists(st.integers(1, 200), max_size=200, unique=True).map(tuple)),
     st.builds(M.CmRegion, robot, dest, fleet_id, xy, xy, st.floats(0, 100, width=32)),
+    st.builds(lambda s, d, t, i, st_, ox, oy, discs: M.CmStream(s, d, t, i, st_, ox, oy,
+                                                                tuple(M.pack_disc(ox + x, oy + y, r, ox, oy) for x, y, r in discs)),
+              robot, dest, fleet_id, st.sampled_from([1, 2]), st.floats(0, 1e6, width=32), xy, xy,
+              st.lists(st.tuples(st.floats(-30, 30), st.floats(-30, 30), st.floats(0.01, 2.5)), max_size=32)),
 )
 
 

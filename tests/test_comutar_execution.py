@@ -117,7 +117,8 @@ def borrowed():
     w.kill(2)
     w.run(killed + 3.0)                            # the daemons' heartbeat timeout: then the loss is known
     stopped = next((t for t, v, om in w.commands if t > killed and v == 0 and om == 0), None)
-    moved_while_blind = max((abs(v) for t, v, om in w.commands if t > killed + w.opts.feed_timeout + 2 * DT), default=0)
+    stale = w.agents[1].feed_timeout("range_data")
+    moved_while_blind = max((abs(v) for t, v, om in w.commands if t > killed + stale + 2 * DT), default=0)
     for r in (1, 3):
         w.bus.send(w.agents[r].on_peer_lost(2, w.now), w.now)
     lost_at = w.now
@@ -139,8 +140,10 @@ def test_the_sensorless_robot_holds_survey_and_avoidance_at_once_with_the_other_
 def test_when_the_sensor_robot_goes_silent_the_borrower_stops_once_its_data_is_stale(borrowed):
     r = borrowed
     assert r.stopped is not None
-    # stale after feed_timeout without a stream (sent every 0.2 s), then stopped at the next control cycle
-    assert r.stopped - r.killed <= r.w.opts.feed_timeout + 0.2 + 2 * DT, r.stopped - r.killed
+    # overdue 2.5 stream periods (0.25 s for range data at 10 Hz) after the last one, stopped in that control cycle
+    stale = r.w.agents[1].feed_timeout("range_data")
+    assert stale == pytest.approx(0.25)
+    assert r.stopped - r.killed <= stale + 0.1 + DT, r.stopped - r.killed
     assert r.moved_while_blind == 0.0
 
 

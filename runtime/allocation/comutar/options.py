@@ -38,7 +38,8 @@ class ComutarOptions:
     status_period: float = field(default=1.0, metadata=rng(0.05, 60.0))      # s between survey status broadcasts
     region_period: float = field(default=0.5, metadata=rng(0.05, 60.0))     # s between region updates to providers
     reader_reach: float = field(default=0.0, metadata=rng(0.0, 1000.0))     # m a reader drives to see a region
-    feed_timeout: float = field(default=0.5, metadata=rng(0.05, 60.0))      # s: a stream older than this is stale
+    # a stream (10 Hz range data, 5 Hz obstacle list) silent this many of its periods is overdue: its consumer stops
+    feed_periods: float = field(default=2.5, metadata=rng(1.0, 100.0))
     region_radius: float = field(default=1.0, metadata=rng(0.0, 50.0))      # m: the region a consumer asks to watch
     max_options: int = field(default=2, metadata=rng(1, 8))                  # providers kept per input
     visit_radius: float = field(default=0.1, metadata=rng(0.01, 5.0))       # m: a waypoint this close is visited

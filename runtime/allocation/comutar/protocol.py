@@ -52,6 +52,7 @@ KINDS = ("surveillance", "avoid_obstacles")
 VISITED = "visited"                       # Progress event of a surveillance executor: data["waypoint"]
 CHOOSE_PERIOD = 0.25                      # s between re-evaluations of the nearest waypoint (at once on news)
 STREAM_PERIOD = {A.RANGE_DATA: 0.1, A.OBSTACLE_LIST: 0.2}   # s: the 10 Hz and 5 Hz of ActionSpec.rates
+SENSE_FRESH = 0.5                         # s: a provider streams only readings newer than this
 SELF_ECHO = 0.12                          # m past a consumer's body: a streamed disc this close is the consumer itself
 
 
@@ -141,7 +142,8 @@ class ComutarAgent:
     def obstacle_input(self, task_id: int, now: float) -> np.ndarray | None:
         """The obstacle list this robot's avoider in ``task_id`` works from now ((M, 3) discs, fleet frame), or
         None when it has none fresh: its provider's stream (obstacle list, or range data its own detector turns
-        into one) is older than ``options.feed_timeout``, or this robot does not hold the task.  A robot's own
+        into one) is overdue (``options.feed_periods`` of its period: 0.25 s for 10 Hz range data), or this robot
+        does not hold the task.  A robot's own
         sensor counts as fresh.  Streamed discs on the robot's own body are dropped; the robots this one serves
         (regions it keeps in view) are added."""
         if task_id not in self.bidder.holdings:
@@ -154,13 +156,17 @@ class ComutarAgent:
         if src is None or src == self.robot_id:
             return self._with_consumers(self.obstacles)
         feed = self.feeds.get((task_id, info))
-        if feed is None or feed[1] != src or now - feed[0] > self.options.feed_timeout:
+        if feed is None or feed[1] != src or now - feed[0] > self.feed_timeout(info):
             return None
         discs = feed[2]
         if len(discs) and self.pose is not None:
             gap = np.hypot(discs[:, 0] - self.pose[0], discs[:, 1] - self.pose[1])
             discs = discs[gap > self.estimator.profile.radius + SELF_ECHO]
         return self._with_consumers(discs)
+
+    def feed_timeout(self, info: str) -> float:
+        """Seconds after which a stream of ``info`` is overdue: ``feed_periods`` of its period."""
+        return self.options.feed_periods * STREAM_PERIOD.get(info, 0.2)
 
     def obstacle_input_any(self, now: float) -> np.ndarray:
         """Every obstacle this robot knows now: its avoiders' inputs (empty when none is fresh)."""
@@ -380,7 +386,7 @@ class ComutarAgent:
     def _streams(self, now: float) -> list:
         """What my readers and detectors serving other robots send them: my sensor's discs (range data: one per
         echo; the obstacle list: the same discs, and my own body), at 10 Hz and 5 Hz, from a fresh reading."""
-        if self.pose is None or now - self.sensed_at > self.options.feed_timeout:
+        if self.pose is None or now - self.sensed_at > SENSE_FRESH:
             return []
         out = []
         for tid in self.bidder.holdings:

@@ -375,6 +375,8 @@ class DrAgent:
             self.log.info("task %d: robot %d leads it already: giving up", m.task, m.sender)
             self.request, self.gave_up[m.task] = None, now
         if self.lead is not None and self.lead.task == m.task:
+            if m.sender in self.lead.members:              # a robot that leads the task is no member of mine (its
+                self.lead.drop(m.sender, now, "it leads the task itself")   # state naming the task is no keep-alive)
             if m.sender > self.robot_id:
                 out += self.lead.resign(YIELD, now, f"robot {m.sender} leads it too and has the higher id")
                 out += self._end_lead(now)

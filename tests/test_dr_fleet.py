@@ -9,7 +9,7 @@ from __future__ import annotations
 import random
 
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, example, given, settings, strategies as st
 
 from runtime.allocation.agent import DONE
 from runtime.allocation.dr.interference import InterferenceModel
@@ -74,6 +74,7 @@ def test_ten_percent_message_loss_loses_and_doubles_no_weight(seed):
 @pytest.mark.slow
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.integers(0, 10_000), st.sampled_from(["dr", "sr", "greedy"]), st.sampled_from(["M_NI", "NM_NI"]))
+@example(1071, "dr", "M_NI")        # a robot that left and then led the task stayed on its old leader's list
 def test_ten_robots_twelve_objects_ten_percent_loss_every_variant(seed, auction, strategy):
     o = DrOptions(auction=auction, strategy=strategy)
     f, watch, handed = _lossy(seed, TEN, 12, o)

@@ -194,27 +194,33 @@ def test_bad_scenarios_are_refused_naming_the_key(tmp_path, changes, key):
     assert f": {key}: expected" in str(info.value) and "\n" not in str(info.value)
 
 
+def _lockstep(tmp_path, fleet: Path, until: float, read=lambda run, res: None):
+    """A lock-step run of the shipped ``fleet`` until its goal or ``until`` s: (goal met, shortfall, summary,
+    ``read(run, summary)`` taken before the daemons close)."""
+    from sitl import launcher
+    from sitl.operator import RunView
+    from tests.sitl_util import shipped_fleet
+
+    f = launcher.build(shipped_fleet(tmp_path, fleet.name), tmp_path / "run", seed=1)
+    run = launcher.Lockstep(f)
+    try:
+        goal = False
+        while f.world.t < until and not goal:
+            run.step()
+            goal = f.scenario.goal(RunView(run.op))
+        res = launcher.finish(f, run.op, "goal" if goal else "timeout")
+        return goal, f.scenario.shortfall(RunView(run.op)), res, read(run, res)
+    finally:
+        run.close()
+        f.close()
+
+
 @pytest.mark.slow
 def test_the_shipped_foraging_fleet_delivers_both_objects_and_o1_gets_a_new_leader_in_time(tmp_path):
     """Paper 000 §6.4 in SITL, lock-step: four Pioneer daemons (odometry only, sonar avoidance) share two
     objects by Double Round; O1's leader is killed and withdrawn at 25 s; a new leader speaks up within 15 s
     and both objects are delivered."""
-    from sitl import launcher
-    from sitl.operator import RunView
-    from tests.sitl_util import shipped_fleet
-
-    f = launcher.build(shipped_fleet(tmp_path, FLEET.name), tmp_path / "run", seed=1)
-    run = launcher.Lockstep(f)
-    try:
-        goal = False
-        while f.world.t < 600.0 and not goal:
-            run.step()
-            goal = f.scenario.goal(RunView(run.op))
-        res = launcher.finish(f, run.op, "goal" if goal else "timeout")
-        why = f.scenario.shortfall(RunView(run.op))
-    finally:
-        run.close()
-        f.close()
+    goal, why, res, _ = _lockstep(tmp_path, FLEET, 600.0)
     assert goal, why
     kill = res["kill"]
     assert kill["robot"] not in (None, kill["new_leader"]) and kill["after"] <= 15.0, kill
@@ -227,27 +233,15 @@ def test_a_killed_member_is_dropped_and_its_leader_auctions_again_and_the_whole_
     station hears: the leader names a group without it within member_timeout and a control period (and one more
     for the STATUSTEXT to arrive), then a group with a robot new to it (the new round); the task is done, and
     the leader's books say all 8 wu came in."""
-    from sitl import launcher
-    from sitl.operator import RunView
-    from tests.sitl_util import shipped_fleet
+    def books(run, res):
+        mk = res.get("member_kill")
+        leader = run.daemons[mk["leader"]].node.agent if mk else None
+        return leader and (leader.finished.get(mk["task"]), leader.o, run.period)
 
-    f = launcher.build(shipped_fleet(tmp_path, FLEET_MEMBER.name), tmp_path / "run", seed=1)
-    run = launcher.Lockstep(f)
-    try:
-        goal = False
-        while f.world.t < 300.0 and not goal:
-            run.step()
-            goal = f.scenario.goal(RunView(run.op))
-        res = launcher.finish(f, run.op, "goal" if goal else "timeout")
-        why = f.scenario.shortfall(RunView(run.op))
-        mk = res["member_kill"]
-        leader = run.daemons[mk["leader"]].node.agent
-        finished = leader.finished.get(mk["task"])
-        o, period = leader.o, run.period
-    finally:
-        run.close()
-        f.close()
+    goal, why, res, got = _lockstep(tmp_path, FLEET_MEMBER, 300.0, books)
     assert goal, why
+    mk = res["member_kill"]
+    finished, o, period = got
     assert mk["robot"] != mk["leader"] and mk["robot"] in mk["group"], mk
     assert mk["dropped_after"] <= o.member_timeout + 2 * period and mk["robot"] not in mk["dropped_group"], mk
     assert set(mk["regroup_group"]) - set(mk["group"]) and mk["robot"] not in mk["regroup_group"], mk

@@ -341,7 +341,8 @@ class Scenario:
         if mk is not None:
             drop, again = self.member_dropped(), self.regrouped()
             res["member_kill"] = {"at": mk.at, "robot": mk.robot, "task": mk.task, "leader": mk.leader,
-                                  "group": mk.group, "dropped_after": drop and drop[0], "dropped_group": drop and drop[1],
+                                  "group": mk.group,
+                                  "dropped_after": drop and drop[0], "dropped_group": drop and drop[1],
                                   "regroup_after": again and again[0], "regroup_group": again and again[1]}
         return res
 

@@ -196,6 +196,17 @@ def test_a_silent_member_is_dropped_after_member_timeout_and_eq8_failing_reopens
     assert k - (t + 0.3) == pytest.approx(a.o.member_timeout, abs=0.25)
 
 
+def test_a_dropped_member_leaves_the_announced_group_at_once_with_no_round_to_settle():
+    """The group a ground station hears ("awarded to") is told the drop, even when no new round follows."""
+    a, t, rid = _leader_with_awards()
+    for r in (3, 4):
+        a.on_message(DrRobotAlive(r, 1, T1, 0, 0, 0, 0, 0), t + 0.3)
+    assert [e.robots for e in a.pop_events() if e.what == AWARDED] == [(1, 3, 4)]
+    a.on_peer_lost(4, t + 1.0)
+    assert not of(a.on_tick(t + 1.1), DrBidRequest)                 # nobody idle: no round, nothing settles
+    assert [e.robots for e in a.pop_events() if e.what == AWARDED] == [(1, 3)]
+
+
 # ------------------------------------------------------------------------------------------------ Alg. 3
 def _free_robot(**options):
     a = agent(2, pos=(0.0, 0.0), **options)

@@ -1,6 +1,6 @@
 """The SITL `foraging` scenario's logic against a stand-in view of the run: objects replaced as the fleet
-delivers them, the leader of an object killed (and withdrawn) once it has one, the time to its new leader, and
-the verdict's shortfall."""
+delivers them, the leader of an object killed (and withdrawn) once it has one, the time to its new leader, a
+member killed and the times to its drop and to the new round, and the verdict's shortfall."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -16,6 +16,7 @@ from sitl.scenarios.foraging import Scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 FLEET = ROOT / "configs" / "fleets" / "foraging_4.yaml"
+FLEET_MEMBER = ROOT / "configs" / "fleets" / "foraging_4_member.yaml"
 
 
 class View:
@@ -42,8 +43,8 @@ class View:
         return [r for r in (1, 2, 3, 4) if r not in self.live]
 
 
-def _scenario(tmp_path, **changes) -> Scenario:
-    data = yaml.safe_load(FLEET.read_text())
+def _scenario(tmp_path, fleet=FLEET, **changes) -> Scenario:
+    data = yaml.safe_load(fleet.read_text())
     data["world"] = str(ROOT / "configs" / "worlds" / "arena_10x5.yaml")
     data["robot"] = str(ROOT / "configs" / "robots" / "pioneer3dx_forage.yaml")
     data["scenario"].update(changes)
@@ -121,9 +122,67 @@ def test_a_successor_later_than_the_limit_fails_the_goal(tmp_path):
     assert sc.shortfall(view) == "O1's new leader came 13.0 s after the kill (> 5 s)"
 
 
+def _member_run(tmp_path, **changes):
+    """The member fleet's scenario with its one object named 1.1 and open."""
+    sc = _scenario(tmp_path, FLEET_MEMBER, **changes)
+    (h,) = sc.handovers()
+    view = View()
+    tid = _name(h, 1, 1)
+    view.states = {tid: OPEN}
+    return sc, view, tid
+
+
+def test_a_member_not_the_leader_is_withdrawn_once_the_group_has_one_and_its_drop_and_new_round_timed(tmp_path):
+    sc, view, tid = _member_run(tmp_path)       # kill_member: object 1 at 20 s; drop within 5 s, new round within 10 s
+    view.said = {1: [(3.0, "task 1.1 awarded to R1+R3+R2")]}
+    assert sc.on_poll(view, 19.9) == []                       # too early
+    view.said = {1: [(3.0, "task 1.1 awarded to R1+R3+R2"), (19.0, "task 1.1 awarded to R1")]}
+    assert sc.on_poll(view, 20.0) == []                       # the leader is alone now: no member to kill
+    view.said[1].append((20.5, "task 1.1 awarded to R1+R3+R4"))
+    assert sc.on_poll(view, 21.0) == [("withdraw", 3)]        # the lowest member, never the leader
+    assert sc.on_poll(view, 22.0) == []                       # once
+    assert sc.shortfall(view) == "0/1 objects delivered; O1's leader R1 has not dropped R3 (killed at 21.0 s)"
+    view.live = [1, 2, 4]
+    view.said[1].append((21.5, "task 1.1 awarded to R1+R3+R4"))   # heard after the kill, still naming it
+    view.said[4] = [(23.0, "task 1.1 awarded to R4")]            # not the leader: no drop
+    view.said[1].append((24.2, "task 1.1 awarded to R1+R4"))
+    sc.on_poll(view, 24.5)
+    assert sc.member_dropped() == (pytest.approx(3.2), (1, 4))
+    assert sc.regrouped() is None and sc.shortfall(view).endswith("; O1 had no new round after R3 was dropped")
+    view.said[1].append((26.0, "task 1.1 awarded to R1+R2+R4"))
+    sc.on_poll(view, 26.5)
+    assert sc.regrouped() == (pytest.approx(1.8), (1, 2, 4))
+    assert sc.shortfall(view) == "0/1 objects delivered"
+    view.states[tid] = DONE
+    assert sc.shortfall(view) is None
+    mk = sc.summary(view)["member_kill"]
+    assert (mk["robot"], mk["leader"], mk["group"], mk["regroup_group"]) == (3, 1, (1, 3, 4), (1, 2, 4))
+
+
+def test_a_late_drop_and_a_late_new_round_fail_the_goal_and_no_round_is_asked_when_eq8_still_holds(tmp_path):
+    sc, view, tid = _member_run(tmp_path, kill_member={"object": 1, "at": 20, "dropped_within": 2,
+                                                       "regroup_within": 1})
+    view.said = {2: [(5.0, "task 1.1 awarded to R2+R1")]}
+    assert sc.on_poll(view, 20.0) == [("withdraw", 1)]
+    view.said[2] += [(23.0, "task 1.1 awarded to R2"), (25.0, "task 1.1 awarded to R2+R3")]
+    view.states[tid] = DONE
+    sc.on_poll(view, 26.0)
+    assert sc.shortfall(view) == ("R2 dropped R1 3.0 s after the kill (> 2 s); "
+                                  "O1's new round came 2.0 s after the drop (> 1 s)")
+    sc, view, tid = _member_run(tmp_path, kill_member={"object": 1, "at": 20, "regroup_within": None})
+    view.said = {2: [(5.0, "task 1.1 awarded to R2+R1")]}
+    sc.on_poll(view, 20.0)
+    view.said[2].append((23.0, "task 1.1 awarded to R2"))
+    view.states[tid] = DONE
+    sc.on_poll(view, 24.0)
+    assert sc.shortfall(view) is None and sc.regrouped() is None
+
+
 @pytest.mark.parametrize("changes, key", [
     ({"objects": [[9.0, 0.0]]}, "scenario.objects[0]"),
     ({"kill_leader": {"object": 9, "at": 1}}, "scenario.kill_leader.object"),
+    ({"kill_member": {"object": 9, "at": 1}}, "scenario.kill_member.object"),
+    ({"kill_member": {"dropped_within": 0}}, "scenario.kill_member.dropped_within"),
     ({"u_max": [10, 5]}, "scenario.u_max"),
     ({"min_distance": 50}, "scenario"),
     ({"to": 9}, "scenario.to"),
@@ -135,27 +194,58 @@ def test_bad_scenarios_are_refused_naming_the_key(tmp_path, changes, key):
     assert f": {key}: expected" in str(info.value) and "\n" not in str(info.value)
 
 
+def _lockstep(tmp_path, fleet: Path, until: float, read=lambda run, res: None):
+    """A lock-step run of the shipped ``fleet`` until its goal or ``until`` s: (goal met, shortfall, summary,
+    ``read(run, summary)`` taken before the daemons close)."""
+    from sitl import launcher
+    from sitl.operator import RunView
+    from tests.sitl_util import shipped_fleet
+
+    f = launcher.build(shipped_fleet(tmp_path, fleet.name), tmp_path / "run", seed=1)
+    run = launcher.Lockstep(f)
+    try:
+        goal = False
+        while f.world.t < until and not goal:
+            run.step()
+            goal = f.scenario.goal(RunView(run.op))
+        res = launcher.finish(f, run.op, "goal" if goal else "timeout")
+        return goal, f.scenario.shortfall(RunView(run.op)), res, read(run, res)
+    finally:
+        run.close()
+        f.close()
+
+
 @pytest.mark.slow
 def test_the_shipped_foraging_fleet_delivers_both_objects_and_o1_gets_a_new_leader_in_time(tmp_path):
     """Paper 000 §6.4 in SITL, lock-step: four Pioneer daemons (odometry only, sonar avoidance) share two
     objects by Double Round; O1's leader is killed and withdrawn at 25 s; a new leader speaks up within 15 s
     and both objects are delivered."""
-    from sitl import launcher
-    from sitl.operator import RunView
-    from tests.sitl_util import shipped_fleet
-
-    f = launcher.build(shipped_fleet(tmp_path, FLEET.name), tmp_path / "run", seed=1)
-    run = launcher.Lockstep(f)
-    try:
-        goal = False
-        while f.world.t < 600.0 and not goal:
-            run.step()
-            goal = f.scenario.goal(RunView(run.op))
-        res = launcher.finish(f, run.op, "goal" if goal else "timeout")
-        why = f.scenario.shortfall(RunView(run.op))
-    finally:
-        run.close()
-        f.close()
+    goal, why, res, _ = _lockstep(tmp_path, FLEET, 600.0)
     assert goal, why
     kill = res["kill"]
     assert kill["robot"] not in (None, kill["new_leader"]) and kill["after"] <= 15.0, kill
+
+
+@pytest.mark.slow
+def test_a_killed_member_is_dropped_and_its_leader_auctions_again_and_the_whole_object_comes_in(tmp_path):
+    """Paper 000 §5.5.3 in SITL, lock-step (issue 16): one object of 8 wu for which a leader alone fails eq. 8
+    and a group of two meets it; at 20 s the group's member is killed and withdrawn.  From what the ground
+    station hears: the leader names a group without it within member_timeout and a control period (and one more
+    for the STATUSTEXT to arrive), then a group with a robot new to it (the new round); the task is done, and
+    the leader's books say all 8 wu came in."""
+    def books(run, res):
+        mk = res.get("member_kill")
+        leader = run.daemons[mk["leader"]].node.agent if mk else None
+        return leader and (leader.finished.get(mk["task"]), leader.o, run.period)
+
+    goal, why, res, got = _lockstep(tmp_path, FLEET_MEMBER, 300.0, books)
+    assert goal, why
+    mk = res["member_kill"]
+    finished, o, period = got
+    assert mk["robot"] != mk["leader"] and mk["robot"] in mk["group"], mk
+    assert mk["dropped_after"] <= o.member_timeout + 2 * period and mk["robot"] not in mk["dropped_group"], mk
+    assert set(mk["regroup_group"]) - set(mk["group"]) and mk["robot"] not in mk["regroup_group"], mk
+    assert finished is not None and finished.delivered == pytest.approx(finished.weight) == 8.0
+    print(f"killed R{mk['robot']} at {mk['at']:.1f} s; R{mk['leader']} dropped it {mk['dropped_after']:.2f} s later; "
+          f"new round {mk['regroup_after']:.2f} s after the drop: {mk['regroup_group']}; "
+          f"{finished.delivered:g}/{finished.weight:g} wu in {finished.time:.1f} s")

@@ -12,6 +12,14 @@ group finishes.  The leader is the robot that announces the
 object's group ("task 1.2 awarded to R3+R4": the STATUSTEXT a `dr` leader sends a ground station); the run
 then measures how long the object takes to get a new leader (the paper: 15 s) and the goal also requires one
 within ``new_leader_within`` s.
+
+``kill_member`` replays §5.5.3 (robot failure): at ``at`` s (or as soon after as the object's group has a member)
+one MEMBER of the ``object``-th object's group (the lowest id other than the leader's) dies and its body is
+withdrawn.  The goal then requires its leader to announce a group without it within ``dropped_within`` s of the
+kill (the drop: ``member_timeout`` and the ground station's latency) and, unless ``regroup_within`` is null (the
+deadline test, eq. 8, still holds after the drop: no new round is due), a group with a robot that was not in it
+at the kill within ``regroup_within`` s of the drop (the new auction round).  Whether the object's whole weight
+came in is the task's DONE: a dr leader ends a task only when nothing is left at the object or on the way.
 """
 from __future__ import annotations
 
@@ -38,6 +46,26 @@ class KillLeader:
 
 
 @dataclass(frozen=True)
+class KillMember:
+    object: int = field(default=1, metadata=rng(1, 1000))       # the n-th object to appear
+    at: float = field(default=20.0, metadata=rng(0.0, None))    # s of sim time, at the earliest
+    withdraw: bool = True          # and take its body out of the arena
+    dropped_within: float = field(default=5.0, metadata=rng(0.0, None, lo_open=True))   # s from the kill
+    regroup_within: Optional[float] = field(default=10.0, metadata=rng(0.0, None, lo_open=True))   # s from the
+    #                              drop to a group with a robot new to it; null: eq. 8 still holds, no round due
+
+
+@dataclass
+class MemberKill:
+    """A member killed: when, who, of which task, and the group its leader had named last."""
+    at: float
+    robot: int
+    task: int
+    leader: int
+    group: tuple[int, ...]
+
+
+@dataclass(frozen=True)
 class Config:
     type: Literal["foraging"] = "foraging"
     present: int = field(default=2, metadata=rng(1, 20))         # objects present at once
@@ -51,6 +79,7 @@ class Config:
     objects: tuple[tuple[float, float], ...] = ()                # fixed places for the first objects
     to: Optional[int] = None                                     # robot the operator uploads to (null: lowest)
     kill_leader: Optional[KillLeader] = None
+    kill_member: Optional[KillMember] = None
     new_leader_within: float = field(default=15.0, metadata=rng(0.0, None, lo_open=True))   # s
 
     def check(self, fleet, world, file: str) -> None:
@@ -67,9 +96,11 @@ class Config:
         if min(sx, sy) / 2 - self.margin <= 0 or not _places(world.size, self):
             raise ConfigError(file, "scenario", "room for objects at least min_distance from the delivery point "
                               "and margin from the walls", (self.min_distance, self.margin))
-        if self.kill_leader is not None and self.kill_leader.object > self.total + self.present - 1:
-            raise ConfigError(file, "scenario.kill_leader.object", f"an object that appears (1..{self.total})",
-                              self.kill_leader.object)
+        for key in ("kill_leader", "kill_member"):
+            k = getattr(self, key)
+            if k is not None and k.object > self.total + self.present - 1:
+                raise ConfigError(file, f"scenario.{key}.object", f"an object that appears (1..{self.total})",
+                                  k.object)
 
 
 def _places(size, cfg: Config, tries: int = 200, seed: int = 0) -> list[tuple[float, float]]:
@@ -109,8 +140,10 @@ class Scenario:
         self.objects: list[Placed] = []
         self.leaders: dict[int, list[tuple[float, int]]] = {}     # fleet task id -> [(when, leader)]
         self.groups: dict[int, tuple[int, ...]] = {}             # fleet task id -> its leader's last group
+        self.announced: dict[int, list[tuple[float, int, tuple[int, ...]]]] = {}   # task -> [(when, leader, group)]
         self._texts_seen: set = set()
         self.killed: tuple[float, int, int] | None = None          # (when, robot, task)
+        self.member_killed: MemberKill | None = None
 
     # ------------------------------------------------------------------ objects
     def _new_object(self, at: float):
@@ -152,17 +185,43 @@ class Scenario:
         while present < self.cfg.present and len(self.objects) < self.cfg.total:
             out.append(self._new_object(now))
             present += 1
-        k = self.cfg.kill_leader
-        if k is not None and self.killed is None and now >= k.at and len(self.objects) >= k.object:
-            o = self.objects[k.object - 1]
-            tid = o.task_id
-            said = self.leaders.get(tid) if tid is not None else None
-            members = len(self.groups.get(tid, ())) - 1
-            if (said and not self._done(run, o) and said[-1][1] in run.live_robots()
-                    and members >= k.members):
-                self.killed = (now, said[-1][1], tid)
-                out.append(("withdraw" if k.withdraw else "kill", said[-1][1]))
+        out += self._kill_leader(run, now) + self._kill_member(run, now)
         return out
+
+    def _leader_said(self, run, n: int) -> tuple[Placed, int, tuple[int, ...]] | None:
+        """The n-th object, its leader and that leader's last group, if it has a live leader and is not done."""
+        if len(self.objects) < n:
+            return None
+        o = self.objects[n - 1]
+        tid = o.task_id
+        said = self.leaders.get(tid) if tid is not None else None
+        if not said or self._done(run, o) or said[-1][1] not in run.live_robots():
+            return None
+        return o, said[-1][1], self.groups.get(tid, ())
+
+    def _kill_leader(self, run, now: float) -> list:
+        k = self.cfg.kill_leader
+        if k is None or self.killed is not None or now < k.at:
+            return []
+        got = self._leader_said(run, k.object)
+        if got is None or len(got[2]) - 1 < k.members:
+            return []
+        o, leader, _ = got
+        self.killed = (now, leader, o.task_id)
+        return [("withdraw" if k.withdraw else "kill", leader)]
+
+    def _kill_member(self, run, now: float) -> list:
+        k = self.cfg.kill_member
+        if k is None or self.member_killed is not None or now < k.at:
+            return []
+        got = self._leader_said(run, k.object)
+        live = run.live_robots()
+        members = [] if got is None else [r for r in got[2] if r != got[1] and r in live]
+        if not members:
+            return []
+        o, leader, group = got
+        self.member_killed = MemberKill(now, min(members), o.task_id, leader, group)
+        return [("withdraw" if k.withdraw else "kill", min(members))]
 
     def _watch_leaders(self, run) -> None:
         for rid, texts in run.texts().items():
@@ -176,6 +235,7 @@ class Scenario:
                     tid = int(m.group(1)) << 16 | int(m.group(2))
                     self.leaders.setdefault(tid, []).append((t, rid))
                     self.groups[tid] = tuple(int(r) for r in re.findall(r"R(\d+)", m.group(3)))
+                    self.announced.setdefault(tid, []).append((t, rid, self.groups[tid]))
 
     def new_leader(self) -> tuple[int, float] | None:
         """After the kill: the object's next leader and how long after the kill it spoke up."""
@@ -184,6 +244,28 @@ class Scenario:
         when, robot, tid = self.killed
         nxt = next(((t, rid) for t, rid in self.leaders.get(tid, []) if t >= when and rid != robot), None)
         return None if nxt is None else (nxt[1], nxt[0] - when)
+
+    def member_dropped(self) -> tuple[float, tuple[int, ...]] | None:
+        """After a member's kill: how long after it its leader first named a group without it, and that group."""
+        k = self.member_killed
+        if k is None:
+            return None
+        for t, rid, group in self.announced.get(k.task, []):
+            if t >= k.at and rid == k.leader and k.robot not in group:
+                return t - k.at, group
+        return None
+
+    def regrouped(self) -> tuple[float, tuple[int, ...]] | None:
+        """After the drop: how long after it the leader first named a group with a robot that was not in the group
+        at the kill (a new auction round's award), and that group."""
+        k, drop = self.member_killed, self.member_dropped()
+        if k is None or drop is None:
+            return None
+        dropped_at = k.at + drop[0]
+        for t, rid, group in self.announced.get(k.task, []):
+            if t >= dropped_at and rid == k.leader and set(group) - set(k.group):
+                return t - dropped_at, group
+        return None
 
     # ------------------------------------------------------------------ verdict
     def goal(self, run) -> bool:
@@ -205,7 +287,29 @@ class Scenario:
                 elif nl[1] > self.cfg.new_leader_within:
                     short.append(f"O{k.object}'s new leader came {nl[1]:.1f} s after the kill "
                                  f"(> {self.cfg.new_leader_within:g} s)")
+        short += self._member_shortfall()
         return "; ".join(short) if short else None
+
+    def _member_shortfall(self) -> list[str]:
+        k = self.cfg.kill_member
+        if k is None:
+            return []
+        mk = self.member_killed
+        if mk is None:
+            return [f"no member of O{k.object}'s group killed yet"]
+        drop = self.member_dropped()
+        if drop is None:
+            return [f"O{k.object}'s leader R{mk.leader} has not dropped R{mk.robot} (killed at {mk.at:.1f} s)"]
+        short = []
+        if drop[0] > k.dropped_within:
+            short.append(f"R{mk.leader} dropped R{mk.robot} {drop[0]:.1f} s after the kill (> {k.dropped_within:g} s)")
+        if k.regroup_within is not None:
+            again = self.regrouped()
+            if again is None:
+                short.append(f"O{k.object} had no new round after R{mk.robot} was dropped")
+            elif again[0] > k.regroup_within:
+                short.append(f"O{k.object}'s new round came {again[0]:.1f} s after the drop (> {k.regroup_within:g} s)")
+        return short
 
     def unreachable(self, run) -> str | None:
         if not run.live_robots() and run.dead():
@@ -233,6 +337,13 @@ class Scenario:
             nl = self.new_leader()
             res["kill"] = {"at": when, "robot": robot, "task": tid,
                            "new_leader": None if nl is None else nl[0], "after": None if nl is None else nl[1]}
+        mk = self.member_killed
+        if mk is not None:
+            drop, again = self.member_dropped(), self.regrouped()
+            res["member_kill"] = {"at": mk.at, "robot": mk.robot, "task": mk.task, "leader": mk.leader,
+                                  "group": mk.group,
+                                  "dropped_after": drop and drop[0], "dropped_group": drop and drop[1],
+                                  "regroup_after": again and again[0], "regroup_group": again and again[1]}
         return res
 
     @staticmethod
@@ -249,6 +360,16 @@ class Scenario:
             after = "no new leader" if k["after"] is None else f"new leader R{k['new_leader']} {k['after']:.1f} s later"
             print(f"killed R{k['robot']}, leader of task {k['task'] >> 16}.{k['task'] & 0xFFFF}, at "
                   f"{k['at']:.1f} s: {after}", file=out)
+        mk = res.get("member_kill")
+        if mk:
+            plus = lambda g: "+".join(f"R{r}" for r in g)      # noqa: E731
+            drop = ("not dropped" if mk["dropped_after"] is None
+                    else f"dropped {mk['dropped_after']:.1f} s later ({plus(mk['dropped_group'])})")
+            again = ("no new round" if mk["regroup_after"] is None
+                     else f"new round {mk['regroup_after']:.1f} s after the drop: {plus(mk['regroup_group'])}")
+            print(f"killed R{mk['robot']}, member of task {mk['task'] >> 16}.{mk['task'] & 0xFFFF} "
+                  f"(group {plus(mk['group'])}, leader R{mk['leader']}), at {mk['at']:.1f} s: {drop}; {again}",
+                  file=out)
         if res["driven"]:
             print("driven (m): " + ", ".join(f"R{rid} {d:.1f}" for rid, d in sorted(res["driven"].items())), file=out)
         print(f"objects delivered: {res['done']}/{len(res['objects'])}   sim time {res['sim_time']:.1f} s", file=out)

@@ -215,11 +215,15 @@ class Leader:
 
     def _settle(self, now: float) -> None:
         """The awards of a round are answered or expired: say who the group is, plan the next check (b)."""
+        self._announce()
+        self.next_check = now + self.o.time_auction
+
+    def _announce(self) -> None:
+        """The group, to whoever listens (a ground station hears "task a.b awarded to R1+R3"), when it changed."""
         group = self.group()
         if group != self.settled:
             self.settled = group
             self.host.events.append(TaskEvent(self.task, AWARDED, group, f"group of {len(group)}"))
-        self.next_check = now + self.o.time_auction
 
     # ------------------------------------------------------------------ each tick
     def tick(self, now: float) -> list:
@@ -283,6 +287,7 @@ class Leader:
         self.members.pop(r, None)
         self.awarded.pop(r, None)
         self.host.log.warning("task %d: member %d dropped (%s)", self.task, r, why)
+        self._announce()                           # else the group heard last keeps naming it until a round settles
         self.next_check = now                      # (a): re-check eq. 8 at once
 
     def _release(self, r: int, reason: int) -> DrExitLeader:

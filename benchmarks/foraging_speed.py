@@ -92,6 +92,9 @@ def method_of(name: str):
     if name == "standin":
         from tests.foraging_standin import STANDIN, StandInOptions
         return STANDIN, StandInOptions()
+    if name == "dr":                  # with the shipped interference model, as the reproductions run it
+        from runtime.allocation.dr.options import DrOptions
+        return name, DrOptions(model=str(ROOT / "runtime" / "allocation" / "dr" / "interference_pioneer3dx.json"))
     return name, None
 
 

@@ -223,19 +223,41 @@ def test_decide_scores_equal_the_2d_gaussian_filter_of_the_weighted_votes(seed, 
     assert d.arc == int(np.argmax(want))
 
 
-def test_something_dead_ahead_votes_for_curving_right_and_the_vote_is_held():
+def _approach(avoid, arcs, start: float, closing: float, speed: float, cycles: int = 8):
+    """One reading dead ahead, ``start`` m off and closing at ``closing`` m/s, the robot driving at ``speed``; the
+    last ballot's votes."""
+    avoid.speed = speed
+    for k in range(cycles):
+        avoid.on_ranges([(0.0, start - closing * 0.1 * k)], 0.1 * k)
+        votes = avoid.ballot(arcs, 0.1 * k).votes
+    return votes
+
+
+def test_something_coming_head_on_votes_for_curving_right_and_the_vote_is_held():
     arcs = ArcSet.uniform(max_speed=0.25, max_turn_rate=2.0)
     avoid = AvoidObstacles(radius=0.25)
-    avoid.on_ranges([(0.0, 1.2)], 0.0)                         # dead ahead, 1.2 m
+    votes = _approach(avoid, arcs, 1.5, closing=0.4, speed=0.2)      # it comes at us at 0.2 m/s
     assert avoid.dead_ahead() > 0
-    votes = avoid.ballot(arcs, 0.0).votes
     right, left = arcs.nearest(0.2, -1.0), arcs.nearest(0.2, 1.0)
     assert votes[right] > votes[left]
-    avoid.on_ranges([(0.0, 5.0)], 0.1)                          # lane clear: still held ...
-    assert avoid.ballot(arcs, 0.1).votes[right] > avoid.ballot(arcs, 0.1).votes[left]
-    avoid.on_ranges([(0.0, 5.0)], 3.0)                          # ... for keep_right_hold s only
-    v = avoid.ballot(arcs, 3.0).votes
+    avoid.on_ranges([(0.0, 5.0)], 1.0)                          # lane clear: still held ...
+    assert avoid.ballot(arcs, 1.0).votes[right] > avoid.ballot(arcs, 1.0).votes[left]
+    avoid.on_ranges([(0.0, 5.0)], 4.0)                          # ... for keep_right_hold s only
+    v = avoid.ballot(arcs, 4.0).votes
     assert v[right] == v[left]
+
+
+def test_what_stands_in_the_lane_is_passed_and_what_goes_our_way_is_followed():
+    arcs = ArcSet.uniform(max_speed=0.25, max_turn_rate=2.0)
+    right, left = arcs.nearest(0.2, -1.0), arcs.nearest(0.2, 1.0)
+    standing = _approach(AvoidObstacles(radius=0.25), arcs, 1.5, closing=0.2, speed=0.2)
+    assert standing[right] > standing[left] + 0.5
+    ahead = _approach(AvoidObstacles(radius=0.25), arcs, 1.5, closing=0.0, speed=0.2)   # goes as fast as we do
+    assert ahead[right] == pytest.approx(ahead[left], abs=1e-9)
+    first = AvoidObstacles(radius=0.25)                          # not watched long enough to judge: no vote yet
+    first.on_ranges([(0.0, 1.2)], 0.0)
+    v = first.ballot(arcs, 0.0).votes
+    assert first.dead_ahead() > 0 and v[right] == pytest.approx(v[left], abs=1e-9)
 
 
 def test_what_stands_at_the_goal_is_not_passed():

@@ -79,9 +79,9 @@ def test_trips_alternate_load_and_delivery_at_the_right_places_and_times():
     for p, xy in zip(got, where):
         target = (1.4, 0.0) if p.event == LOADED else (0.0, 0.0)
         assert math.dist(xy, target) <= 0.3 + 0.05, (p.event, xy)
-    # a round trip of 2 x 1.4 m at <= 0.25 m/s, turning at each end, plus 0.48 s of dwell: 11.7 s at the least
+    # from one mark's reach to the other's and back, 2 x (1.4 - 2 x 0.3) m at <= 0.25 m/s, plus 0.48 s of dwell
     deliveries = [p.t for p in got if p.event == DELIVERED]
-    assert all(b - a > 11.7 for a, b in zip(deliveries, deliveries[1:]))
+    assert all(b - a > 2 * 0.8 / 0.25 + 0.48 for a, b in zip(deliveries, deliveries[1:]))
 
 
 def test_a_changed_coalition_keeps_the_load_on_board():
@@ -161,3 +161,30 @@ def test_an_idle_robot_makes_way_only_when_armed_and_not_boxed_in():
     boxed = BaseSensors(ranges=((0.0, 0.4), (math.pi, 0.35)))
     assert ex.step((0.0, 0.0, 0.0), boxed, 0.3)[0] == (0.0, 0.0)
     assert ex.step((0.0, 0.0, 0.0), BaseSensors(ranges=((0.0, 2.0),)), 0.4)[0] == (0.0, 0.0)
+
+
+def test_circuit_legs_turn_left_round_each_mark_and_meet_at_the_tips():
+    from runtime.execution.transport import TIP_POINTS, circuit_leg
+    out = circuit_leg((0.0, 0.0), (3.0, 0.0), 0.4, 0.3)
+    back = circuit_leg((3.0, 0.0), (0.0, 0.0), 0.4, 0.3)
+    tip_out, tip_back = out[-1 - TIP_POINTS], back[-1 - TIP_POINTS]
+    assert math.dist(tip_out, (3.0, 0.0)) < 0.3 and math.dist(tip_back, (0.0, 0.0)) < 0.3     # within reach
+    assert out[0] == pytest.approx(tip_back) and back[0] == pytest.approx(tip_out)   # each leaves from the other's tip
+    assert out[-1] == pytest.approx(back[TIP_POINTS])          # past the tip, on to the way back's lane
+    assert all(y == pytest.approx(-0.4) for x, y in out if 1.0 < x < 2.0)             # right of +x is -y ...
+    assert all(y == pytest.approx(0.4) for x, y in back if 1.0 < x < 2.0)             # ... and of -x, +y
+    turn = out[-1 - 2 * TIP_POINTS:]                            # round the goal: counter-clockwise (left)
+    cross = [(b[0] - a[0]) * (c[1] - b[1]) - (b[1] - a[1]) * (c[0] - b[0]) for a, b, c in zip(turn, turn[1:], turn[2:])]
+    assert all(c > 0 for c in cross)
+    assert circuit_leg((0.0, 0.0), (1.0, 0.0), 0.4, 0.3) is None          # too close for two turns
+    assert circuit_leg((0.0, 0.0), (3.0, 0.0), 0.0, 0.3) is None
+
+
+def test_join_drives_onto_the_leg_a_little_ahead_of_the_nearest_point():
+    from runtime.execution.transport import join
+    leg = [(0.0, 0.0), (1.0, 0.0), (2.0, 0.0), (3.0, 0.0)]
+    path = join((1.5, 0.3, 0.0), leg, 0.2)
+    assert path[0] == (1.5, 0.3) and path[1] == pytest.approx((1.7, 0.0)) and path[2:] == [(2.0, 0.0), (3.0, 0.0)]
+    assert join((0.5, -0.2, 0.0), leg, 0.2, since=2)[1] == pytest.approx((2.2, 0.0))      # not before point 2
+    assert join((5.0, 0.1, 0.0), leg, 0.2, upto=3) == [(5.0, 0.1), (2.0, 0.0)]            # past the part searched
+    assert join((5.0, 0.1, 0.0), leg, 0.2, upto=3, past=(9.0, 9.0)) == [(5.0, 0.1), (9.0, 9.0)]

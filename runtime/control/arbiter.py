@@ -185,9 +185,9 @@ class AvoidObstacles:
     its path brings the robot within ``radius + margin`` of a reading (and closer to it than now); arcs
     hitting within ``horizon`` seconds get votes from -1 (hit at once) rising to 0 (hit at the horizon),
     and moving arcs hitting within ``veto_time`` are vetoed.  Something in the robot's lane ahead (nearer than its
-    goal less a body, within ``ahead_range`` of the clearance) adds a vote for curving right, growing as it nears
-    (``keep_right``) and held ``keep_right_hold`` s after the lane clears: robots meeting head-on pass each other
-    right to right.  Readings that are not finite or negative are dropped and counted in ``dropped``.
+    goal less a body, within ``ahead_range`` of the clearance) and not drawing away (:meth:`to_pass`) adds a vote for
+    curving right, growing as it nears (``keep_right``) and held ``keep_right_hold`` s after the lane clears: robots
+    meeting head-on pass each other right to right, robots going the same way follow each other.  Readings that are not finite or negative are dropped and counted in ``dropped``.
     """
     weight: float = 1.5
     radius: float = 0.17
@@ -203,6 +203,9 @@ class AvoidObstacles:
     ahead_range: float = 2.0
     keep_right_hold: float = 2.0
     goal_distance: float = math.inf      # m to where the robot is going (set each cycle by whoever drives it)
+    speed: float = 0.0                   # m/s the robot moves forward (set each cycle by whoever drives it)
+    follow_speed: float = 0.05           # m/s: what is dead ahead and draws away this fast or faster is followed
+    closing_window: float = 0.5          # s over which how fast the lane ahead closes is judged
     name: str = "avoid"
     dropped: int = 0
     _bump_until: float = field(default=-math.inf, repr=False)
@@ -211,6 +214,7 @@ class AvoidObstacles:
     _points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)), repr=False)
     _ranges_at: float = field(default=-math.inf, repr=False)
     _ahead: tuple[float, float] = field(default=(0.0, -math.inf), repr=False)
+    _gaps: list = field(default_factory=list, repr=False)       # (time, gap ahead) over the closing window
 
     def on_bumpers(self, left: bool, right: bool, now: float) -> None:
         """Bumper state: a press starts (or extends) a back-up-and-turn-away manoeuvre."""
@@ -307,14 +311,45 @@ class AvoidObstacles:
             hits = np.isfinite(ttc)
             votes = np.where(hits, np.minimum(votes, -(1.0 - ttc / self.horizon)), votes)
             ahead = self.dead_ahead()
-            if ahead > 0:
+            if ahead > 0 and self.to_pass(now):
                 self._ahead = (ahead, now)
             elif now - self._ahead[1] <= self.keep_right_hold:
                 ahead = self._ahead[0]              # held: turning right clears the lane, the pass is not done
+            else:
+                ahead = 0.0                         # what is ahead goes our way, or stands: follow it, do not pass
             if ahead > 0 and self.keep_right > 0:
                 wmax = float(np.max(np.abs(arcs.w))) or 1.0
                 votes = votes - ahead * self.keep_right * np.where(arcs.v > 0, arcs.w / wmax, 0.0)
         return Ballot(_clip1(votes), veto)
+
+    def to_pass(self, now: float) -> bool:
+        """Whether what is dead ahead is to be passed on the right: it comes towards the robot or stands, i.e. it
+        does not draw away at ``follow_speed`` or more, judged from how fast the gap to it closed over the last
+        ``closing_window`` s beside the robot's own ``speed`` (False until the lane has been watched that long).
+        A robot ahead going the same way (the next one on a transport circuit) is followed, not overtaken: range
+        votes keep the distance; overtaking it on the right pushed robots off their lane into the oncoming one."""
+        gap = self._lane_gap()
+        if not math.isfinite(gap):
+            self._gaps = []
+            return False
+        self._gaps = [g for g in self._gaps if now - g[0] <= self.closing_window] + [(now, gap)]
+        t0, g0 = self._gaps[0]
+        if now - t0 < 0.6 * self.closing_window:
+            return False
+        closing = (g0 - gap) / (now - t0)
+        return closing - self.speed >= -self.follow_speed
+
+    def _lane_gap(self) -> float:
+        """Distance from the clearance to the nearest range point in the robot's lane ahead (inf: none), leaving
+        out what stands within a body of the goal."""
+        pts = self._points
+        if len(pts) == 0:
+            return math.inf
+        clearance = self.radius + self.margin
+        lane = (pts[:, 0] > 0) & (np.abs(pts[:, 1]) < clearance) & (pts[:, 0] < self.goal_distance - 2 * self.radius)
+        if not lane.any():
+            return math.inf
+        return float(np.min(pts[lane, 0])) - clearance
 
     def dead_ahead(self) -> float:
         """How close the nearest range point in the robot's lane ahead is: 0 (none within ``ahead_range`` of
@@ -322,14 +357,9 @@ class AvoidObstacles:
         does: two robots meeting head-on both veer to their right and pass, where votes that only penalise the
         arcs towards each other leave both facing each other, stopped (each one's path runs through the other).
         What stands at the goal (within a body of it: a robot at the same mark) is waited for, not passed."""
-        pts = self._points
-        if len(pts) == 0:
+        gap = self._lane_gap()
+        if not math.isfinite(gap):
             return 0.0
-        clearance = self.radius + self.margin
-        lane = (pts[:, 0] > 0) & (np.abs(pts[:, 1]) < clearance) & (pts[:, 0] < self.goal_distance - 2 * self.radius)
-        if not lane.any():
-            return 0.0
-        gap = float(np.min(pts[lane, 0])) - clearance
         return float(min(max(1.0 - gap / self.ahead_range, 0.0), 1.0))
 
 

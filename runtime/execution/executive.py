@@ -72,6 +72,7 @@ class Executive:
         self._mark: tuple[tuple, float, float] | None = None  # (pose, time, m asked since) of the stall window
         self._last: tuple | None = None                         # (follower's command, time) of the last cycle
         self._rng = random.Random(self.ctx.seed)
+        self._pose_at: tuple | None = None                      # (pose, time) of the last cycle
         self._rebuild_arbiter()
 
     def _arcs(self) -> ArcSet:
@@ -109,6 +110,8 @@ class Executive:
             p.lookahead, p.cruise_speed, p.max_turn_rate, p.goal_tolerance = (t.lookahead, t.cruise_speed,
                                                                               t.max_turn_rate, t.goal_tolerance)
             p.slow_radius, p.min_speed = 2.0 * t.lookahead, 0.15 * t.cruise_speed
+            if hasattr(e, "retune"):
+                e.retune()                        # the executor's own adjustments to its follower
         self.arbiter.arcs = self._arcs()
 
     # ------------------------------------------------------------------ commitments
@@ -148,8 +151,11 @@ class Executive:
         if ranges:
             self.avoid.on_ranges(ranges, now)
         lead = self._lead()
-        path = lead.follow.path if lead is not None else None
-        self.avoid.goal_distance = math.hypot(path[-1][0] - pose[0], path[-1][1] - pose[1]) if path else math.inf
+        goal = None
+        if lead is not None:
+            goal = getattr(lead, "goal", None) or (lead.follow.path[-1] if lead.follow.path else None)
+        self.avoid.goal_distance = math.hypot(goal[0] - pose[0], goal[1] - pose[1]) if goal else math.inf
+        self._track_speed(pose, now)
         if lead is not None:
             self._check_stall(pose, now)
         backing = self.avoid.backing_up(now)
@@ -192,6 +198,15 @@ class Executive:
             return 0.0, 0.0                      # boxed in: stay
         self.made_way += 1
         return (-MAKE_WAY_SPEED if ahead else MAKE_WAY_SPEED), 0.0
+
+    def _track_speed(self, pose, now: float) -> None:
+        """The robot's forward speed from its last two poses, for the avoidance behaviour (what closes on it
+        faster than it drives comes towards it)."""
+        last, self._pose_at = self._pose_at, (pose, now)
+        if last is not None and now > last[1]:
+            (x, y, _), t = last
+            th = pose[2]
+            self.avoid.speed = ((pose[0] - x) * math.cos(th) + (pose[1] - y) * math.sin(th)) / (now - t)
 
     def _check_stall(self, pose, now: float) -> None:
         """A robot whose path follower has asked for at least ``STALL_MOVE`` m of driving (turning counts at the

@@ -23,7 +23,70 @@ from runtime.tasks.transport import DELIVERED, LOADED
 
 TO_OBJECT, LOADING, TO_DELIVERY, UNLOADING = "to_object", "loading", "to_delivery", "unloading"
 DEFAULT_REACH = 0.3           # m
-LANE_FACTOR = 1.2             # default lane offset: this many robot radii right of the straight line
+TIP_POINTS = 6                # segments per quarter turn of a circuit (a leg goes on one quarter turn past its tip)
+LANE_FACTOR = 1.6             # default lane offset: this many robot radii right of the straight line
+TIP_FACTOR = 0.85             # a circuit's tip lies this share of reach short of its mark
+LOOKAHEAD_FACTOR = 0.5        # pure pursuit looks ahead at most this share of the lane (the circuit's turn radius)
+
+
+def circuit_leg(start: tuple[float, float], goal: tuple[float, float], lane: float, reach: float,
+                arc_points: int = TIP_POINTS) -> list | None:
+    """The leg from mark ``start`` to mark ``goal`` of a one-way circuit between them: robots leave ``start`` along a
+    quarter circle of radius ``lane``, drive ``lane`` m right of the straight line, and turn left along a half
+    circle round ``goal`` whose middle (the *tip*) lies ``TIP_FACTOR * reach`` short of ``goal`` on the line, so
+    the turn passes within reach of the mark; the leg ends on the way back's lane (``arc_points`` segments per
+    quarter turn).  The way back is the same circuit seen from the other end: a robot that stops in the turn to
+    load carries on forward, away from the robot behind it and onto the other lane, so arriving and departing
+    robots never cross at a mark (driving on the right, the circuit turns left round each mark, as a roundabout
+    does).  None when the marks are closer than the two turns need or ``lane`` is not positive."""
+    (x0, y0), (x1, y1) = start, goal
+    d = math.hypot(x1 - x0, y1 - y0)
+    e = TIP_FACTOR * reach
+    if lane <= 0 or d < 2.0 * (lane + e):
+        return None
+    ux, uy = (x1 - x0) / d, (y1 - y0) / d
+    rx, ry = uy, -ux                                              # the right-hand normal
+    cs = (x0 + ux * (e + lane), y0 + uy * (e + lane))             # centre of the turn leaving start
+    cg = (x1 - ux * (e + lane), y1 - uy * (e + lane))             # ... and of the turn reaching goal
+    out = []
+    for k in range(arc_points + 1):                               # from start's tip to the right lane
+        a = 0.5 * math.pi * k / arc_points
+        out.append((cs[0] + lane * (-ux * math.cos(a) + rx * math.sin(a)),
+                    cs[1] + lane * (-uy * math.cos(a) + ry * math.sin(a))))
+    for k in range(2 * arc_points + 1):                           # from the right lane past goal's tip to the other
+        a = 0.5 * math.pi * k / arc_points
+        out.append((cg[0] + lane * (rx * math.cos(a) + ux * math.sin(a)),
+                    cg[1] + lane * (ry * math.cos(a) + uy * math.sin(a))))
+    return out
+
+
+def join(pose, leg: list, lead: float, upto: int | None = None, since: int = 0, past=None) -> list:
+    """``leg`` driven from ``pose``: straight to the point ``lead`` m past the leg's point nearest the robot (among
+    its points ``since`` to ``upto``, default all), then on along the leg; straight to ``past`` (default the last
+    point searched) when the nearest is the last point searched."""
+    px, py = pose[0], pose[1]
+    best, at = math.inf, (since, 0.0)
+    for i, ((ax, ay), (bx, by)) in enumerate(zip(leg[since:upto], leg[since + 1:upto]), since):
+        dx, dy = bx - ax, by - ay
+        l2 = dx * dx + dy * dy
+        t = 0.0 if l2 == 0 else min(max(((px - ax) * dx + (py - ay) * dy) / l2, 0.0), 1.0)
+        d2 = (ax + t * dx - px) ** 2 + (ay + t * dy - py) ** 2
+        if d2 < best:
+            best, at = d2, (i, t * math.sqrt(l2))
+    i, s = at
+    last = len(leg[:upto]) - 2
+    if i == last and s >= math.dist(leg[last], leg[last + 1]):
+        return [(px, py), leg[last + 1] if past is None else past]
+    s += lead
+    while i < len(leg) - 1:
+        (ax, ay), (bx, by) = leg[i], leg[i + 1]
+        length = math.hypot(bx - ax, by - ay)
+        if s <= length:
+            f = s / length if length > 0 else 0.0
+            return [(px, py), (ax + f * (bx - ax), ay + f * (by - ay))] + leg[i + 1:]
+        s -= length
+        i += 1
+    return [(px, py), leg[-1]]
 
 
 def keep_lane(path: list, offset: float) -> list:
@@ -77,15 +140,31 @@ class TransportExecutor:
 
     def _pursuit(self) -> PurePursuit:
         p = self.ctx.pursuit()
-        p.goal_tolerance = max(p.goal_tolerance, float(self.commitment.param("reach", DEFAULT_REACH)))
+        p.goal_tolerance = max(p.goal_tolerance, 0.5 * self.reach)
+        p.lookahead = min(p.lookahead, LOOKAHEAD_FACTOR * self.lane)
         return p
+
+    def retune(self) -> None:
+        """After the executive applied changed tunables to the follower: look ahead no farther than the circuit's
+        turns allow (a lookahead longer than about half the turn radius slows pure pursuit down in every turn)."""
+        p = self.follow.follower
+        p.lookahead = min(p.lookahead, LOOKAHEAD_FACTOR * self.lane)
 
     @property
     def lane(self) -> float:
         return float(self.commitment.param("lane", LANE_FACTOR * self.ctx.radius))
 
     def _route(self, pose) -> list:
-        return keep_lane(self.ctx.planner.route(pose, self.goal), self.lane)
+        route = self.ctx.planner.route(pose, self.goal)
+        other = self.delivery if self.phase in (TO_OBJECT, LOADING) else self.task.position
+        if len(route) == 2 and len(self.ctx.planner.route(other, self.goal)) == 2:     # the map leaves a straight way
+            leg = circuit_leg(other, self.goal, self.lane, self.reach)
+            if leg is not None:
+                # from the mark it left, the circuit's turn; from elsewhere, the lane (not into the other mark's turn)
+                at_start = math.hypot(pose[0] - other[0], pose[1] - other[1]) <= 2 * self.reach
+                return join(pose, leg, self.ctx.tunables.lookahead, upto=len(leg) - TIP_POINTS,
+                            since=0 if at_start else TIP_POINTS, past=self.goal)
+        return keep_lane(route, self.lane)
 
     @property
     def goal(self) -> tuple[float, float]:
@@ -99,7 +178,7 @@ class TransportExecutor:
     def recommit(self, commitment: Commitment, now: float) -> None:
         """Same task, new partners or parameters: carry on from where the trip is."""
         self.commitment = commitment
-        self.follow.follower.goal_tolerance = max(self.ctx.goal_tolerance, self.reach)
+        self.follow.follower.goal_tolerance = max(self.ctx.goal_tolerance, 0.5 * self.reach)
 
     def begin(self, pose, now: float) -> None:
         if not self._routed and self.phase in (TO_OBJECT, TO_DELIVERY):
@@ -114,7 +193,7 @@ class TransportExecutor:
         self.follow.update(pose, now)
         if self.phase in (TO_OBJECT, TO_DELIVERY):
             near = math.hypot(self.goal[0] - pose[0], self.goal[1] - pose[1]) <= self.reach
-            if self.follow.done and near:
+            if near:                              # within reach of the mark: work from here
                 self.phase = LOADING if self.phase == TO_OBJECT else UNLOADING
                 self._dwell_until = now + self.load * self.load_time
                 self.follow.set_path(None)        # stand still (the Stop behaviour votes for it)

@@ -247,13 +247,14 @@ def test_something_coming_head_on_votes_for_curving_right_and_the_vote_is_held()
     assert v[right] == v[left]
 
 
-def test_what_stands_in_the_lane_is_passed_and_what_goes_our_way_is_followed():
+def test_what_goes_our_way_or_stands_is_followed_not_passed():
     arcs = ArcSet.uniform(max_speed=0.25, max_turn_rate=2.0)
     right, left = arcs.nearest(0.2, -1.0), arcs.nearest(0.2, 1.0)
-    standing = _approach(AvoidObstacles(radius=0.25), arcs, 1.5, closing=0.2, speed=0.2)
-    assert standing[right] > standing[left] + 0.5
-    ahead = _approach(AvoidObstacles(radius=0.25), arcs, 1.5, closing=0.0, speed=0.2)   # goes as fast as we do
-    assert ahead[right] == pytest.approx(ahead[left], abs=1e-9)
+    coming = _approach(AvoidObstacles(radius=0.25), arcs, 1.5, closing=0.3, speed=0.2)   # comes at 0.1 m/s
+    assert coming[right] > coming[left] + 0.5
+    for closing in (0.2, 0.0):                                  # stands; goes as fast as we do
+        ahead = _approach(AvoidObstacles(radius=0.25), arcs, 1.5, closing=closing, speed=0.2)
+        assert ahead[right] == pytest.approx(ahead[left], abs=1e-9)
     first = AvoidObstacles(radius=0.25)                          # not watched long enough to judge: no vote yet
     first.on_ranges([(0.0, 1.2)], 0.0)
     v = first.ballot(arcs, 0.0).votes

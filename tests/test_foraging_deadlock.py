@@ -2,7 +2,7 @@
 
 Two robots that meet head-on on one line used to stop nose to nose for good when they avoided by sonar: range
 avoidance vetoed every arc towards the other robot and pure pursuit kept pointing both at the line through it.
-The executive now keeps right when something is in its lane ahead (coming at it, or standing) and backs out of a
+The executive now keeps right when something in its lane ahead comes towards it, and backs out of a
 standstill it cannot vote its way out of (runtime/control/arbiter.py, runtime/execution/executive.py); these checks
 hold it to that, over a sweep of lateral offsets, check 8 robots on one object keep moving weight through a long
 run, and that two robots on one object move more than one (runtime/execution/transport.py's circuit).

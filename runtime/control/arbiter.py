@@ -185,7 +185,7 @@ class AvoidObstacles:
     its path brings the robot within ``radius + margin`` of a reading (and closer to it than now); arcs
     hitting within ``horizon`` seconds get votes from -1 (hit at once) rising to 0 (hit at the horizon),
     and moving arcs hitting within ``veto_time`` are vetoed.  Something in the robot's lane ahead (nearer than its
-    goal less a body, within ``ahead_range`` of the clearance) and not drawing away (:meth:`to_pass`) adds a vote for
+    goal less a body, within ``ahead_range`` of the clearance) and coming towards it (:meth:`to_pass`) adds a vote for
     curving right, growing as it nears (``keep_right``) and held ``keep_right_hold`` s after the lane clears: robots
     meeting head-on pass each other right to right, robots going the same way follow each other.  Readings that are not finite or negative are dropped and counted in ``dropped``.
     """
@@ -204,7 +204,7 @@ class AvoidObstacles:
     keep_right_hold: float = 2.0
     goal_distance: float = math.inf      # m to where the robot is going (set each cycle by whoever drives it)
     speed: float = 0.0                   # m/s the robot moves forward (set each cycle by whoever drives it)
-    follow_speed: float = 0.05           # m/s: what is dead ahead and draws away this fast or faster is followed
+    oncoming_speed: float = 0.05         # m/s: what is dead ahead and comes at the robot this fast or faster is passed
     closing_window: float = 0.5          # s over which how fast the lane ahead closes is judged
     name: str = "avoid"
     dropped: int = 0
@@ -323,11 +323,13 @@ class AvoidObstacles:
         return Ballot(_clip1(votes), veto)
 
     def to_pass(self, now: float) -> bool:
-        """Whether what is dead ahead is to be passed on the right: it comes towards the robot or stands, i.e. it
-        does not draw away at ``follow_speed`` or more, judged from how fast the gap to it closed over the last
-        ``closing_window`` s beside the robot's own ``speed`` (False until the lane has been watched that long).
-        A robot ahead going the same way (the next one on a transport circuit) is followed, not overtaken: range
-        votes keep the distance; overtaking it on the right pushed robots off their lane into the oncoming one."""
+        """Whether what is dead ahead is to be passed on the right: it comes towards the robot at ``oncoming_speed``
+        or more, judged from how fast the gap to it closed over the last ``closing_window`` s beside the robot's own
+        ``speed`` (False until the lane has been watched that long).  A robot ahead going the same way (the next one
+        on a transport circuit) or standing (working at a mark) is followed, not overtaken: range votes keep the
+        distance, and a standstill that lasts is the executive's stall escape.  Overtaking on the right pushed
+        robots off their lane into the oncoming one, and two robots standing nose to nose, each keeping right
+        while its path follower turned it back, dithered for good."""
         gap = self._lane_gap()
         if not math.isfinite(gap):
             self._gaps = []
@@ -337,7 +339,7 @@ class AvoidObstacles:
         if now - t0 < 0.6 * self.closing_window:
             return False
         closing = (g0 - gap) / (now - t0)
-        return closing - self.speed >= -self.follow_speed
+        return closing - self.speed >= self.oncoming_speed
 
     def _lane_gap(self) -> float:
         """Distance from the clearance to the nearest range point in the robot's lane ahead (inf: none), leaving

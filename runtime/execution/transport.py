@@ -197,8 +197,9 @@ class TransportExecutor:
                 self.phase = LOADING if self.phase == TO_OBJECT else UNLOADING
                 self._dwell_until = now + self.load * self.load_time
                 self.follow.set_path(None)        # stand still (the Stop behaviour votes for it)
-            elif self.follow.done:                # stopped short (pushed, or the path ended off the mark)
-                self.follow.set_path(self._route(pose))
+            elif self.follow.done:                # the path ended off the mark (pushed, or odometry drifted so the
+                # circuit's turn missed reach): straight for the mark, not round the circuit again and again
+                self.follow.set_path(self.ctx.planner.route(pose, self.goal))
             return []
         if now < self._dwell_until:
             return []

@@ -90,7 +90,7 @@ class Daemon:
         self.node = FleetNode(self.id, self.agent, armed=cfg.robot.armed, peers=[p.id for p in cfg.comms.peers])
         self.executive = Executive(ExecContext(self.planner, Tunables(c.cruise_speed, c.lookahead, c.max_turn_rate,
                                                                       c.goal_tolerance), self.log, radius,
-                                               seed=self.id, agent=self.agent))
+                                               seed=self.id, agent=self.agent, robot_id=self.id))
         self._sense_agent = getattr(self.agent, "sense", None)    # agents that read the robot's pose and sensors
         self.ground = GroundServices(self)
         self.period = 1.0 / c.rate

@@ -188,3 +188,55 @@ def test_join_drives_onto_the_leg_a_little_ahead_of_the_nearest_point():
     assert join((0.5, -0.2, 0.0), leg, 0.2, since=2)[1] == pytest.approx((2.2, 0.0))      # not before point 2
     assert join((5.0, 0.1, 0.0), leg, 0.2, upto=3) == [(5.0, 0.1), (2.0, 0.0)]            # past the part searched
     assert join((5.0, 0.1, 0.0), leg, 0.2, upto=3, past=(9.0, 9.0)) == [(5.0, 0.1), (9.0, 9.0)]
+
+
+def test_a_circuit_holds_robots_by_its_length_and_the_rest_wait_beside_the_object_off_it():
+    from runtime.execution.transport import circuit_capacity, hold_spot
+    assert [circuit_capacity(d, 1.3, 9) for d in (0.5, 1.4, 1.8, 2.5, 4.0)] == [1, 2, 2, 3, 6]
+    assert circuit_capacity(4.0, 1.3, 3) == 3 and circuit_capacity(4.0, 0.0, 3) == 3
+    spots = [hold_spot((2.0, 0.0), (0.0, 0.0), k, 0.25) for k in range(4)]
+    assert spots[0] == pytest.approx((1.4, -1.5)) and spots[1] == pytest.approx((1.4, 1.5))   # right side first
+    assert spots[2] == pytest.approx((1.4, -2.15)) and spots[3] == pytest.approx((1.4, 2.15))
+    assert all(math.dist(a, b) >= 0.5 for i, a in enumerate(spots) for b in spots[i + 1:])   # bodies apart
+
+
+def _executor(me, partners, position=(1.4, 0.0)):
+    ctx = ExecContext(RobotPlanner(None, "euclid", 0.25, 0, 1), Tunables(0.25, 0.3, 2.0, 0.12),
+                      logging.getLogger("test"), 0.25, robot_id=me)
+    task = Task(7, "transport", Transport(*position, 40.0, 108.0, 100.0))
+    return TransportExecutor(Commitment(task, partners, "member", PARAMS), ctx), task
+
+
+def test_partners_beyond_the_circuits_capacity_wait_their_turn_and_go_when_it_comes():
+    """At 1.4 m the circuit holds two: of robots 1, 3, 4, 6 the two lowest ids drive, 4 and 6 wait beside the
+    object (4 on the arrival lane's side); when robot 1 leaves the coalition, 4 goes to the object."""
+    from runtime.execution.transport import hold_spot
+    driving, _ = _executor(3, (1, 4, 6))
+    assert not driving.waiting and driving.goal == (1.4, 0.0)
+    ex, task = _executor(4, (1, 3, 6))
+    assert ex.waiting and ex.goal == pytest.approx(hold_spot((1.4, 0.0), (0.0, 0.0), 0, 0.25))
+    ex.begin((0.0, 1.0, 0.0), 0.0)
+    assert ex.follow.path[-1] == pytest.approx(ex.goal)           # straight to its place, not onto the circuit
+    ex.update((1.4, 0.1, 0.0), 1.0)                               # passing within reach of the object ...
+    assert ex.phase == TO_OBJECT                                  # ... does not load while waiting
+    ex.recommit(Commitment(task, (3, 6), "member", PARAMS), 2.0)
+    ex.begin((1.4, -1.5, 0.0), 2.0)
+    assert not ex.waiting and ex.follow.path[-1] != pytest.approx(hold_spot((1.4, 0.0), (0.0, 0.0), 0, 0.25))
+    alone, _ = _executor(9, ())
+    assert not alone.waiting                                      # no coalition: drives
+    anonymous, _ = _executor(None, (1, 2, 3))
+    assert not anonymous.waiting                                  # no id to take turns by: drives
+
+
+def test_a_robot_carrying_a_load_finishes_its_trip_before_it_waits():
+    ex, task = _executor(2, (1,))
+    ex.begin((0.0, 0.0, 0.0), 0.0)
+    ex.update((1.4, 0.0, 0.0), 0.0)                               # loads
+    ex.update((1.4, 0.0, 0.0), 1.0)
+    assert ex.phase == TO_DELIVERY
+    crowd = Commitment(task, (0, 1), "member", PARAMS)            # a lower id joins: robot 2 is third of three
+    ex.recommit(crowd, 1.0)
+    assert not ex.waiting and ex.goal == (0.0, 0.0)               # still carries to the delivery point
+    ex.update((0.0, 0.0, 0.0), 2.0)
+    ex.update((0.0, 0.0, 0.0), 3.0)                               # unloads: now it waits its turn
+    assert ex.phase == TO_OBJECT and ex.waiting and ex.turn == 0

@@ -36,6 +36,7 @@ class ExecContext:
     radius: float                     # m, the base's footprint (obstacle avoidance)
     seed: int = 0                     # the robot's own random choices (escape turns): its id on a robot
     agent: object = None              # the allocation agent, for executors that read it (CoMutaR's)
+    robot_id: int | None = None       # the robot's fleet id, for executors that take turns with partners
 
     @property
     def goal_tolerance(self) -> float:

@@ -216,7 +216,8 @@ class _Robot:
         self.log = get_logger("foraging.robot", rid)
         planner = RobotPlanner(None, "euclid", RADIUS, 0, rid, rid)
         tunables = Tunables(cfg.speed, cfg.lookahead, cfg.max_turn_rate, cfg.goal_tolerance)
-        self.executive = Executive(ExecContext(planner, tunables, self.log, RADIUS, seed=cfg.seed * 1000 + rid))
+        self.executive = Executive(ExecContext(planner, tunables, self.log, RADIUS, seed=cfg.seed * 1000 + rid,
+                                               robot_id=rid))
         self.node: FleetNode | None = None
         self._fixed: tuple[Commitment, ...] = ()          # calibration mode's commitment
         self.timeout = cfg.heartbeat_timeout

@@ -194,9 +194,9 @@ def test_a_circuit_holds_robots_by_its_length_and_the_rest_wait_beside_the_objec
     from runtime.execution.transport import circuit_capacity, hold_spot
     assert [circuit_capacity(d, 1.3, 9) for d in (0.5, 1.4, 1.8, 2.5, 4.0)] == [1, 2, 2, 3, 6]
     assert circuit_capacity(4.0, 1.3, 3) == 3 and circuit_capacity(4.0, 0.0, 3) == 3
-    spots = [hold_spot((2.0, 0.0), (0.0, 0.0), k, 0.25) for k in range(4)]
-    assert spots[0] == pytest.approx((1.4, -1.5)) and spots[1] == pytest.approx((1.4, 1.5))   # right side first
-    assert spots[2] == pytest.approx((1.4, -2.15)) and spots[3] == pytest.approx((1.4, 2.15))
+    spots = [hold_spot((2.0, 0.0), (0.0, 0.0), k, 0.25, side) for k, side in enumerate((1, -1, 1, -1))]
+    assert spots[0] == pytest.approx((1.4, -1.5)) and spots[1] == pytest.approx((1.4, 2.15))   # right of the line: -y
+    assert spots[2] == pytest.approx((1.4, -2.8)) and spots[3] == pytest.approx((1.4, 3.45))  # each its own distance
     assert all(math.dist(a, b) >= 0.5 for i, a in enumerate(spots) for b in spots[i + 1:])   # bodies apart
 
 
@@ -214,14 +214,18 @@ def test_partners_beyond_the_circuits_capacity_wait_their_turn_and_go_when_it_co
     driving, _ = _executor(3, (1, 4, 6))
     assert not driving.waiting and driving.goal == (1.4, 0.0)
     ex, task = _executor(4, (1, 3, 6))
-    assert ex.waiting and ex.goal == pytest.approx(hold_spot((1.4, 0.0), (0.0, 0.0), 0, 0.25))
-    ex.begin((0.0, 1.0, 0.0), 0.0)
+    assert ex.waiting
+    ex.begin((0.0, 1.0, 0.0), 0.0)                                # left of the line: waits on that side
+    assert ex.goal == pytest.approx(hold_spot((1.4, 0.0), (0.0, 0.0), 0, 0.25, -1.0))
     assert ex.follow.path[-1] == pytest.approx(ex.goal)           # straight to its place, not onto the circuit
+    last, _ = _executor(6, (1, 3, 4))
+    last.begin((0.0, -1.0, 0.0), 0.0)                             # right of the line, one further out
+    assert last.goal == pytest.approx(hold_spot((1.4, 0.0), (0.0, 0.0), 1, 0.25, 1.0))
     ex.update((1.4, 0.1, 0.0), 1.0)                               # passing within reach of the object ...
     assert ex.phase == TO_OBJECT                                  # ... does not load while waiting
     ex.recommit(Commitment(task, (3, 6), "member", PARAMS), 2.0)
     ex.begin((1.4, -1.5, 0.0), 2.0)
-    assert not ex.waiting and ex.follow.path[-1] != pytest.approx(hold_spot((1.4, 0.0), (0.0, 0.0), 0, 0.25))
+    assert not ex.waiting and ex.follow.path[-1] != pytest.approx(hold_spot((1.4, 0.0), (0.0, 0.0), 0, 0.25, -1.0))
     alone, _ = _executor(9, ())
     assert not alone.waiting                                      # no coalition: drives
     anonymous, _ = _executor(None, (1, 2, 3))

@@ -29,11 +29,11 @@ TIP_FACTOR = 0.85             # a circuit's tip lies this share of reach short o
 LOOKAHEAD_FACTOR = 0.5        # pure pursuit looks ahead at most this share of the lane (the circuit's turn radius)
 SPACING_FACTOR = 5.2          # a transport's circuit (about twice the marks' distance round) holds one robot per
                               # this many robot radii (1.3 m for a Pioneer); more partners wait their turn
-CIRCUIT_MAX = 2               # ... and at most this many (the delivery point is shared with every other transport)
+CIRCUIT_MAX = 3               # ... and at most this many (the delivery point is shared with every other transport)
 HOLD_FACTOR = 6.0             # a waiting robot stands this many radii beside the object's turn (off the circuit) ...
 HOLD_BACK_FACTOR = 2.4        # ... this many radii short of the object, towards the delivery point (inside the
                               # arena, from an object near a wall) ...
-HOLD_GAP_FACTOR = 2.6         # ... and this many further out per robot already waiting on that side
+HOLD_GAP_FACTOR = 2.6         # ... and this many further out per robot ahead of it in the queue
 
 
 def circuit_capacity(distance: float, spacing: float, most: int = CIRCUIT_MAX) -> int:
@@ -42,35 +42,17 @@ def circuit_capacity(distance: float, spacing: float, most: int = CIRCUIT_MAX) -
     return max(1, min(most, int(2.0 * distance / spacing))) if spacing > 0 else most
 
 
-def hold_spot(obj: tuple[float, float], delivery: tuple[float, float], turn: int, radius: float) -> tuple[float, float]:
+def hold_spot(obj: tuple[float, float], delivery: tuple[float, float], turn: int, radius: float,
+              side: float = 1.0) -> tuple[float, float]:
     """Where the ``turn``-th waiting robot (0, 1, ...) of a transport stands: beside the object's end of the
-    circuit, a little short of the object, across the line from the delivery point, on alternate sides (right, the arrival lane's side, first), each further out than
-    the last: off the circuit's turn and off the way to and from the delivery point."""
+    circuit, a little short of the object, ``side`` 1 right of the line from the delivery point (-1 left), each
+    further out than the one before it: off the circuit's turn and off the way to and from the delivery point."""
     (x0, y0), (x1, y1) = delivery, obj
     d = math.hypot(x1 - x0, y1 - y0)
     ux, uy = ((x1 - x0) / d, (y1 - y0) / d) if d > 0 else (1.0, 0.0)
-    side = 1.0 if turn % 2 == 0 else -1.0
-    off = side * radius * (HOLD_FACTOR + HOLD_GAP_FACTOR * (turn // 2))
+    off = side * radius * (HOLD_FACTOR + HOLD_GAP_FACTOR * turn)
     back = radius * HOLD_BACK_FACTOR
     return x1 - ux * back + uy * off, y1 - uy * back - ux * off
-
-
-def skirt(a: tuple[float, float], b: tuple[float, float], mark: tuple[float, float], clear: float) -> list:
-    """A waypoint (in a list; empty when not needed) that takes the straight way from ``a`` to ``b`` round
-    ``mark`` at ``clear`` m, on the side the way passes it, when the way passes nearer than that between its
-    ends: robots crossing the fleet from one task to another keep out of the delivery point's crowd."""
-    (ax, ay), (bx, by), (mx, my) = a, b, mark
-    dx, dy = bx - ax, by - ay
-    l2 = dx * dx + dy * dy
-    if l2 == 0:
-        return []
-    t = ((mx - ax) * dx + (my - ay) * dy) / l2
-    cx, cy = ax + t * dx, ay + t * dy
-    gap = math.hypot(cx - mx, cy - my)
-    if not 0.0 < t < 1.0 or gap >= clear:
-        return []
-    nx, ny = ((cx - mx) / gap, (cy - my) / gap) if gap > 1e-9 else (dy / math.sqrt(l2), -dx / math.sqrt(l2))
-    return [(mx + nx * clear, my + ny * clear)]
 
 
 def circuit_leg(start: tuple[float, float], goal: tuple[float, float], lane: float, reach: float,
@@ -164,6 +146,7 @@ class TransportExecutor:
         self._dwell_until: float | None = None
         self._routed = False
         self.turn = self._turn()          # None: drive the circuit; k: the k-th partner waiting beside the object
+        self._side = 0.0                  # the side of the circuit it waits on (the one it was on): +1 right, -1 left
 
     # ------------------------------------------------------------------ parameters
     @property
@@ -215,23 +198,20 @@ class TransportExecutor:
         return float(self.commitment.param("lane", LANE_FACTOR * self.ctx.radius))
 
     def _route(self, pose) -> list:
+        if self.waiting and not self._side:                   # wait on the side it is on: never cross the circuit
+            (x0, y0), (x1, y1) = self.delivery, self.task.position
+            self._side = 1.0 if (x1 - x0) * (pose[1] - y0) - (y1 - y0) * (pose[0] - x0) <= 0 else -1.0
         route = self.ctx.planner.route(pose, self.goal)
+        if self.waiting:                                      # straight to its place beside the object
+            return route
         other = self.delivery if self.phase in (TO_OBJECT, LOADING) else self.task.position
         at_start = math.hypot(pose[0] - other[0], pose[1] - other[1]) <= 2 * self.reach
-        straight = len(route) == 2 and len(self.ctx.planner.route(other, self.goal)) == 2  # the map leaves a straight way
-        # on its way to the object from elsewhere than the delivery point, round the latter's turns
-        around = [] if not straight or at_start or self.phase != TO_OBJECT else \
-            skirt(pose[:2], self.goal, self.delivery, 2.0 * (self.lane + TIP_FACTOR * self.reach))
-        if self.waiting:                                      # straight to its place beside the object
-            return [tuple(pose[:2])] + around + [self.goal]
-        if straight:
+        if len(route) == 2 and len(self.ctx.planner.route(other, self.goal)) == 2:     # the map leaves a straight way
             leg = circuit_leg(other, self.goal, self.lane, self.reach)
             if leg is not None:
                 # from the mark it left, the circuit's turn; from elsewhere, the lane (not into the other mark's turn)
-                via = around[0] if around else pose
-                path = join(via, leg, self.ctx.tunables.lookahead, upto=len(leg) - TIP_POINTS,
+                return join(pose, leg, self.ctx.tunables.lookahead, upto=len(leg) - TIP_POINTS,
                             since=0 if at_start else TIP_POINTS, past=self.goal)
-                return [tuple(pose[:2])] + path if around else path
         return keep_lane(route, self.lane)
 
     @property
@@ -243,7 +223,7 @@ class TransportExecutor:
     def goal(self) -> tuple[float, float]:
         """Where the robot is going: its mark, or its place beside the object while it waits its turn."""
         if self.waiting:
-            return hold_spot(self.task.position, self.delivery, self.turn, self.ctx.radius)
+            return hold_spot(self.task.position, self.delivery, self.turn, self.ctx.radius, self._side or 1.0)
         return self.mark
 
     @property
@@ -262,7 +242,7 @@ class TransportExecutor:
         self.follow.follower.goal_tolerance = max(self.ctx.goal_tolerance, 0.5 * self.reach)
         turn = self._turn()
         if turn != self.turn and self.phase == TO_OBJECT:     # its turn came, or its place changed: go there
-            self.turn, self._routed = turn, False             # (one that carries finishes its trip first)
+            self.turn, self._routed, self._side = turn, False, 0.0    # (one that carries finishes its trip first)
 
     def begin(self, pose, now: float) -> None:
         if not self._routed and self.phase in (TO_OBJECT, TO_DELIVERY):
@@ -296,7 +276,7 @@ class TransportExecutor:
         else:
             wu, self.carrying = self.carrying, 0.0
             self.trips += 1
-            self.phase, self.turn = TO_OBJECT, self._turn()
+            self.phase, self.turn, self._side = TO_OBJECT, self._turn(), 0.0
             out = [Progress(self.task.id, DELIVERED, now, data={"wu": wu})]
         self.follow.set_path(self._route(pose))
         return out

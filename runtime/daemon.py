@@ -91,7 +91,7 @@ class Daemon:
         self.executive = Executive(ExecContext(self.planner, Tunables(c.cruise_speed, c.lookahead, c.max_turn_rate,
                                                                       c.goal_tolerance), self.log, radius,
                                                seed=self.id, agent=self.agent, robot_id=self.id))
-        self._sense_agent = getattr(self.agent, "sense", None)    # agents that read the robot's pose and sensors
+        self._perceive = getattr(self.agent, "perceive", None)    # agents that read the robot's pose and ranges
         self.ground = GroundServices(self)
         self.period = 1.0 / c.rate
         self._last_step: float | None = None
@@ -193,11 +193,8 @@ class Daemon:
         return out
 
     def _allocate(self, now: float) -> None:
-        if self._sense_agent is not None:
-            from runtime.allocation.comutar.protocol import echo_discs
-            pose = self.pose()
-            ranges = getattr(self.base.sensors, "ranges", ())
-            self._sense_agent(pose, echo_discs(pose, ranges), now)      # the driver leaves out no-echo readings
+        if self._perceive is not None:
+            self._perceive(self.pose(), getattr(self.base.sensors, "ranges", ()), now)
         self._send(self._comms(now), now)
 
     def _send(self, out: list, now: float) -> None:

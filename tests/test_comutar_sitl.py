@@ -16,14 +16,11 @@ FLEET = ROOT / "configs" / "fleets" / "comutar_3.yaml"
 
 
 def _load(tmp_path, **changes):
-    data = yaml.safe_load(FLEET.read_text())
-    for key in ("world", "robot"):
-        data[key] = str((FLEET.parent / data[key]).resolve())
-    for r in data["robots"]:
-        if r.get("robot"):
-            r["robot"] = str((FLEET.parent / r["robot"]).resolve())
+    from tests.sitl_util import shipped_fleet
+
+    path = shipped_fleet(tmp_path, FLEET.name)
+    data = yaml.safe_load(path.read_text())
     data["scenario"].update(changes)
-    path = tmp_path / "fleet.yaml"
     path.write_text(yaml.safe_dump(data))
     return C.load_fleet(path)
 

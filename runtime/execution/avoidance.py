@@ -32,8 +32,7 @@ class AvoidanceExecutor(CspaceExecutor):
     def recommit(self, commitment: Commitment, now: float) -> None:
         self.commitment = commitment
         self.actions = tuple(commitment.param("actions", ()))
-        reader = next((a for a in self.actions if a.endswith("_reader")), None)
-        self.reader = A.catalogue(tuple(A.SENSORS)).by_name(reader) if reader else None
+        self.reader = next((spec for spec in A.READERS.values() if spec.name in self.actions), None)
 
     def update(self, pose, now: float) -> list[Progress]:
         agent = self.agent

@@ -47,10 +47,6 @@ class CspaceVote:
         votes, veto = C.to_arc_ballot(self.window, choice, arcs)
         return Ballot(np.asarray(votes, float), np.asarray(veto, bool))
 
-    @property
-    def conflict(self) -> bool:
-        return self.choice is not None and bool(self.choice.conflict[0])
-
 
 def stop_only(win: C.Window, name: str) -> C.Constraint:
     """A constraint that allows standing still and nothing else (turning on the spot included)."""

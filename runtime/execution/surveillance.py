@@ -20,10 +20,10 @@ import math
 import numpy as np
 
 from runtime.allocation.comutar import cspace as C
+from runtime.allocation.comutar.protocol import VISITED
 from runtime.execution.cspace_vote import CspaceExecutor, stop_only
 from runtime.tasks import Commitment, Progress
 
-VISITED = "visited"
 STUCK_TIME = 4.0         # s without getting PROGRESS m nearer the waypoint: stuck
 PROGRESS = 0.05          # m
 DETOUR_TIME = 6.0        # s at most on a detour

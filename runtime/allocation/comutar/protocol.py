@@ -138,6 +138,11 @@ class ComutarAgent:
             if now is not None:
                 self.sensed_at = float(now)
 
+    def perceive(self, pose, ranges, now: float) -> None:
+        """The daemon's each cycle: the pose estimate and the base's range readings ((bearing, distance) pairs,
+        robot frame; the driver leaves out readings with no echo), one disc per echo (:func:`echo_discs`)."""
+        self.sense(pose, echo_discs(pose, ranges), now)
+
     # ------------------------------------------------------------------ what execution reads
     def obstacle_input(self, task_id: int, now: float) -> np.ndarray | None:
         """The obstacle list this robot's avoider in ``task_id`` works from now ((M, 3) discs, fleet frame), or

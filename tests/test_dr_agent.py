@@ -493,3 +493,20 @@ def test_a_leader_of_an_exhausted_object_keeps_the_books_without_recruiting():
         a.on_message(DrDeliver(robot, 3, T1, 1, 2.0, 1, 2.0, 2.0, 0.0), 5.0)
     a.on_tick(5.1)
     assert a.role(T1) is None and a.finished[T1].delivered == 4.0
+
+
+def test_with_a_delivery_area_distances_run_to_its_edge_and_the_executor_unloads_there():
+    """``delivery_reach`` makes D an area: eq. 5 (and the model's input) use the way to its edge, and the
+    commitment tells the executor to unload within it; without it D is a point, unloaded within ``reach``."""
+    a = agent(1, delivery_reach=1.0)
+    info = a.world.add(transport(T1, 2.4, 0.0), 0.0)
+    assert info.distance == pytest.approx(1.4) and a.capacity(info) == pytest.approx(WC)
+    assert agent(1, delivery_reach=1.0).world.add(transport(T1, 0.5, 0.0), 0.0).distance == 0.0    # inside it
+    point = agent(1)
+    assert point.world.add(transport(T1, 1.4, 0.0), 0.0).distance == pytest.approx(1.4)
+    t, _ = elect(a, T1)
+    (c,) = a.commitments
+    assert c.param("delivery_reach") == 1.0 and c.param("reach") == a.o.reach
+    t, _ = elect(point, T1)
+    (c,) = point.commitments
+    assert c.param("delivery_reach") == point.o.reach

@@ -70,7 +70,8 @@ def test_eight_robots_on_one_object_keep_moving_weight():
     """8 robots on one object 1.4 m from D for 30 min move weight in every 5 min: no permanent jam.  How much
     they move beside one robot alone (the crowding the interference model learns) is measured, not asserted:
     `mrta experiment dr-calibration` (docs/foraging.md)."""
-    fr = ForagingRun(ForagingConfig(robots=8, method=None, time_limit=1800.0, fixed_object=(1.4, 0.0), seed=1))
+    fr = ForagingRun(ForagingConfig(robots=8, method=None, time_limit=1800.0, fixed_object=(1.4, 0.0), seed=1,
+                                    delivery_reach=0.3))     # D a point, as when this was written
     marks = []
 
     def observe(run):
@@ -86,7 +87,7 @@ def test_eight_robots_on_one_object_keep_moving_weight():
 
 def _moved(robots: int, distance: float = 1.4, seconds: float = 300.0, seed: int = 1) -> float:
     fr = ForagingRun(ForagingConfig(robots=robots, method=None, time_limit=seconds, fixed_object=(distance, 0.0),
-                                    seed=seed))
+                                    seed=seed, delivery_reach=0.3))      # D a point, as when this was written
     try:
         return fr.run().moved
     finally:

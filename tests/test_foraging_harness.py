@@ -132,3 +132,24 @@ def test_coalitions_of_two_share_an_object_and_conserve_its_weight():
     lasting = [n for o in res.finished for (t, n), (t2, _) in zip(o.coalition, o.coalition[1:]) if t2 - t > 1.0]
     assert max(lasting) == 2                  # more only for a tick, while robots that chose together sort it out
     assert any(len(o.done_by) == 2 for o in res.finished)
+
+
+def test_objects_appear_beyond_min_distance_and_min_angle_apart_seen_from_d():
+    import numpy as np
+    rng = np.random.default_rng(4)
+    others = [(3.0, 0.0), (0.0, 3.0)]
+    for _ in range(200):
+        x, y = scenario.object_place(rng, 10.0, (0.0, 0.0), 2.0, 0.5, others, 90.0)
+        assert math.hypot(x, y) >= 2.0 and max(abs(x), abs(y)) <= 4.5
+        b = math.degrees(math.atan2(y, x))
+        assert all(abs((b - o + 180) % 360 - 180) >= 90 for o in (0.0, 90.0))
+    # no point is 90 degrees from both of two opposite objects but on a line: the draw missing it least is taken
+    x, y = scenario.object_place(np.random.default_rng(1), 10.0, (0.0, 0.0), 2.0, 0.5, [(3.0, 0.0), (-3.0, 0.0)], 95.0)
+    assert abs(math.degrees(math.atan2(abs(y), abs(x))) - 90) < 10
+    run_ = ForagingRun(dataclasses.replace(BASE, robots=3, min_angle=90.0, max_objects=None, time_limit=0.2))
+    try:
+        bearings = [math.degrees(math.atan2(o.y, o.x)) for o in run_.objects.values()]
+    finally:
+        run_.close()
+    assert len(bearings) == 3 and all(abs((a - b + 180) % 360 - 180) >= 90
+                                      for i, a in enumerate(bearings) for b in bearings[i + 1:])

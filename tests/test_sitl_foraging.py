@@ -228,11 +228,11 @@ def test_the_shipped_foraging_fleet_delivers_both_objects_and_o1_gets_a_new_lead
 
 @pytest.mark.slow
 def test_a_killed_member_is_dropped_and_its_leader_auctions_again_and_the_whole_object_comes_in(tmp_path):
-    """Paper 000 §5.5.3 in SITL, lock-step (issue 16): one object of 8 wu for which a leader alone fails eq. 8
+    """Paper 000 §5.5.3 in SITL, lock-step (issue 16): one object of 12 wu for which a leader alone fails eq. 8
     and a group of two meets it; at 20 s the group's member is killed and withdrawn.  From what the ground
     station hears: the leader names a group without it within member_timeout and a control period (and one more
     for the STATUSTEXT to arrive), then a group with a robot new to it (the new round); the task is done, and
-    the leader's books say all 8 wu came in."""
+    the leader's books say all 12 wu came in."""
     def books(run, res):
         mk = res.get("member_kill")
         leader = run.daemons[mk["leader"]].node.agent if mk else None
@@ -245,7 +245,7 @@ def test_a_killed_member_is_dropped_and_its_leader_auctions_again_and_the_whole_
     assert mk["robot"] != mk["leader"] and mk["robot"] in mk["group"], mk
     assert mk["dropped_after"] <= o.member_timeout + 2 * period and mk["robot"] not in mk["dropped_group"], mk
     assert set(mk["regroup_group"]) - set(mk["group"]) and mk["robot"] not in mk["regroup_group"], mk
-    assert finished is not None and finished.delivered == pytest.approx(finished.weight) == 8.0
+    assert finished is not None and finished.delivered == pytest.approx(finished.weight) == 12.0
     print(f"killed R{mk['robot']} at {mk['at']:.1f} s; R{mk['leader']} dropped it {mk['dropped_after']:.2f} s later; "
           f"new round {mk['regroup_after']:.2f} s after the drop: {mk['regroup_group']}; "
           f"{finished.delivered:g}/{finished.weight:g} wu in {finished.time:.1f} s")

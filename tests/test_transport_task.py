@@ -10,7 +10,7 @@ import pytest
 from runtime import tasks as T
 from runtime.drivers.base import BaseSensors
 from runtime.execution.executive import ExecContext, Executive, Tunables
-from runtime.execution.transport import LOADING, TO_DELIVERY, TO_OBJECT, TransportExecutor
+from runtime.execution.transport import LOADING, TO_DELIVERY, TO_OBJECT, UNLOADING, TransportExecutor
 from runtime.planning.robot_planner import RobotPlanner
 from runtime.tasks import Commitment, Task
 from runtime.tasks.transport import DELIVERED, LOADED, MAV_CMD_WAYPOINT_USER_2, Transport, from_item, to_item
@@ -209,23 +209,24 @@ def _executor(me, partners, position=(1.4, 0.0)):
 
 def test_partners_beyond_the_circuits_capacity_wait_their_turn_and_go_when_it_comes():
     """At 1.4 m the circuit holds two: of robots 1, 3, 4, 6 the two lowest ids drive, 4 and 6 wait beside the
-    object (4 on the arrival lane's side); when robot 1 leaves the coalition, 4 goes to the object."""
+    object, both on the arrival lane's side (right of the line from D, where the turn round the object never
+    sweeps), whichever side they come from; when robot 1 leaves the coalition, 4 goes to the object."""
     from runtime.execution.transport import hold_spot
     driving, _ = _executor(3, (1, 4, 6))
     assert not driving.waiting and driving.goal == (1.4, 0.0)
     ex, task = _executor(4, (1, 3, 6))
     assert ex.waiting
-    ex.begin((0.0, 1.0, 0.0), 0.0)                                # left of the line: waits on that side
-    assert ex.goal == pytest.approx(hold_spot((1.4, 0.0), (0.0, 0.0), 0, 0.25, -1.0))
+    ex.begin((0.0, 1.0, 0.0), 0.0)                                # left of the line: still waits on the right
+    assert ex.goal == pytest.approx(hold_spot((1.4, 0.0), (0.0, 0.0), 0, 0.25, 1.0))
     assert ex.follow.path[-1] == pytest.approx(ex.goal)           # straight to its place, not onto the circuit
     last, _ = _executor(6, (1, 3, 4))
-    last.begin((0.0, -1.0, 0.0), 0.0)                             # right of the line, one further out
+    last.begin((0.0, -1.0, 0.0), 0.0)                             # one further out
     assert last.goal == pytest.approx(hold_spot((1.4, 0.0), (0.0, 0.0), 1, 0.25, 1.0))
     ex.update((1.4, 0.1, 0.0), 1.0)                               # passing within reach of the object ...
     assert ex.phase == TO_OBJECT                                  # ... does not load while waiting
     ex.recommit(Commitment(task, (3, 6), "member", PARAMS), 2.0)
     ex.begin((1.4, -1.5, 0.0), 2.0)
-    assert not ex.waiting and ex.follow.path[-1] != pytest.approx(hold_spot((1.4, 0.0), (0.0, 0.0), 0, 0.25, -1.0))
+    assert not ex.waiting and ex.follow.path[-1] != pytest.approx(hold_spot((1.4, 0.0), (0.0, 0.0), 0, 0.25, 1.0))
     alone, _ = _executor(9, ())
     assert not alone.waiting                                      # no coalition: drives
     anonymous, _ = _executor(None, (1, 2, 3))
@@ -244,3 +245,31 @@ def test_a_robot_carrying_a_load_finishes_its_trip_before_it_waits():
     ex.update((0.0, 0.0, 0.0), 2.0)
     ex.update((0.0, 0.0, 0.0), 3.0)                               # unloads: now it waits its turn
     assert ex.phase == TO_OBJECT and ex.waiting and ex.turn == 0
+
+
+def test_a_delivery_area_unloads_at_its_edge_and_the_circuit_turns_there():
+    """``delivery_reach`` 1 m: the robot unloads as soon as it is within 1 m of D, loads only within ``reach`` of the
+    object, and the circuit's turn at D lies 0.85 m out while the object's stays 0.255 m short of it."""
+    from runtime.execution.transport import TIP_FACTOR, TIP_POINTS, circuit_leg
+    params = PARAMS + (("delivery_reach", 1.0),)
+    ctx = ExecContext(RobotPlanner(None, "euclid", 0.25, 0, 1), Tunables(0.25, 0.3, 2.0, 0.12),
+                      logging.getLogger("test"), 0.25, robot_id=1)
+    task = Task(7, "transport", Transport(3.0, 0.0, 40.0, 108.0, 100.0))
+    ex = TransportExecutor(Commitment(task, (), "member", params), ctx)
+    ex.begin((0.0, 0.0, 0.0), 0.0)
+    ex.update((2.0, 0.0, 0.0), 0.0)
+    assert ex.phase == TO_OBJECT                                  # 1 m from the object: not within its reach
+    ex.update((2.8, 0.0, 0.0), 1.0)
+    assert ex.phase == LOADING
+    ex.update((2.8, 0.0, 0.0), 2.0)
+    assert ex.phase == TO_DELIVERY
+    ex.update((1.5, 0.0, 0.0), 3.0)
+    assert ex.phase == TO_DELIVERY
+    ex.update((0.9, 0.3, 0.0), 4.0)                               # inside the area: unloads
+    assert ex.phase == UNLOADING
+    back = circuit_leg((3.0, 0.0), (0.0, 0.0), 0.4, 1.0, start_reach=0.3)
+    out = circuit_leg((0.0, 0.0), (3.0, 0.0), 0.4, 0.3, start_reach=1.0)
+    assert math.dist(back[-1 - TIP_POINTS], (0.0, 0.0)) == pytest.approx(TIP_FACTOR * 1.0)     # the turn at D
+    assert math.dist(out[-1 - TIP_POINTS], (3.0, 0.0)) == pytest.approx(TIP_FACTOR * 0.3)      # ... at the object
+    assert out[0] == pytest.approx(back[-1 - TIP_POINTS]) and back[0] == pytest.approx(out[-1 - TIP_POINTS])
+    assert circuit_leg((0.0, 0.0), (1.8, 0.0), 0.4, 0.3, start_reach=1.0) is None     # no room for both turns

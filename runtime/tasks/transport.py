@@ -10,7 +10,9 @@ not the task's: the allocation agent hands them to the executor in the commitmen
 * ``delivery`` - ``(x, y)`` of the delivery point, fleet frame, m
 * ``load`` - wu this robot carries per trip
 * ``load_time`` - s per wu to load, and again to unload
-* ``reach`` - m: the robot loads (unloads) once its centre is this close to the object (delivery point)
+* ``reach`` - m: the robot loads once its centre is this close to the object
+* ``delivery_reach`` - m: ... and unloads once this close to the delivery point (the delivery area's radius;
+  default ``reach``)
 
 The executor reports :data:`LOADED` after each load and :data:`DELIVERED` after each unload, with the wu in
 ``Progress.data["wu"]``; it never reports ``done``: the agent ends the commitment.

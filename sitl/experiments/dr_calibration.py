@@ -3,8 +3,10 @@
 One object of unlimited weight at distance d from the delivery point D, 1..8 robots all committed to it from the
 start (fixed commitments, no agent), load 2 wu per trip, 0.25 m/s (3 du/tu), loading and unloading 0.12 s per wu,
 for 4800 s (40,000 tu).  Ten distances: the paper's seven (140 ... 400 du = 1.40 ... 4.00 m) and three that
-cover the rest of the 10 x 10 m arena (100, 500 and 600 du: objects appear 1 m from D at the least and, 0.5 m
-inside the walls, 6.36 m at the most).  The object lies on the diagonal from D, so the longest fits.
+cover the rest of the 10 x 10 m arena (100, 450 and 525 du).  Robots load within 0.3 m of the object and unload
+within 1 m of D's centre (the delivery area), as in the foraging runs, and d is the way from the object to that
+area's edge (the dr agents measure it so too): objects appear 2 m from D's centre at the least (1 m from the
+area) and, 0.5 m inside the walls, 6.36 m at the most (5.36 m from the area).  The object lies on the diagonal from D, so the longest fits.
 Each (n, d) gives one sample of the interference model's training set (80 = n_v):
 
     I = n * workCapacity(d) - weight moved / duration        (wu/s),
@@ -32,13 +34,14 @@ from sitl.foraging import scenario
 log = get_logger("experiments.dr_calibration")
 
 PAPER_DU = (140, 180, 250, 280, 330, 360, 400)      # Fig. 2's D1..D7
-EXTRA_DU = (100, 500, 600)                          # ours: the rest of the arena
+EXTRA_DU = (100, 450, 525)                          # ours: the rest of the arena (objects lie 1-5.4 m from D's area)
 DURATION = 40000 * scenario.TU                      # 4800 s
 LOAD, SPEED, LOAD_TIME = 2.0, 0.25, scenario.TU     # wu, m/s, s per wu
 PAPER_FRACTION_8_AT_140 = 0.413                     # Fig. 2 text: 8 robots at D1 reach 41.3 % of ideal
 SHIPPED_MODEL = "runtime/allocation/dr/interference_pioneer3dx.json"   # the model the configs and experiments use
 CHECK_CASE = (4, 140)                               # the point measured again at a finer physics step
-SETTINGS = ("duration_s", "dt_s", "control_s", "seed", "lookahead_m", "max_turn_rate", "reach_m", "sonar")
+SETTINGS = ("duration_s", "dt_s", "control_s", "seed", "lookahead_m", "max_turn_rate", "reach_m",
+            "delivery_reach_m", "sonar")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -81,10 +84,10 @@ def _distances(text: str) -> tuple[int, ...]:
         out = tuple(int(v) for v in text.split(","))
     except ValueError:
         raise InputError(f"--distances {text!r}: expected whole du (cm) separated by commas") from None
-    reach = (10.0 / 2 - 0.5) * math.sqrt(2) * 100
+    reach = ((10.0 / 2 - 0.5) * math.sqrt(2) - 1.0) * 100          # the diagonal less the delivery area
     if not out or min(out) < 50 or max(out) > reach:
-        raise InputError(f"--distances {text!r}: expected du between 50 and {reach:.0f} (the arena's diagonal, "
-                         f"0.5 m inside the walls)")
+        raise InputError(f"--distances {text!r}: expected du between 50 and {reach:.0f} (the arena's half diagonal "
+                         f"less the delivery area, 0.5 m inside the walls)")
     return out
 
 
@@ -96,9 +99,9 @@ def work_capacity(d_m: float) -> float:
 def config(n: int, d_du: int, duration: float, seed: int, dt: float) -> "harness.ForagingConfig":
     from sitl.foraging import harness          # pybullet: loaded when a case runs, not when the CLI is built
 
-    d = d_du * scenario.DU
+    c = d_du * scenario.DU + harness.ForagingConfig.delivery_reach     # d is to the delivery area's edge
     return harness.ForagingConfig(robots=n, method=None, seed=seed, time_limit=duration, dt=dt,
-                                  fixed_object=(d / math.sqrt(2), d / math.sqrt(2)), load=LOAD, load_time=LOAD_TIME,
+                                  fixed_object=(c / math.sqrt(2), c / math.sqrt(2)), load=LOAD, load_time=LOAD_TIME,
                                   speed=SPEED)
 
 
@@ -119,7 +122,8 @@ def run_case(n: int, d_du: int, duration: float, seed: int, dt: float) -> dict:
             "trips": sum(r.trips for r in robots), "stalled_s_mean": float(np.mean([r.stalled for r in robots])),
             "distance_m_mean": float(np.mean([r.distance for r in robots])), "duration_s": res.end, "dt_s": cfg.dt,
             "control_s": cfg.control_period, "seed": seed, "lookahead_m": cfg.lookahead,
-            "max_turn_rate": cfg.max_turn_rate, "reach_m": cfg.reach, "sonar": cfg.sonar, "wall_s": wall}
+            "max_turn_rate": cfg.max_turn_rate, "reach_m": cfg.reach, "delivery_reach_m": cfg.delivery_reach,
+            "sonar": cfg.sonar, "wall_s": wall}
 
 
 def _key(row: dict) -> tuple:
@@ -290,7 +294,7 @@ def run(args: argparse.Namespace) -> int:
     sample = config(1, distances[0], args.duration, args.seed, args.dt)
     want = {"duration_s": args.duration, "control_s": sample.control_period, "seed": args.seed,
             "lookahead_m": sample.lookahead, "max_turn_rate": sample.max_turn_rate, "reach_m": sample.reach,
-            "sonar": sample.sonar}
+            "delivery_reach_m": sample.delivery_reach, "sonar": sample.sonar}
     done = load_resume(args.resume, want) if args.resume else {}
     t0 = time.perf_counter()
     done = run_all(cases, args, done, out / "dr_calibration.csv")
@@ -310,7 +314,8 @@ def run(args: argparse.Namespace) -> int:
     setup = (f"One object of unlimited weight on the diagonal from D at distance d, {robots[0]}..{robots[-1]} "
              f"Pioneer-sized robots committed to it from the start (fixed commitments: the real transport executor in "
              f"the real executive, no agent), load {LOAD:g} wu, {SPEED:g} m/s, {LOAD_TIME:g} s per wu to load and to "
-             f"unload, reach {sample.reach:g} m, for {args.duration:g} s; physics step {args.dt * 1000:g} ms, control "
+             f"unload, reach {sample.reach:g} m at the object and {sample.delivery_reach:g} m at D (the delivery area's "
+             f"radius), for {args.duration:g} s; physics step {args.dt * 1000:g} ms, control "
              f"period {sample.control_period:g} s; robots start at seeded random places (seed {args.seed}). "
              f"I = n workCapacity(d) - moved / duration (wu/s; x 0.12 for wu/tu). Command: `{cmd}`. "
              f"Wall time {wall:.0f} s for the cases run now.")

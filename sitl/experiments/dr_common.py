@@ -55,6 +55,7 @@ class Cell:
     utility: str = "hard"
     online: bool = False
     speed_belief: float | None = None
+    late: str = "all"                  # eq. 8 cannot hold: award every bidder (the paper) | "fastest"
 
     @property
     def uses_model(self) -> bool:
@@ -73,6 +74,9 @@ class Setup:
     max_objects: int | None = None                  # the run ends when this many are done (or at time_limit)
     size: float = 10.0
     sonar: bool = True
+    delivery_area: float = 1.0                      # m: robots unload within this of D (distances are to its edge)
+    min_distance: float = 2.0                       # m: objects appear this far from D's centre at the least ...
+    min_angle: float = 90.0                         # deg: ... and this far apart seen from D
 
     def describe(self) -> str:
         lo, hi = self.u_max
@@ -81,13 +85,15 @@ class Setup:
                                           f" or {self.max_objects} objects done, whichever comes first")
         return (f"{self.robots} robots, {self.objects} objects present at once (each replaced at a random place as "
                 f"it is done) of {self.weight:g} wu, deadline {self.deadline:g} s ({self.deadline / scenario.TU:.0f} "
-                f"tu) after the object appears, {u}; a {self.size:g} x {self.size:g} m arena, delivery point at its "
-                f"centre; each run lasts {end}; robots avoid by {'sonar and bumpers' if self.sonar else 'bumpers'}")
+                f"tu) after the object appears, {u}; a {self.size:g} x {self.size:g} m arena, delivery area of "
+                f"{self.delivery_area:g} m radius at its centre (distances are to its edge), objects at least "
+                f"{self.min_distance:g} m from its centre and {self.min_angle:g} deg apart seen from it; each run lasts {end}; robots avoid by {'sonar and bumpers' if self.sonar else 'bumpers'}")
 
 
 def options(cell: Cell, model: Path | None, setup: Setup) -> DrOptions:
     return DrOptions(auction=cell.auction, strategy=cell.strategy, utility=cell.utility, online=cell.online,
-                     speed_belief=cell.speed_belief, delivery=(0.0, 0.0),
+                     speed_belief=cell.speed_belief, delivery=(0.0, 0.0), late=cell.late,
+                     delivery_reach=setup.delivery_area,
                      model=str(model) if model is not None and (cell.uses_model or cell.online) else None)
 
 
@@ -99,7 +105,8 @@ def config(cell: Cell, setup: Setup, seed: int, model: Path | None) -> "harness.
                                   time_limit=setup.time_limit, max_objects=setup.max_objects, objects=setup.objects,
                                   weight=Dist.const(setup.weight), deadline=Dist.const(setup.deadline),
                                   u_max=Dist.integers(lo, hi), size=setup.size, delivery=(0.0, 0.0),
-                                  sonar=setup.sonar)
+                                  sonar=setup.sonar, delivery_reach=setup.delivery_area,
+                                  min_distance=setup.min_distance, min_angle=setup.min_angle)
 
 
 # ---------------------------------------------------------------------- one run
@@ -217,6 +224,7 @@ def execute(args, name: str, cells: Sequence[Cell], setup: Setup, extra: str = "
     wall = time.perf_counter() - t0
     command = (f"mrta experiment {name.replace('_', '-')} --seeds {args.seeds} --jobs {args.jobs}{extra}"
                + (" --quick" if args.quick else "") + (f" --time-limit {args.time_limit:g}" if args.time_limit else "")
+               + (f" --deadline {args.deadline:g}" if getattr(args, "deadline", None) else "")
                + (" --no-sonar" if args.no_sonar else ""))
     return Execution(results, source, command, wall, write_rows(out, name, results))
 
@@ -288,6 +296,9 @@ def add_arguments(parser: argparse.ArgumentParser, seeds: int = 5) -> None:
                         help="interference model JSON (default: the shipped one in runtime/allocation/dr/, else "
                              "one fitted from results/dr-calibration/samples.csv)")
     parser.add_argument("--time-limit", type=float, default=None, help="simulated s per run (default: the table's)")
+    parser.add_argument("--deadline", type=float, default=None,
+                        help="s from an object's appearance to its deadline (default: the table's, the paper's "
+                             "900 tu = 108 s); see docs/dr-experiments.md on scaling it to the world")
     parser.add_argument("--no-sonar", action="store_true", help="robots avoid by their bumpers only")
     parser.add_argument("--no-png", action="store_true", help="skip the figures")
 
@@ -299,6 +310,8 @@ def check_arguments(args) -> None:
         raise InputError(f"--jobs {args.jobs}: expected at least 1")
     if args.time_limit is not None and not (math.isfinite(args.time_limit) and args.time_limit > 0):
         raise InputError(f"--time-limit {args.time_limit!r}: expected seconds > 0")
+    if args.deadline is not None and not (math.isfinite(args.deadline) and args.deadline > 0):
+        raise InputError(f"--deadline {args.deadline!r}: expected seconds > 0")
 
 
 def apply_arguments(setup: Setup, args) -> Setup:
@@ -306,6 +319,8 @@ def apply_arguments(setup: Setup, args) -> Setup:
         setup = replace(setup, time_limit=float(args.time_limit))
     if args.no_sonar:
         setup = replace(setup, sonar=False)
+    if getattr(args, "deadline", None) is not None:
+        setup = replace(setup, deadline=float(args.deadline))
     return setup
 
 

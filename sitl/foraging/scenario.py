@@ -9,6 +9,8 @@ its centre; objects appear uniformly at least 1 m from D (and, so that a robot c
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import math
 from dataclasses import dataclass
 
@@ -78,16 +80,29 @@ def work_capacity(distance: float, load: float, speed: float, load_time: float) 
 
 
 def object_place(rng: np.random.Generator, size: float, delivery: tuple[float, float], min_distance: float,
-                 wall_margin: float) -> tuple[float, float]:
+                 wall_margin: float, others: Sequence[tuple[float, float]] = (),
+                 min_angle: float = 0.0) -> tuple[float, float]:
     """A point uniform in the arena, at least ``min_distance`` from ``delivery`` and ``wall_margin`` from the
-    walls."""
+    walls, and seen from ``delivery`` at least ``min_angle`` degrees away from each of ``others`` (the objects
+    present: their transports' ways to the delivery point do not run along each other).  Should no point meet the
+    angle in 10,000 draws, the draw that misses it least is taken."""
     half = size / 2 - wall_margin
     if half <= 0:
         raise InputError(f"wall_margin {wall_margin}: expected less than half the arena ({size / 2:g} m)")
+    bearings = [math.atan2(oy - delivery[1], ox - delivery[0]) for ox, oy in others]
+    best, best_gap = None, -1.0
     for _ in range(10000):
         x, y = rng.uniform(-half, half, size=2)
-        if math.hypot(x - delivery[0], y - delivery[1]) >= min_distance:
+        if math.hypot(x - delivery[0], y - delivery[1]) < min_distance:
+            continue
+        b = math.atan2(y - delivery[1], x - delivery[0])
+        gap = min((abs(math.remainder(b - o, math.tau)) for o in bearings), default=math.pi)
+        if math.degrees(gap) >= min_angle:
             return float(x), float(y)
+        if gap > best_gap:
+            best, best_gap = (float(x), float(y)), gap
+    if best is not None:
+        return best
     raise InputError(f"min_distance {min_distance} m: no point of the arena is that far from the delivery point")
 
 

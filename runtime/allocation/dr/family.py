@@ -154,7 +154,8 @@ class DrAgent:
         if info is None or info.task is None:
             return ()
         params = (("delivery", tuple(self.o.delivery)), ("load", self.o.load_capacity),
-                  ("load_time", self.o.load_time), ("reach", self.o.reach))
+                  ("load_time", self.o.load_time), ("reach", self.o.reach),
+                  ("delivery_reach", self.o.delivery_reach or self.o.reach))
         return (Commitment(info.task, partners, role, params),)
 
     @property

@@ -27,7 +27,11 @@ class DrOptions:
     load_capacity: float = field(default=2.0, metadata=rng(0.0, 1e6, lo_open=True))   # wu per trip
     load_time: float = field(default=0.12, metadata=rng(0.0, 3600))     # s per wu to load, and again to unload
     delivery: tuple[float, float] = (0.0, 0.0)                   # m, the delivery point in the fleet frame
-    reach: float = field(default=0.3, metadata=rng(0.01, 10))    # m: loads/unloads this close to the point
+    reach: float = field(default=0.3, metadata=rng(0.01, 10))    # m: loads this close to the object
+    delivery_reach: Optional[float] = field(default=None, metadata=rng(0.01, 10))   # m: unloads this close to the
+                                                                 # delivery point, a delivery area of this radius:
+                                                                 # distances (eq. 5, the model) are to its edge;
+                                                                 # null: a point, unloaded within reach
     model: Optional[str] = None                                  # interference model file (JSON); null: none yet
     time_leadership: float = field(default=1.2, metadata=_T)     # Alg. 1: s a candidate waits before it leads
     time_auction: float = field(default=1.2, metadata=_T)        # Alg. 2: s the leader collects bids
@@ -40,6 +44,11 @@ class DrOptions:
     report_resend: float = field(default=0.5, metadata=_T)       # s between resends of a load/delivery report
     sample_period: float = field(default=10.0, metadata=_T)      # s between repeats of a robot's last SVR sample
     source: str = ""                                             # the config file (set by the builder)
+
+    @property
+    def area(self) -> float:
+        """The delivery area's radius: how much shorter than to D's centre the way to deliver is (0: a point)."""
+        return 0.0 if self.delivery_reach is None else self.delivery_reach
 
     @property
     def monitoring(self) -> bool:

@@ -58,6 +58,8 @@ class TransportRobot(SimRobot):
             gx, gy = trip.goal()
             d = math.hypot(gx - self.pos[0], gy - self.pos[1])
             reach = float(c.param("reach", 0.3))
+            if trip.phase == TO_DELIVERY:
+                reach = float(c.param("delivery_reach", reach))
             step = min(max(0.0, d - reach * 0.5), self.speed * dt)
             if d > 0:
                 self.pos = (self.pos[0] + (gx - self.pos[0]) * step / d, self.pos[1] + (gy - self.pos[1]) * step / d)

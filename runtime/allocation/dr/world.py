@@ -23,7 +23,7 @@ class TaskInfo:
     id: int
     task: Task | None = None
     appeared: float = math.inf              # when it appeared, this robot's clock (earliest heard)
-    distance: float = math.nan              # m from the object to the delivery point
+    distance: float = math.nan              # m from the object to the delivery area (its edge)
     ledger: Ledger = field(default_factory=Ledger)
     leader: int | None = None               # the leader last heard of, and when
     leader_heard: float = -math.inf
@@ -62,7 +62,8 @@ class World:
             info.task = task
             info.appeared = min(info.appeared, now)
             dx, dy = self.o.delivery
-            info.distance = math.hypot(task.spec.x - dx, task.spec.y - dy)
+            # the way to drive: to the edge of the delivery area (eqs. 5 and the model's input)
+            info.distance = max(0.0, math.hypot(task.spec.x - dx, task.spec.y - dy) - self.o.area)
             info.ledger.weight = float(task.spec.weight)
         return info
 

@@ -96,6 +96,12 @@ def test_greedy_puts_more_robots_on_an_object_than_nm_i(model_file):
     assert greedy["max_group"] >= 4             # Greedy awards every bidder
 
 
+def _args(**given):
+    import argparse
+    base = dict(time_limit=None, no_sonar=False, deadline=None)
+    return argparse.Namespace(**{**base, **given})
+
+
 def test_dr_table3_quick_writes_its_files(tmp_path, model_file, capsys):
     out = tmp_path / "t3"
     assert cli.main(["experiment", "dr-table3", "--quick", "--seeds", "1", "--jobs", "2", "--model", str(model_file),
@@ -115,6 +121,11 @@ def test_dr_table3_quick_writes_its_files(tmp_path, model_file, capsys):
     assert "| Greedy | 30.87 |" in md and "| NM_I | 36.67 |" in md and "Why ours differ" in md
     assert "--model" in md and "commit" in md
     assert (out / "dr_table3_fig3.png").stat().st_size > 5_000
+    assert "not the paper's" not in md                            # the quick size's own deadline is not noted ...
+    assert C.deadline_note(dr_table3.SETUP) == ""                # ... nor the paper's
+    scaled = C.apply_arguments(dr_table3.SETUP, _args(deadline=328.0))
+    assert scaled.deadline == 328.0 and "328 s, not the paper's 108 s" in C.deadline_note(scaled)
+    assert "3.04 x the paper's 900 tu" in scaled.describe()
 
 
 def test_dr_table5_quick_writes_its_files(tmp_path, model_file):
@@ -209,6 +220,7 @@ def test_the_model_is_fitted_from_the_calibration_samples_when_none_is_shipped(t
     (["dr-table4", "--objects", "0", "--model", "X"], "mrta: --objects 0: expected at least 1"),
     (["dr-table5", "--jobs", "0"], "mrta: --jobs 0: expected at least 1"),
     (["dr-table3", "--time-limit", "-5"], "mrta: --time-limit -5.0: expected seconds > 0"),
+    (["dr-table3", "--deadline", "0"], "mrta: --deadline 0.0: expected seconds > 0"),
     (["dr-table3", "--model", "/nonexistent/model.json"], "mrta: /nonexistent/model.json"),
     (["dr-table5"], "mrta: no interference model: expected --model PATH"),
 ])

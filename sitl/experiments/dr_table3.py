@@ -85,11 +85,12 @@ def histogram_table(runs: list[dict], objects: list[dict]) -> str:
 
 def why(setup: C.Setup, runs: list[dict]) -> str:
     done = np.mean([r["objects_done"] for r in runs]) if runs else 0
+    scaled = C.deadline_note(setup)
     return (f"Why ours differ: the paper's RoboCoT robots and their avoidance are not ours: here Pioneer-sized "
-            f"discs (0.5 m) avoid each other with the real executive's sonar arbiter, and crowds at the delivery "
-            f"point and on the line to an object cost far more than in RoboCoT (the calibration's Fig. 2 and "
-            f"tests/test_foraging_deadlock.py), so fewer tasks are done ({done:.1f} per run here) and their times "
-            f"are longer; the paper gives no number of runs, we give mean ± sd over {len({r['seed'] for r in runs})} "
+            f"discs (0.5 m) avoid each other with the real executive's sonar arbiter, a circuit round an object "
+            f"drives at most three robots and three objects' circuits meet at D's area (the calibration's Fig. 2, "
+            f"docs/foraging.md), so fewer tasks are done ({done:.1f} per run here) and their times are longer.{scaled} "
+            f"The paper gives no number of runs, we give mean ± sd over {len({r['seed'] for r in runs})} "
             f"seeds; objects are placed at random in a {setup.size:g} x {setup.size:g} m arena (the paper's arena is not "
             f"given).")
 

@@ -138,10 +138,10 @@ def run(args: argparse.Namespace) -> int:
                   f"cores, so each run's shares rest on few tasks and the spread over seeds is wide. Interference "
                   f"model: {ex.source}. {args.seeds} seeds per cell. {ex.describe(args.jobs)}")
     why = ("Why ours differ: RoboCoT's robots and avoidance are not ours (Pioneer-sized discs under the real "
-           "executive's sonar avoidance crowd at the delivery point and on the lines to the objects, so groups move "
-           "less than eq. 5 says and much less than the paper's); the paper's 400 objects per run against our "
-           f"{setup.max_objects or '-'}; its U_max distribution is not given (ours: integers in [50, 150]); its "
-           "number of runs is not given.")
+           "executive's sonar avoidance; a circuit round an object drives at most three robots and three circuits "
+           "meet at D's area, so groups move less than eq. 5 says and much less than the paper's); the paper's 400 "
+           f"objects per run against our {setup.max_objects or '-'}; its U_max distribution is not given (ours: "
+           "integers in [50, 150]); its number of runs is not given." + C.deadline_note(setup))
     soft, hard = gains(runs, "soft"), gains(runs, "hard")
     cols = ["strategy", "total utility", "% of the maximum", "vs Greedy (ours)", "vs Greedy (paper)"]
     sections = [("Setup", setup_text),

@@ -116,7 +116,8 @@ def run(args: argparse.Namespace) -> int:
                   f"{args.seeds} seeds per cell. {ex.describe(args.jobs)}")
     why = ("Why ours differ: fewer objects per run (so on-line learning has fewer samples to learn from: one per "
            "task done); RoboCoT's bodies and avoidance are not ours, so the off-line model (fitted on our calibration) "
-           "and the interference met differ from the paper's; U_max distribution and run count not given.")
+           "and the interference met differ from the paper's; U_max distribution and run count not given."
+           + C.deadline_note(setup))
     sections = [("Setup", setup_text),
                 ("Table 5: total utility (DR, NM_I, soft)", table(runs) + "\n\n" + why),
                 ("Per cell", details(runs)),

@@ -1,9 +1,15 @@
-"""Test-wide settings: generated MAVLink bindings go to a per-run temp cache, not ~/.cache."""
+"""Test-wide settings: generated MAVLink bindings go to a per-run temp cache, not ~/.cache; hypothesis has no
+per-example deadline (an absolute-time assert: one example that took 277 ms, against the default 200, failed a
+run on a loaded 2-core machine; tests that want a time budget set their own)."""
 from __future__ import annotations
 
 import os
 
 import pytest
+from hypothesis import settings
+
+settings.register_profile("mrta", deadline=None)
+settings.load_profile("mrta")
 
 
 @pytest.fixture(scope="session", autouse=True)

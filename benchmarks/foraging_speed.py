@@ -94,7 +94,8 @@ def method_of(name: str):
         return STANDIN, StandInOptions()
     if name == "dr":                  # with the shipped interference model, as the reproductions run it
         from runtime.allocation.dr.options import DrOptions
-        return name, DrOptions(model=str(ROOT / "runtime" / "allocation" / "dr" / "interference_pioneer3dx.json"))
+        return name, DrOptions(model=str(ROOT / "runtime" / "allocation" / "dr" / "interference_pioneer3dx.json"),
+                               delivery_reach=ForagingConfig.delivery_reach)     # the experiments' delivery area
     return name, None
 
 

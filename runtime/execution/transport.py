@@ -19,10 +19,9 @@ import math
 from runtime.control.arbiter import FollowPath
 from runtime.control.pure_pursuit import PurePursuit
 from runtime.tasks import Commitment, Progress
-from runtime.tasks.transport import DELIVERED, LOADED
+from runtime.tasks.transport import DELIVERED, LOADED, mark_reach
 
 TO_OBJECT, LOADING, TO_DELIVERY, UNLOADING = "to_object", "loading", "to_delivery", "unloading"
-DEFAULT_REACH = 0.3           # m
 TIP_POINTS = 6                # segments per quarter turn of a circuit (a leg goes on one quarter turn past its tip)
 LANE_FACTOR = 1.6             # default lane offset: this many robot radii right of the straight line
 TIP_FACTOR = 0.85             # a circuit's tip lies this share of reach short of its mark
@@ -177,16 +176,12 @@ class TransportExecutor:
 
     @property
     def reach(self) -> float:
-        return float(self.commitment.param("reach", DEFAULT_REACH))
+        return mark_reach(self.commitment, at_object=True)
 
     @property
     def delivery_reach(self) -> float:
         """How close to the delivery point it unloads: the radius of the delivery area (default: ``reach``)."""
-        return float(self.commitment.param("delivery_reach", self.reach))
-
-    def reach_of(self, phase: str) -> float:
-        """The reach at the mark worked in ``phase``'s half of the trip."""
-        return self.reach if phase in (TO_OBJECT, LOADING) else self.delivery_reach
+        return mark_reach(self.commitment, at_object=False)
 
     def _pursuit(self) -> PurePursuit:
         p = self.ctx.pursuit()
@@ -279,7 +274,8 @@ class TransportExecutor:
         if self.waiting:
             return []
         if self.phase in (TO_OBJECT, TO_DELIVERY):
-            near = math.hypot(self.mark[0] - pose[0], self.mark[1] - pose[1]) <= self.reach_of(self.phase)
+            near = (math.hypot(self.mark[0] - pose[0], self.mark[1] - pose[1])
+                    <= mark_reach(self.commitment, at_object=self.phase == TO_OBJECT))
             if near:                              # within reach of the mark: work from here
                 self.phase = LOADING if self.phase == TO_OBJECT else UNLOADING
                 self._dwell_until = now + self.load * self.load_time

@@ -36,6 +36,14 @@ LOADED, DELIVERED = "loaded", "delivered"          # Progress events of a transp
 MAX_WEIGHT = 1e6
 MAX_DEADLINE = 1e6                                  # s (11.6 days)
 MAX_UTILITY = 1e9
+DEFAULT_REACH = 0.3                                 # m, a commitment's ``reach`` when it gives none
+
+
+def mark_reach(commitment, at_object: bool) -> float:
+    """How close to its mark a robot works under ``commitment``: ``reach`` at the object; ``delivery_reach``
+    (default ``reach``) at the delivery point."""
+    reach = float(commitment.param("reach", DEFAULT_REACH))
+    return reach if at_object else float(commitment.param("delivery_reach", reach))
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 from runtime.fleet.simulate import MAV_FRAME_LOCAL_ENU, SimFleet, SimRobot
 from runtime.tasks import Commitment, Progress
-from runtime.tasks.transport import DELIVERED, LOADED, MAV_CMD_WAYPOINT_USER_2
+from runtime.tasks.transport import DELIVERED, LOADED, MAV_CMD_WAYPOINT_USER_2, mark_reach
 
 TO_OBJECT, LOADING, TO_DELIVERY, UNLOADING = "to_object", "loading", "to_delivery", "unloading"
 
@@ -57,9 +57,7 @@ class TransportRobot(SimRobot):
         if trip.phase in (TO_OBJECT, TO_DELIVERY):
             gx, gy = trip.goal()
             d = math.hypot(gx - self.pos[0], gy - self.pos[1])
-            reach = float(c.param("reach", 0.3))
-            if trip.phase == TO_DELIVERY:
-                reach = float(c.param("delivery_reach", reach))
+            reach = mark_reach(c, at_object=trip.phase == TO_OBJECT)
             step = min(max(0.0, d - reach * 0.5), self.speed * dt)
             if d > 0:
                 self.pos = (self.pos[0] + (gx - self.pos[0]) * step / d, self.pos[1] + (gy - self.pos[1]) * step / d)

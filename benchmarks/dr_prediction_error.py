@@ -3,11 +3,14 @@ dr-table run finished, its time from appearing to done against eq. 2 at its mean
 I), per strategy.  Above 1 the world was slower than the model says.
 
     python benchmarks/dr_prediction_error.py results/dr-table3/dr_table3_objects.csv [--area 1.0] [--model PATH]
+
+Robots as the experiments run them: 2 wu per trip, 0.25 m/s, 0.12 s per wu (the calibration's).
 """
 from __future__ import annotations
 
 import argparse
 import csv
+import math
 import sys
 from pathlib import Path
 
@@ -18,18 +21,16 @@ sys.path.insert(0, str(ROOT))
 
 from runtime.allocation.dr import model as M  # noqa: E402
 from runtime.allocation.dr.interference import InterferenceModel  # noqa: E402
-
-SHIPPED = ROOT / "runtime" / "allocation" / "dr" / "interference_pioneer3dx.json"
+from sitl.experiments import dr_common as D  # noqa: E402
+from sitl.experiments.dr_calibration import LOAD, LOAD_TIME, SPEED  # noqa: E402
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("objects_csv")
-    ap.add_argument("--area", type=float, default=1.0, help="the delivery area's radius, m (distances run to its edge)")
-    ap.add_argument("--model", default=str(SHIPPED))
-    ap.add_argument("--load", type=float, default=2.0)
-    ap.add_argument("--speed", type=float, default=0.25)
-    ap.add_argument("--load-time", type=float, default=0.12)
+    ap.add_argument("--area", type=float, default=D.Setup.delivery_area,
+                    help="the delivery area's radius, m (distances run to its edge)")
+    ap.add_argument("--model", default=str(D.shipped_model()))
     args = ap.parse_args()
     try:
         model = InterferenceModel.load(args.model)
@@ -44,9 +45,10 @@ def main() -> int:
         ratio = []
         for r in (r for r in rows if r["cell"] == cell):
             n, d = float(r["mean_group"]), max(0.0, float(r["d_m"]) - args.area)
-            cap = n * M.work_capacity(args.load, args.speed, d, args.load_time) - model.predict(n, d)
-            if cap > 0:
-                ratio.append(float(r["elapsed_s"]) / (float(r["weight_wu"]) / cap))
+            cap = M.group_capacity(n * M.work_capacity(LOAD, SPEED, d, LOAD_TIME), model.predict(n, d))
+            predicted = M.expected_time(float(r["weight_wu"]), cap)
+            if math.isfinite(predicted) and predicted > 0:
+                ratio.append(float(r["elapsed_s"]) / predicted)
         if ratio:
             p25, p50, p75 = np.percentile(ratio, [25, 50, 75])
             print(f"{cell:24s}  {len(ratio):5d}  {p25:24.2f}  {p50:6.2f}  {p75:5.2f}")

@@ -39,18 +39,17 @@ def main() -> int:
     from sitl.foraging import harness
 
     model = D.shipped_model()
-    setup = D.Setup(time_limit=args.time_limit, u_max=(50, 150), min_distance=args.min_distance,
-                    min_angle=args.min_angle)
-    cells = [] if args.no_greedy else [("Greedy", D.Cell("Greedy", auction="greedy", strategy="NM_NI"), None)]
-    cells += [(f"DR NM_I late={late}", D.Cell("NM_I"), late) for late in args.late.split(",")]
+    cells = [] if args.no_greedy else [("Greedy", D.Cell("Greedy", auction="greedy", strategy="NM_NI"))]
+    cells += [(f"DR NM_I late={late}", D.Cell("NM_I", late=late)) for late in args.late.split(",")]
     print("reach  at D   seed  method                wu moved  objects done  wall (s)")
     for reach, at_d in [(float(r), float(r) if d == "same" else float(d))
                         for r in args.reach.split(",") for d in args.delivery_reach.split(",")]:
+        setup = D.Setup(time_limit=args.time_limit, u_max=(50, 150), min_distance=args.min_distance,
+                        min_angle=args.min_angle, delivery_area=at_d)
         for seed in map(int, args.seeds.split(",")):
-            for name, cell, late in cells:
+            for name, cell in cells:
                 cfg = D.config(cell, setup, seed, model)
-                opts = replace(cfg.options, reach=reach, delivery_reach=at_d, **({"late": late} if late else {}))
-                cfg = replace(cfg, reach=reach, delivery_reach=at_d, options=opts)
+                cfg = replace(cfg, options=replace(cfg.options, reach=reach))     # the area comes with the setup
                 t0 = time.perf_counter()
                 fr = harness.ForagingRun(cfg)
                 try:

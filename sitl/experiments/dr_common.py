@@ -75,22 +75,28 @@ class Setup:
     size: float = 10.0
     sonar: bool = True
     paper_deadline: float | None = DL               # s: the paper's deadline for this setting (None: no paper's)
-    delivery_area: float = 1.0                      # m: robots unload within this of D (distances are to its edge)
-    min_distance: float = 2.0                       # m: objects appear this far from D's centre at the least ...
-    min_angle: float = 90.0                         # deg: ... and this far apart seen from D
+    delivery_area: float = scenario.DELIVERY_AREA   # m: robots unload within this of D (distances are to its edge)
+    min_distance: float = scenario.MIN_DISTANCE     # m: objects appear this far from D's centre at the least ...
+    min_angle: float = scenario.MIN_ANGLE           # deg: ... and this far apart seen from D
 
     def describe(self) -> str:
         lo, hi = self.u_max
         u = f"U_max {lo}" if lo == hi else f"U_max integers uniform in [{lo}, {hi}]"
         end = f"{self.time_limit:g} s" + ("" if self.max_objects is None else
                                           f" or {self.max_objects} objects done, whichever comes first")
-        scaled = ("" if not deadline_note(self) else
-                  f", {self.deadline / DL:.2f} x the paper's 900 tu: see docs/dr-experiments.md on the deadline")
+        scaled = (f", {self.deadline / DL:.2f} x the paper's 900 tu: see docs/dr-experiments.md on the deadline"
+                  if self.deadline_scaled else "")
         return (f"{self.robots} robots, {self.objects} objects present at once (each replaced at a random place as "
                 f"it is done) of {self.weight:g} wu, deadline {self.deadline:g} s ({self.deadline / scenario.TU:.0f} "
                 f"tu{scaled}) after the object appears, {u}; a {self.size:g} x {self.size:g} m arena, delivery area of "
                 f"{self.delivery_area:g} m radius at its centre (distances are to its edge), objects at least "
-                f"{self.min_distance:g} m from its centre and {self.min_angle:g} deg apart seen from it; each run lasts {end}; robots avoid by {'sonar and bumpers' if self.sonar else 'bumpers'}")
+                f"{self.min_distance:g} m from its centre and {self.min_angle:g} deg apart seen from it; each run "
+                f"lasts {end}; robots avoid by {'sonar and bumpers' if self.sonar else 'bumpers'}")
+
+    @property
+    def deadline_scaled(self) -> bool:
+        """Whether the deadline differs from the paper's for this setting (a setting with no paper's: never)."""
+        return self.paper_deadline is not None and abs(self.deadline - self.paper_deadline) >= 1e-9
 
 
 def options(cell: Cell, model: Path | None, setup: Setup) -> DrOptions:
@@ -227,7 +233,7 @@ def execute(args, name: str, cells: Sequence[Cell], setup: Setup, extra: str = "
     wall = time.perf_counter() - t0
     command = (f"mrta experiment {name.replace('_', '-')} --seeds {args.seeds} --jobs {args.jobs}{extra}"
                + (" --quick" if args.quick else "") + (f" --time-limit {args.time_limit:g}" if args.time_limit else "")
-               + (f" --deadline {args.deadline:g}" if getattr(args, "deadline", None) else "")
+               + (f" --deadline {args.deadline:g}" if args.deadline else "")
                + (" --no-sonar" if args.no_sonar else ""))
     return Execution(results, source, command, wall, write_rows(out, name, results))
 
@@ -322,14 +328,14 @@ def apply_arguments(setup: Setup, args) -> Setup:
         setup = replace(setup, time_limit=float(args.time_limit))
     if args.no_sonar:
         setup = replace(setup, sonar=False)
-    if getattr(args, "deadline", None) is not None:
+    if args.deadline is not None:
         setup = replace(setup, deadline=float(args.deadline))
     return setup
 
 
 def deadline_note(setup: Setup) -> str:
     """A sentence on why a run's deadline is not the paper's ('' when it is)."""
-    if setup.paper_deadline is None or abs(setup.deadline - setup.paper_deadline) < 1e-9:
+    if not setup.deadline_scaled:
         return ""
     return (f" The deadline is {setup.deadline:g} s, not the paper's {DL:g} s: at {DL:g} s no strategy met a single "
             f"deadline in this world (results/dr-table3-paper-dl), so it is set where Greedy, which ignores deadlines, "

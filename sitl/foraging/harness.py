@@ -79,17 +79,15 @@ class ForagingConfig:
     u_max: Dist = Dist.integers(50, 150)
     size: float = 10.0                        # m, side of the square arena centred on the origin
     delivery: tuple[float, float] = (0.0, 0.0)
-    min_distance: float = 2.0                 # m, objects at least this far from the delivery point (beyond the
-                                              # delivery area and its circuits' turns) ...
-    min_angle: float = 90.0                   # deg, ... and this far apart seen from it (3 transports' circuits
-                                              # meet D's area apart: their turns there do not overlap)
+    min_distance: float = scenario.MIN_DISTANCE   # m, objects at least this far from the delivery point ...
+    min_angle: float = scenario.MIN_ANGLE     # deg, ... and this far apart seen from it
     wall_margin: float = 0.5                  # m, and this far from the walls
     starts: Mapping[int, tuple[float, float, float]] | None = None   # default: seeded, spread over the arena
     fixed_object: tuple[float, float] = (1.4, 0.0)     # calibration mode: the object's place
     load: float = 2.0                         # wu per trip (calibration mode's commitments)
     load_time: float = 0.12                   # s per wu
     reach: float = 0.3                        # m, loads this close to the object (calibration mode's commitments)
-    delivery_reach: float = 1.0               # m, unloads this close to the delivery point
+    delivery_reach: float = scenario.DELIVERY_AREA   # m, unloads this close to the delivery point
     speed: float = 0.25                       # m/s cruise (the paper's 3 du/tu)
     lookahead: float = 0.3                    # m (pure pursuit; it slows down within 2 x this of a mark)
     max_turn_rate: float = 2.0                # rad/s (arc set and pursuit; the drive ramps at 100 deg/s^2)

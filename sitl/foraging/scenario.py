@@ -21,6 +21,9 @@ from runtime.errors import InputError
 TU = 0.12                 # s per paper time unit
 DU = 0.01                 # m per paper distance unit
 SOFT_TAIL = 0.07          # eq. 10: the utility halves 0.07 DL after the deadline
+DELIVERY_AREA = 1.0       # m: robots unload within this of D (docs/foraging.md: one 0.3 m point jammed the fleet)
+MIN_DISTANCE = 2.0        # m: objects appear this far from D's centre at the least (beyond the area and its turns)
+MIN_ANGLE = 90.0          # deg: ... and this far apart seen from D (their circuits' turns at the area do not overlap)
 
 
 @dataclass(frozen=True)

@@ -33,6 +33,7 @@ from runtime.config.build import ConfigError, rng
 from runtime.config.world import check_inside
 from runtime.fleet.messages import DONE, STATE_NAMES
 from runtime.tasks.transport import Transport, to_item
+from sitl.foraging.scenario import MIN_DISTANCE
 
 AWARD_TEXT = re.compile(r"task (\d+)\.(\d+) awarded to ((?:R\d+\+?)*)")
 
@@ -74,8 +75,8 @@ class Config:
     deadline: float = field(default=108.0, metadata=rng(0.0, 1e6, lo_open=True))    # s after it appears
     u_max: tuple[float, float] = (50.0, 150.0)                   # utility drawn as an integer in [lo, hi]
     delivery: tuple[float, float] = (0.0, 0.0)                   # m; the robots' allocation.delivery
-    min_distance: float = field(default=2.0, metadata=rng(0.0, None))    # m from the delivery point (1 m beyond
-                                                                 # the robots' delivery area, allocation.delivery_reach)
+    min_distance: float = field(default=MIN_DISTANCE, metadata=rng(0.0, None))    # m from the delivery point (1 m
+                                                                 # beyond the robots' allocation.delivery_reach)
     margin: float = field(default=0.75, metadata=rng(0.0, None))         # m from the arena's walls
     objects: tuple[tuple[float, float], ...] = ()                # fixed places for the first objects
     to: Optional[int] = None                                     # robot the operator uploads to (null: lowest)

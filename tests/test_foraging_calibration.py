@@ -29,6 +29,29 @@ def test_interference_grows_with_the_group_at_a_short_distance():
     assert three["fraction_of_ideal"] < one["fraction_of_ideal"]
 
 
+def test_background_groups_work_their_own_objects_and_only_the_fixed_one_counts():
+    from sitl.foraging import harness
+    cfg = cal.config(2, 140, 120.0, seed=1, dt=0.05, extra=1)
+    assert cfg.ids == (1, 2, 3, 4) and len(cfg.background) == 2
+    for x, y, n in cfg.background:            # BACKGROUND_AT from D, +-BACKGROUND_TURN from the diagonal, one robot
+        assert math.hypot(x, y) == pytest.approx(cal.BACKGROUND_AT) and n == 1
+    fr = harness.ForagingRun(cfg)
+    try:
+        res = fr.run()
+        commits = {r: fr.robots[r].commitments[0] for r in cfg.ids}
+    finally:
+        fr.close()
+    assert commits[1].task_id == commits[2].task_id != commits[3].task_id != commits[4].task_id
+    assert commits[1].partners == (2,) and commits[2].partners == (1,) and commits[3].partners == ()
+    fixed, *others = res.objects
+    assert (fixed.x, fixed.y) == pytest.approx(cfg.fixed_object) and all(o.delivered > 0 for o in others)
+    row = cal.run_case(2, 140, 120.0, seed=1, dt=0.05, extra=1)
+    assert row["background"] == 1 and row["moved_wu"] == pytest.approx(fixed.delivered)
+    assert row["moved_wu"] == 2.0 * row["trips"] > 0             # the fixed group's trips only
+    with pytest.raises(InputError, match="foraging background"):
+        harness.ForagingRun(harness.ForagingConfig(robots=2, method=None, background=((0.0, 3.0, 2),)))
+
+
 @pytest.mark.slow
 def test_quick_run_writes_the_samples_and_the_report(tmp_path):
     import argparse
@@ -63,7 +86,8 @@ def test_quick_run_writes_the_samples_and_the_report(tmp_path):
 @pytest.mark.parametrize("argv, why", [(["--robots", "0-3"], "--robots '0-3': expected group sizes"),
                                        (["--robots", "a"], "--robots 'a': expected a range"),
                                        (["--distances", "140,900"], "--distances '140,900': expected du between"),
-                                       (["--jobs", "0"], "--jobs 0: expected at least 1")])
+                                       (["--jobs", "0"], "--jobs 0: expected at least 1"),
+                                       (["--background", "7"], "--background 7: expected 0 to 6")])
 def test_bad_arguments_are_one_line_errors(argv, why, tmp_path):
     import argparse
     parser = argparse.ArgumentParser()

@@ -40,8 +40,10 @@ LOAD, SPEED, LOAD_TIME = 2.0, 0.25, scenario.TU     # wu, m/s, s per wu
 PAPER_FRACTION_8_AT_140 = 0.413                     # Fig. 2 text: 8 robots at D1 reach 41.3 % of ideal
 SHIPPED_MODEL = "runtime/allocation/dr/interference_pioneer3dx.json"   # the model the configs and experiments use
 CHECK_CASE = (4, 140)                               # the point measured again at a finer physics step
+BACKGROUND_AT = 3.0         # m from D's centre: --background's two objects (about where the tables' objects lie) ...
+BACKGROUND_TURN = 120.0     # deg: ... this far either side of the fixed object's bearing
 SETTINGS = ("duration_s", "dt_s", "control_s", "seed", "lookahead_m", "max_turn_rate", "reach_m",
-            "delivery_reach_m", "sonar")
+            "delivery_reach_m", "sonar", "background")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -63,6 +65,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resume", default=None, metavar="CSV",
                         help="a dr_calibration.csv of an earlier run with the same settings: its cases are kept")
     parser.add_argument("--no-png", action="store_true", help="skip the figure")
+    parser.add_argument("--background", type=int, default=0, metavar="N",
+                        help="not the paper's: two more objects, %g m from D at +-%g deg from the fixed one, each worked "
+                             "by N more robots throughout, so the samples include other groups' traffic at D's area, as "
+                             "in the tables' three-object world (default 0: the paper's one object)"
+                        % (BACKGROUND_AT, BACKGROUND_TURN))
 
 
 def _robots(text: str) -> tuple[int, ...]:
@@ -96,34 +103,44 @@ def work_capacity(d_m: float) -> float:
     return scenario.work_capacity(d_m, LOAD, SPEED, LOAD_TIME)
 
 
-def config(n: int, d_du: int, duration: float, seed: int, dt: float) -> "harness.ForagingConfig":
+def background(per_object: int) -> tuple[tuple[float, float, int], ...]:
+    """--background's two objects, (x, y, robots) each, about the fixed object's bearing (45 deg, the diagonal)."""
+    if per_object <= 0:
+        return ()
+    at = [math.radians(45.0 + s * BACKGROUND_TURN) for s in (-1, 1)]
+    return tuple((BACKGROUND_AT * math.cos(a), BACKGROUND_AT * math.sin(a), per_object) for a in at)
+
+
+def config(n: int, d_du: int, duration: float, seed: int, dt: float, extra: int = 0) -> "harness.ForagingConfig":
     from sitl.foraging import harness          # pybullet: loaded when a case runs, not when the CLI is built
 
     c = d_du * scenario.DU + harness.ForagingConfig.delivery_reach     # d is to the delivery area's edge
-    return harness.ForagingConfig(robots=n, method=None, seed=seed, time_limit=duration, dt=dt,
-                                  fixed_object=(c / math.sqrt(2), c / math.sqrt(2)), load=LOAD, load_time=LOAD_TIME,
-                                  speed=SPEED)
+    bg = background(extra)
+    return harness.ForagingConfig(robots=n + sum(g[2] for g in bg), method=None, seed=seed, time_limit=duration,
+                                  dt=dt, fixed_object=(c / math.sqrt(2), c / math.sqrt(2)), background=bg, load=LOAD,
+                                  load_time=LOAD_TIME, speed=SPEED)
 
 
-def run_case(n: int, d_du: int, duration: float, seed: int, dt: float) -> dict:
-    """One calibration case: the row of the CSV."""
+def run_case(n: int, d_du: int, duration: float, seed: int, dt: float, extra: int = 0) -> dict:
+    """One calibration case: the row of the CSV.  Only the fixed object's weight counts (the first record)."""
     from sitl.foraging import harness
 
-    cfg = config(n, d_du, duration, seed, dt)
+    cfg = config(n, d_du, duration, seed, dt, extra)
     t0 = time.perf_counter()
     res = harness.run(cfg)
     wall = time.perf_counter() - t0
     d = d_du * scenario.DU
     ideal = n * work_capacity(d)
-    rate = res.moved / res.end
-    robots = list(res.robots.values())
+    mine = res.objects[0]
+    robots = [res.robots[r] for r in cfg.ids[:n]]
+    rate = mine.delivered / res.end
     return {"n": n, "d_du": d_du, "d_m": d, "I_wu_per_s": ideal - rate, "I_wu_per_tu": (ideal - rate) * scenario.TU,
-            "moved_wu": res.moved, "ideal_wu_per_s": ideal, "actual_wu_per_s": rate, "fraction_of_ideal": rate / ideal,
+            "moved_wu": mine.delivered, "ideal_wu_per_s": ideal, "actual_wu_per_s": rate, "fraction_of_ideal": rate / ideal,
             "trips": sum(r.trips for r in robots), "stalled_s_mean": float(np.mean([r.stalled for r in robots])),
             "distance_m_mean": float(np.mean([r.distance for r in robots])), "duration_s": res.end, "dt_s": cfg.dt,
             "control_s": cfg.control_period, "seed": seed, "lookahead_m": cfg.lookahead,
             "max_turn_rate": cfg.max_turn_rate, "reach_m": cfg.reach, "delivery_reach_m": cfg.delivery_reach,
-            "sonar": cfg.sonar, "wall_s": wall}
+            "sonar": cfg.sonar, "background": extra, "wall_s": wall}
 
 
 def _key(row: dict) -> tuple:
@@ -140,6 +157,7 @@ def load_resume(path: str, want: dict) -> dict[tuple, dict]:
     with p.open() as fh:
         for row in csv.DictReader(fh):
             parsed = {k: _parse(v) for k, v in row.items()}
+            parsed.setdefault("background", 0)            # rows written before --background existed
             if all(k in parsed and str(parsed[k]) == str(v) for k, v in want.items() if k != "dt_s"):
                 out[_key(parsed)] = parsed
     return out
@@ -175,11 +193,11 @@ def run_all(cases: list[tuple], args, done: dict[tuple, dict], out_csv: Path) ->
 
     if args.jobs <= 1 or len(order) <= 1:
         for c in order:
-            finished(c, run_case(c[0], c[1], args.duration, args.seed, c[2]))
+            finished(c, run_case(c[0], c[1], args.duration, args.seed, c[2], args.background))
     else:
         from concurrent.futures import ProcessPoolExecutor, as_completed
         with ProcessPoolExecutor(max_workers=min(args.jobs, len(order))) as pool:
-            jobs = {pool.submit(run_case, c[0], c[1], args.duration, args.seed, c[2]): c for c in order}
+            jobs = {pool.submit(run_case, c[0], c[1], args.duration, args.seed, c[2], args.background): c for c in order}
             for job in as_completed(jobs):
                 finished(jobs[job], job.result())
     return done
@@ -284,6 +302,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--duration {args.duration!r}: expected seconds > 0")
     if args.jobs < 1:
         raise InputError(f"--jobs {args.jobs}: expected at least 1")
+    if not 0 <= args.background <= 6:
+        raise InputError(f"--background {args.background}: expected 0 to 6 robots per background object")
     if args.dt is None:
         from sitl.foraging.world import DT
         args.dt = DT
@@ -294,7 +314,7 @@ def run(args: argparse.Namespace) -> int:
     sample = config(1, distances[0], args.duration, args.seed, args.dt)
     want = {"duration_s": args.duration, "control_s": sample.control_period, "seed": args.seed,
             "lookahead_m": sample.lookahead, "max_turn_rate": sample.max_turn_rate, "reach_m": sample.reach,
-            "delivery_reach_m": sample.delivery_reach, "sonar": sample.sonar}
+            "delivery_reach_m": sample.delivery_reach, "sonar": sample.sonar, "background": args.background}
     done = load_resume(args.resume, want) if args.resume else {}
     t0 = time.perf_counter()
     done = run_all(cases, args, done, out / "dr_calibration.csv")
@@ -310,14 +330,15 @@ def run(args: argparse.Namespace) -> int:
     written += model
     cmd = (f"mrta experiment dr-calibration --robots {','.join(map(str, robots))} --distances {','.join(map(str, distances))} "
            f"--duration {args.duration:g} --seed {args.seed} --dt {args.dt:g} --check-dt {args.check_dt:g} "
-           f"--jobs {args.jobs}")
+           f"--jobs {args.jobs}" + (f" --background {args.background}" if args.background else ""))
     setup = (f"One object of unlimited weight on the diagonal from D at distance d, {robots[0]}..{robots[-1]} "
              f"Pioneer-sized robots committed to it from the start (fixed commitments: the real transport executor in "
              f"the real executive, no agent), load {LOAD:g} wu, {SPEED:g} m/s, {LOAD_TIME:g} s per wu to load and to "
              f"unload, reach {sample.reach:g} m at the object and {sample.delivery_reach:g} m at D (the delivery area's "
              f"radius), for {args.duration:g} s; physics step {args.dt * 1000:g} ms, control "
              f"period {sample.control_period:g} s; robots start at seeded random places (seed {args.seed}). "
-             f"I = n workCapacity(d) - moved / duration (wu/s; x 0.12 for wu/tu). Command: `{cmd}`. "
+             f"I = n workCapacity(d) - moved / duration (wu/s; x 0.12 for wu/tu). " + _background_text(args.background)
+             + f"Command: `{cmd}`. "
              f"Wall time {wall:.0f} s for the cases run now.")
     sections = [("Setup", setup),
                 ("Paper's statements (section 4.2.1, Fig. 2) beside ours", _claims_table(claims(main))),
@@ -331,6 +352,15 @@ def run(args: argparse.Namespace) -> int:
         written.append(figure(main, out / "dr_calibration.png"))
     print("wrote " + ", ".join(map(str, written)))
     return 0
+
+
+def _background_text(per_object: int) -> str:
+    if not per_object:
+        return ""
+    return (f"Not the paper's calibration: two more objects of unlimited weight, {BACKGROUND_AT:g} m from D's centre at "
+            f"+-{BACKGROUND_TURN:g} deg from the fixed one, each worked by {per_object} more robots throughout (the "
+            f"tables' three objects; their groups met at D's area, which a one-object calibration never shows); only "
+            f"the fixed object's weight and group enter the sample. ")
 
 
 def fit_model(samples: list[dict], out: Path, args) -> tuple[list[Path], str]:

@@ -27,7 +27,8 @@ what was not delivered is still to be moved).  So ``delivered`` is the weight th
 delivery point, whatever the agents believe.
 
 ``method=None`` is the calibration mode: no agents, no bus; every robot holds a fixed commitment to one object
-of unlimited weight (``fixed_object``) from the start.
+of unlimited weight (``fixed_object``) from the start, or, the last robots, to ``background`` objects worked at the
+same time.
 """
 from __future__ import annotations
 
@@ -84,6 +85,8 @@ class ForagingConfig:
     wall_margin: float = 0.5                  # m, and this far from the walls
     starts: Mapping[int, tuple[float, float, float]] | None = None   # default: seeded, spread over the arena
     fixed_object: tuple[float, float] = (1.4, 0.0)     # calibration mode: the object's place
+    background: tuple[tuple[float, float, int], ...] = ()  # calibration mode: other objects (x, y, robots) worked
+                                              # at the same time by the last robots (traffic the model then sees)
     load: float = 2.0                         # wu per trip (calibration mode's commitments)
     load_time: float = 0.12                   # s per wu
     reach: float = 0.3                        # m, loads this close to the object (calibration mode's commitments)
@@ -312,15 +315,25 @@ class ForagingRun:
         return scenario.starts(np.random.default_rng([cfg.seed, 0]), ids, cfg.size, RADIUS)
 
     def _fixed_object(self) -> None:
+        """Calibration mode: the fixed object (first record) worked by the first robots, each background object by
+        as many of the last robots as it names; every robot's partners are its own group."""
         cfg = self.cfg
-        x, y = cfg.fixed_object
-        task = Task(FIXED_TASK, "transport", Transport(float(x), float(y), MAX_WEIGHT, 1e6, 0.0))
-        rec = ObjectRecord(task.id, float(x), float(y), math.inf, math.inf, 0.0, 0.0, pile=math.inf)
-        rec.coalition.append((0.0, len(self.robots)))
-        self.objects[task.id] = rec
-        self.present.append(task.id)
-        for r, rb in self.robots.items():
-            rb._fixed = (Commitment(task, partners=rb.peers, role="member", params=cfg.params()),)
+        ids = list(self.robots)
+        extra = sum(int(n) for _, _, n in cfg.background)
+        if any(int(n) < 1 for _, _, n in cfg.background) or extra >= len(ids):
+            raise InputError(f"foraging background {cfg.background!r}: expected groups of at least one robot, fewer "
+                             f"than the {len(ids)} robots in all (the fixed object keeps one at the least)")
+        groups = [(cfg.fixed_object, len(ids) - extra)] + [((x, y), int(n)) for x, y, n in cfg.background]
+        for k, ((x, y), n) in enumerate(groups):
+            task = Task(FIXED_TASK + k, "transport", Transport(float(x), float(y), MAX_WEIGHT, 1e6, 0.0))
+            rec = ObjectRecord(task.id, float(x), float(y), math.inf, math.inf, 0.0, 0.0, pile=math.inf)
+            rec.coalition.append((0.0, n))
+            self.objects[task.id] = rec
+            self.present.append(task.id)
+            group, ids = ids[:n], ids[n:]
+            for r in group:
+                partners = tuple(q for q in group if q != r)
+                self.robots[r]._fixed = (Commitment(task, partners=partners, role="member", params=cfg.params()),)
 
     def _spawn(self, now: float) -> None:
         """A new object, handed to the lowest-id live robot as an operator's one-item upload."""

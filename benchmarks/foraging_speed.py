@@ -137,6 +137,9 @@ def main() -> None:
           f"{args.seconds / wall:.0f}x (target: wall < 30 s, 120x); objects done {len(res.finished)}, "
           f"{res.moved:.0f} wu moved, {res.messages.sent} messages sent")
     print(f"  cost split: {split(timing)}")
+    rest = sum(v for k, v in timing.items() if k not in ("total", "executive"))
+    print(f"  without the executive the rest (world, agents, harness) takes {rest:.1f} s: "
+          f"{args.seconds / max(rest, 1e-9):.0f}x real time at best with these parts as they are")
     if args.default_seconds > 0:
         short = ForagingConfig(**{**cfg.__dict__, "time_limit": args.default_seconds})
         t_fast, w_fast, c_fast, _ = measure(short)

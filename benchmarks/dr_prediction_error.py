@@ -1,6 +1,7 @@
 """How far the shipped interference model's prediction is from what the foraging world did: for every task a
 dr-table run finished, its time from appearing to done against eq. 2 at its mean group (eq. 4 less the model's
-I), per strategy.  Above 1 the world was slower than the model says.
+I), per strategy, then over every strategy by group size (with eq. 4's ideal time and how far the group's largest
+size was above its mean).  Above 1 the world was slower than the model says.
 
     python benchmarks/dr_prediction_error.py results/dr-table3/dr_table3_objects.csv [--area 1.0] [--model PATH]
 
@@ -40,18 +41,26 @@ def main() -> int:
         print(f"{args.objects_csv} / {args.model}: expected a dr-table objects CSV and a model file ({e})",
               file=sys.stderr)
         return 2
+    tasks = []                                   # (cell, mean group, elapsed / predicted, elapsed / ideal, max - mean)
+    for r in rows:
+        n, d = float(r["mean_group"]), max(0.0, float(r["d_m"]) - args.area)
+        ideal = n * M.work_capacity(LOAD, SPEED, d, LOAD_TIME)
+        predicted = M.expected_time(float(r["weight_wu"]), M.group_capacity(ideal, model.predict(n, d)))
+        if math.isfinite(predicted) and predicted > 0:
+            elapsed = float(r["elapsed_s"])
+            tasks.append((r["cell"], n, elapsed / predicted, elapsed / M.expected_time(float(r["weight_wu"]), ideal),
+                          float(r["max_group"]) - n))
     print("cell                      tasks  elapsed / predicted: p25  median   p75")
-    for cell in dict.fromkeys(r["cell"] for r in rows):
-        ratio = []
-        for r in (r for r in rows if r["cell"] == cell):
-            n, d = float(r["mean_group"]), max(0.0, float(r["d_m"]) - args.area)
-            cap = M.group_capacity(n * M.work_capacity(LOAD, SPEED, d, LOAD_TIME), model.predict(n, d))
-            predicted = M.expected_time(float(r["weight_wu"]), cap)
-            if math.isfinite(predicted) and predicted > 0:
-                ratio.append(float(r["elapsed_s"]) / predicted)
-        if ratio:
-            p25, p50, p75 = np.percentile(ratio, [25, 50, 75])
-            print(f"{cell:24s}  {len(ratio):5d}  {p25:24.2f}  {p50:6.2f}  {p75:5.2f}")
+    for cell in dict.fromkeys(t[0] for t in tasks):
+        ratio = [t[2] for t in tasks if t[0] == cell]
+        p25, p50, p75 = np.percentile(ratio, [25, 50, 75])
+        print(f"{cell:24s}  {len(ratio):5d}  {p25:24.2f}  {p50:6.2f}  {p75:5.2f}")
+    print("\nevery cell, by mean group (rounded; 5 = 5 or more): medians")
+    print("group  tasks  elapsed/predicted  elapsed/eq.4 ideal  max group - mean group")
+    for g in sorted({min(round(t[1]), 5) for t in tasks}):
+        sel = np.array([t[2:] for t in tasks if min(round(t[1]), 5) == g])
+        print(f"{g:5d}  {len(sel):5d}  {np.median(sel[:, 0]):17.2f}  {np.median(sel[:, 1]):18.2f}  "
+              f"{np.median(sel[:, 2]):22.2f}")
     return 0
 
 

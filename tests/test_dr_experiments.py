@@ -142,6 +142,23 @@ def test_dr_table5_quick_writes_its_files(tmp_path, model_file):
     assert (out / "dr_table5.png").stat().st_size > 5_000
 
 
+def test_late_fastest_reaches_every_run_and_the_report(tmp_path, model_file, monkeypatch):
+    seen, real = [], C.run_all
+
+    def spy(jobs, model, workers):
+        seen.extend(cell.late for cell, _, _ in jobs)
+        return real(jobs, model, workers)
+
+    monkeypatch.setattr(C, "run_all", spy)
+    out = tmp_path / "t5"
+    assert cli.main(["experiment", "dr-table5", "--quick", "--seeds", "1", "--jobs", "1", "--model", str(model_file),
+                     "--out", str(out), "--time-limit", "10", "--late", "fastest"]) == 0
+    assert seen == ["fastest"] * 4
+    md = (out / "dr_table5.md").read_text()
+    assert "`late: fastest`, ours" in md and "--late fastest" in md
+    assert C.options(C.Cell("x", late="fastest"), None, C.QUICK).late == "fastest"
+
+
 @pytest.mark.slow
 def test_dr_table4_quick_writes_its_files(tmp_path, model_file):
     out = tmp_path / "t4"

@@ -25,10 +25,10 @@ REPORTS = {                      # experiment -> (committed report, the command 
                        "mrta experiment dr-calibration --out results/dr-calibration --duration 600 --jobs 2"),
     "dr-table3 (paper's deadline)": ("results/dr-table3-paper-dl/dr_table3.md",
                                      "mrta experiment dr-table3 --seeds 3 --jobs 2 --time-limit 1800"),
-    "dr-table3": ("results/dr-table3/dr_table3.md", "mrta experiment dr-table3 --seeds 3 --jobs 2 --deadline 328"),
+    "dr-table3": ("results/dr-table3/dr_table3.md", "mrta experiment dr-table3 --seeds 5 --jobs 2 --deadline 328"),
     "dr-table4": ("results/dr-table4/dr_table4.md",
                   "mrta experiment dr-table4 --seeds 3 --jobs 2 --deadline 328 --time-limit 2400"),
-    "dr-table5": ("results/dr-table5/dr_table5.md", "mrta experiment dr-table5 --seeds 3 --jobs 2 --deadline 328"),
+    "dr-table5": ("results/dr-table5/dr_table5.md", "mrta experiment dr-table5 --seeds 8 --jobs 2 --deadline 328"),
 }
 WALL = re.compile(r"Command: `([^`]*)` on commit ([0-9a-f+dirty]+): wall time (\d+) s")
 

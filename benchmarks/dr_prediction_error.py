@@ -23,7 +23,7 @@ sys.path.insert(0, str(ROOT))
 from runtime.allocation.dr import model as M  # noqa: E402
 from runtime.allocation.dr.interference import InterferenceModel  # noqa: E402
 from sitl.experiments import dr_common as D  # noqa: E402
-from sitl.experiments.dr_calibration import LOAD, LOAD_TIME, SPEED  # noqa: E402
+from sitl.experiments.dr_calibration import work_capacity  # noqa: E402
 
 
 def main() -> int:
@@ -43,12 +43,12 @@ def main() -> int:
         return 2
     tasks = []                                   # (cell, mean group, elapsed / predicted, elapsed / ideal, max - mean)
     for r in rows:
-        n, d = float(r["mean_group"]), max(0.0, float(r["d_m"]) - args.area)
-        ideal = n * M.work_capacity(LOAD, SPEED, d, LOAD_TIME)
-        predicted = M.expected_time(float(r["weight_wu"]), M.group_capacity(ideal, model.predict(n, d)))
+        n, d, weight = float(r["mean_group"]), max(0.0, float(r["d_m"]) - args.area), float(r["weight_wu"])
+        ideal = n * work_capacity(d)
+        predicted = M.expected_time(weight, M.group_capacity(ideal, model.predict(n, d)))
         if math.isfinite(predicted) and predicted > 0:
             elapsed = float(r["elapsed_s"])
-            tasks.append((r["cell"], n, elapsed / predicted, elapsed / M.expected_time(float(r["weight_wu"]), ideal),
+            tasks.append((r["cell"], n, elapsed / predicted, elapsed / M.expected_time(weight, ideal),
                           float(r["max_group"]) - n))
     print("cell                      tasks  elapsed / predicted: p25  median   p75")
     for cell in dict.fromkeys(t[0] for t in tasks):

@@ -92,10 +92,9 @@ def method_of(name: str):
     if name == "standin":
         from tests.foraging_standin import STANDIN, StandInOptions
         return STANDIN, StandInOptions()
-    if name == "dr":                  # with the shipped interference model, as the reproductions run it
-        from runtime.allocation.dr.options import DrOptions
-        return name, DrOptions(model=str(ROOT / "runtime" / "allocation" / "dr" / "interference_pioneer3dx.json"),
-                               delivery_reach=ForagingConfig.delivery_reach)     # the experiments' delivery area
+    if name == "dr":                  # NM_I, soft, as Table 5 runs it: the shipped model, the delivery area
+        from sitl.experiments import dr_common as D
+        return name, D.options(D.Cell("NM_I", utility="soft"), D.shipped_model(), D.Setup())
     return name, None
 
 

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from runtime.allocation.dr import model as dr_model
 from runtime.errors import InputError
 
 TU = 0.12                 # s per paper time unit
@@ -78,8 +79,9 @@ def utility_hard(elapsed: float, deadline: float, u_max: float) -> float:
 
 def work_capacity(distance: float, load: float, speed: float, load_time: float) -> float:
     """Eq. 5 (wu/s): one robot's ideal rate, ``L v / (2 (tau L v + d))``: round trips of ``2 d / v`` plus
-    ``tau L`` to load and again to unload (acceleration, turning and the first approach left out)."""
-    return load * speed / (2.0 * (load_time * load * speed + distance))
+    ``tau L`` to load and again to unload (acceleration, turning and the first approach left out).  The agents'
+    own eq. 5 (:func:`runtime.allocation.dr.model.work_capacity`), in the scenario's argument order."""
+    return dr_model.work_capacity(load, speed, distance, load_time)
 
 
 def object_place(rng: np.random.Generator, size: float, delivery: tuple[float, float], min_distance: float,

@@ -159,6 +159,25 @@ def test_late_fastest_reaches_every_run_and_the_report(tmp_path, model_file, mon
     assert C.options(C.Cell("x", late="fastest"), None, C.QUICK).late == "fastest"
 
 
+def test_online_reaches_the_model_cells_only_and_the_report(tmp_path, model_file, monkeypatch):
+    seen, real = [], C.run_all
+
+    def spy(jobs, model, workers):
+        seen.extend((cell.label, cell.online) for cell, _, _ in jobs)
+        return real(jobs, model, workers)
+
+    monkeypatch.setattr(C, "run_all", spy)
+    out = tmp_path / "t3"
+    assert cli.main(["experiment", "dr-table3", "--quick", "--seeds", "1", "--jobs", "1", "--model", str(model_file),
+                     "--out", str(out), "--time-limit", "10", "--online"]) == 0
+    assert dict(seen) == {"Greedy": False, "NM_NI": False, "NM_I": True, "M_NI": False, "M_I": True}
+    md = (out / "dr_table3.md").read_text()
+    assert "learns on-line" in md and "--online" in md
+    assert {r["cell"]: r["online"] for r in _rows(out / "dr_table3_runs.csv")}["M_I"] == "True"
+    with pytest.raises(SystemExit):                 # Table 5's cells are off-line and on-line already
+        cli.main(["experiment", "dr-table5", "--quick", "--online", "--out", str(tmp_path / "t5")])
+
+
 @pytest.mark.slow
 def test_dr_table4_quick_writes_its_files(tmp_path, model_file):
     out = tmp_path / "t4"

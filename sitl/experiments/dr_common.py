@@ -209,6 +209,7 @@ class Execution:
     wall: float
     written: list[Path]
     late: str = "all"
+    online: bool = False
 
     @property
     def runs(self) -> list[dict]:
@@ -223,6 +224,9 @@ class Execution:
         rule = ("" if self.late == "all" else
                 "Leaders that cannot meet eq. 8 add bidders only while each brings the predicted finish forward "
                 "(`late: fastest`, ours), not every bidder (the paper's rule); Greedy still awards every bidder. ")
+        if self.online:
+            rule += ("Every cell that uses the model learns on-line (section 5.4: each finished task's sample is "
+                     "shared and every robot refits on its newest 120), not off-line only as the paper's run. ")
         return (rule + f"Command: `{self.command}` on commit {commit()}: wall time {self.wall:.0f} s ({per_run:.0f} s per "
                 f"run, {len(self.results)} runs, {jobs} jobs).")
 
@@ -231,7 +235,8 @@ def execute(args, name: str, cells: Sequence[Cell], setup: Setup, extra: str = "
     """Resolve the model, run every (cell, seed), write the run and object CSVs under ``--out``."""
     out = Path(args.out)
     model, source = resolve_model(args.model, out)
-    cells = [replace(c, late=args.late) for c in cells]
+    online = getattr(args, "online", False)
+    cells = [replace(c, late=args.late, online=c.online or (online and c.uses_model)) for c in cells]
     jobs = [(cell, setup, seed) for seed in range(1, args.seeds + 1) for cell in cells]
     t0 = time.perf_counter()
     results = run_all(jobs, model, args.jobs)
@@ -239,8 +244,9 @@ def execute(args, name: str, cells: Sequence[Cell], setup: Setup, extra: str = "
     command = (f"mrta experiment {name.replace('_', '-')} --seeds {args.seeds} --jobs {args.jobs}{extra}"
                + (" --quick" if args.quick else "") + (f" --time-limit {args.time_limit:g}" if args.time_limit else "")
                + (f" --deadline {args.deadline:g}" if args.deadline else "")
-               + (" --no-sonar" if args.no_sonar else "") + (f" --late {args.late}" if args.late != "all" else ""))
-    return Execution(results, source, command, wall, write_rows(out, name, results), args.late)
+               + (" --no-sonar" if args.no_sonar else "") + (f" --late {args.late}" if args.late != "all" else "")
+               + (" --online" if online else ""))
+    return Execution(results, source, command, wall, write_rows(out, name, results), args.late, online)
 
 
 def objects_setup(args, full: Setup) -> Setup:
@@ -302,7 +308,8 @@ def read_samples(path: Path) -> list[tuple[float, float, float]]:
 
 # ---------------------------------------------------------------------- arguments
 
-def add_arguments(parser: argparse.ArgumentParser, seeds: int = 5) -> None:
+def add_arguments(parser: argparse.ArgumentParser, seeds: int = 5, online: bool = True) -> None:
+    """The options every dr-* command takes; ``online``: also ``--online`` (not for a table whose cells set it)."""
     parser.add_argument("--seeds", type=int, default=seeds, help="runs per cell, seeds 1..N (default %(default)s)")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="runs in this many processes")
     parser.add_argument("--quick", action="store_true", help="a small size for tests (a few seconds)")
@@ -319,6 +326,10 @@ def add_arguments(parser: argparse.ArgumentParser, seeds: int = 5) -> None:
                         help="what a leader does when eq. 8 cannot hold: all (the paper: award every bidder) or "
                              "fastest (ours: add bidders, best first, only while each brings the predicted finish "
                              "forward); Greedy awards every bidder either way (default %(default)s)")
+    if online:
+        parser.add_argument("--online", action="store_true",
+                            help="cells that use the interference model also learn it on-line (section 5.4), "
+                                 "not off-line only as the paper's run")
 
 
 def check_arguments(args) -> None:

@@ -34,7 +34,7 @@ SETUP = C.Setup(robots=7, objects=3, weight=40.0, deadline=C.DL, u_max=(50, 150)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    C.add_arguments(parser)
+    C.add_arguments(parser, online=False)            # the table's cells are off-line and on-line already
     parser.add_argument("--objects", type=int, default=OBJECTS,
                         help="objects done that end a run (default %(default)s; the paper moves 200)")
 

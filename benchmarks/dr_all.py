@@ -27,11 +27,14 @@ REPORTS = {                      # experiment -> (committed report, the command 
                                      "mrta experiment dr-table3 --seeds 3 --jobs 2 --time-limit 1800"),
     "dr-table3": ("results/dr-table3/dr_table3.md", "mrta experiment dr-table3 --seeds 5 --jobs 2 --deadline 328"),
     "dr-table4": ("results/dr-table4/dr_table4.md",
-                  "mrta experiment dr-table4 --seeds 3 --jobs 2 --deadline 328 --time-limit 2400"),
+                  "mrta experiment dr-table4 --seeds 5 --jobs 2 --deadline 328 --time-limit 2400"),
     "dr-table5": ("results/dr-table5/dr_table5.md", "mrta experiment dr-table5 --seeds 8 --jobs 2 --deadline 328"),
     "dr-table3 (late: fastest)": ("results/dr-table3-fastest/dr_table3.md",
                                   "mrta experiment dr-table3 --seeds 5 --jobs 2 --deadline 328 --late fastest "
                                   "--out out/dr-table3-fastest"),
+    "dr-table3 (on-line learning)": ("results/dr-table3-online/dr_table3.md",
+                                     "mrta experiment dr-table3 --seeds 5 --jobs 2 --deadline 328 --online "
+                                     "--out out/dr-table3-online"),
 }
 WALL = re.compile(r"Command: `([^`]*)` on commit ([0-9a-f+dirty]+): wall time (\d+) s")
 

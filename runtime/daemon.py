@@ -272,8 +272,10 @@ def _for_agent(msg) -> bool:
 
 # ---------------------------------------------------------------------- process main loop
 
-class _Stop(Exception):
-    """SIGTERM or SIGINT arrived: leave the loop wherever it is, then stop the motors."""
+class _Stop(BaseException):
+    """SIGTERM or SIGINT arrived: leave the loop wherever it is, then stop the motors.  A BaseException, as
+    KeyboardInterrupt is: the signal can land inside any ``except Exception`` (every parser loop has one, to count
+    what it drops), which must not swallow it."""
 
 
 def run(daemon: Daemon, clock: Clock, duration: float | None = None, stats_path: str | None = None) -> int:

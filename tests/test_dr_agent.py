@@ -342,6 +342,25 @@ def test_of_two_leaders_the_lower_id_yields_and_tells_its_group():
     assert [e.what for e in a.pop_events()][-1] == RELEASED
 
 
+def test_a_bid_request_shows_a_leader_as_leader_alive_does():
+    """Only a leader of the task auctions it: a candidate that hears another's BID_REQUEST gives up (and bids),
+    and of two leaders the lower id yields on it too.  With 10 % loss two candidates both became leaders and the
+    lower one missed every LEADER_ALIVE of the other for 3.8 s, though it had heard its BID_REQUEST."""
+    a = agent(3)
+    a.add_tasks([transport(T1, 1.4, 0.0)], 0.0)
+    a.on_tick(0.0)
+    assert a.role(T1) == "candidate"
+    (bid,) = of(a.on_message(DrBidRequest(5, 0, T1, 5 * 65536 + 1), 0.4), DrBid)
+    assert a.role(T1) is None and bid.dest == 5 and not of(a.on_tick(1.3), DrLeaderRequest)
+    b = agent(3)
+    b.add_tasks([transport(T1, 1.4, 0.0)], 0.0)
+    t, _ = elect(b, T1)
+    assert b.on_message(DrBidRequest(2, 0, T1, 2 * 65536 + 1), t + 0.5) == []     # lower id: it yields to me
+    assert b.role(T1) == "leader" and of(b.on_tick(t + 0.55), DrLeaderAlive)
+    assert b.on_message(DrBidRequest(5, 0, T1, 5 * 65536 + 1), t + 0.6) == [DrExitLeader(3, 0, T1, YIELD)]
+    assert b.role(T1) is None
+
+
 def _member(leader=1):
     a = _free_robot(auction="sr")
     a.on_message(DrAward(leader, 2, T1, 7, 10.0), 1.0)

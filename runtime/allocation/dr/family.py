@@ -326,6 +326,12 @@ class DrAgent:
         return []
 
     def _on_bid_request(self, m: DrBidRequest, now: float) -> list:
+        if m.sender != self.robot_id:                        # only a leader of the task auctions it
+            if self.request is not None and self.request.task == m.task:
+                self.log.info("task %d: robot %d auctions it already: giving up", m.task, m.sender)
+                self.request, self.gave_up[m.task] = None, now
+            if self.lead is not None and self.lead.task == m.task:
+                return self._two_leaders(m.sender, now)
         info = self.world.tasks.get(m.task)
         if not self._free() or info is None or info.task is None or m.sender in self.world.lost:
             return []
@@ -376,18 +382,22 @@ class DrAgent:
             self.log.info("task %d: robot %d leads it already: giving up", m.task, m.sender)
             self.request, self.gave_up[m.task] = None, now
         if self.lead is not None and self.lead.task == m.task:
-            if m.sender in self.lead.members:              # a robot that leads the task is no member of mine (its
-                self.lead.drop(m.sender, now, "it leads the task itself")   # state naming the task is no keep-alive)
-            if m.sender > self.robot_id:
-                out += self.lead.resign(YIELD, now, f"robot {m.sender} leads it too and has the higher id")
-                out += self._end_lead(now)
-            else:
-                self.lead.next_alive = now                   # the other one yields on hearing me
+            out += self._two_leaders(m.sender, now)
         ms = self.membership
         if ms is not None and ms.task == m.task and ms.leader == m.sender:
             ms.leader_heard = now
             ms.partners = tuple(r for r in m.members if r != self.robot_id)
         return out
+
+    def _two_leaders(self, other: int, now: float) -> list:
+        """Robot ``other`` leads the task this robot leads (its LEADER_ALIVE or its BID_REQUEST said so): the
+        higher id keeps it.  Yield to a higher id; from a lower one, send LEADER_ALIVE at once so it yields."""
+        if other in self.lead.members:                 # a robot that leads the task is no member of mine (its
+            self.lead.drop(other, now, "it leads the task itself")     # state naming the task is no keep-alive)
+        if other > self.robot_id:
+            return self.lead.resign(YIELD, now, f"robot {other} leads it too and has the higher id") + self._end_lead(now)
+        self.lead.next_alive = now
+        return []
 
     def _on_exit(self, m: DrExitLeader, now: float) -> list:
         info = self.world.tasks.get(m.task)

@@ -510,8 +510,32 @@ def test_a_leader_of_an_exhausted_object_keeps_the_books_without_recruiting():
     assert not of(a.on_tick(4.0), DrBidRequest)
     for robot in (1, 2):
         a.on_message(DrDeliver(robot, 3, T1, 1, 2.0, 1, 2.0, 2.0, 0.0), 5.0)
-    a.on_tick(5.1)
+    a.on_tick(5.1)                  # all delivered, but it has led for less than three LEADER_ALIVE periods ...
+    assert a.role(T1) == "leader" and T1 not in a.finished
+    a.on_tick(1.7 + 3 * a.o.leader_alive_period)        # ... in case another leader finishes it: now it does
     assert a.role(T1) is None and a.finished[T1].delivered == 4.0
+    assert [e.what for e in a.pop_events()].count(DONE) == 1
+
+
+def test_a_new_leader_that_hears_another_finish_the_task_says_no_done():
+    """With loss a robot can take over a task whose leader lives, as its last load arrives: both see the books
+    close.  The older leader says DONE at once; the new one waits three LEADER_ALIVE periods, and another's
+    EXIT_LEADER(task done) ends its lead with no DONE of its own (seed 3814 raised DONE twice without this)."""
+    a = agent(3)
+    a.add_tasks([transport(T1, 1.4, 0.0, weight=4.0, deadline=1.0)], 0.0)
+    for robot in (1, 2):
+        a.on_message(DrLedger(1, 0, T1, robot, 1, 2.0, 0, 0.0, 0.0, 0.0), 0.1)
+    a.on_message(DrExitLeader(1, 0, T1, YIELD), 0.2)
+    a.on_tick(0.3)
+    a.on_tick(1.6)
+    assert a.role(T1) == "leader"
+    for robot in (1, 2):
+        a.on_message(DrDeliver(robot, 3, T1, 1, 2.0, 1, 2.0, 2.0, 0.0), 2.0)
+    a.on_tick(2.1)
+    a.on_message(DrExitLeader(4, 0, T1, FINISHED), 2.2)
+    a.on_tick(10.0)
+    assert a.role(T1) is None and T1 not in a.finished
+    assert DONE not in [e.what for e in a.pop_events()]
 
 
 def test_with_a_delivery_area_distances_run_to_its_edge_and_the_executor_unloads_there():

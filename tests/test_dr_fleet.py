@@ -76,6 +76,7 @@ def test_ten_percent_message_loss_loses_and_doubles_no_weight(seed):
 @given(st.integers(0, 10_000), st.sampled_from(["dr", "sr", "greedy"]), st.sampled_from(["M_NI", "NM_NI"]))
 @example(1071, "dr", "M_NI")        # a robot that left and then led the task stayed on its old leader's list
 @example(689, "dr", "M_NI")         # two candidates both led; the lower missed every LEADER_ALIVE, not the BID_REQUEST
+@example(3814, "dr", "NM_NI")       # a robot took over as the last load arrived: two leaders said DONE
 def test_ten_robots_twelve_objects_ten_percent_loss_every_variant(seed, auction, strategy):
     o = DrOptions(auction=auction, strategy=strategy)
     f, watch, handed = _lossy(seed, TEN, 12, o)

@@ -30,8 +30,8 @@ from runtime.allocation.dr.leader import Finish, Leader, LeaderView
 from runtime.allocation.dr.learning import Learning
 from runtime.allocation.dr.ledger import EPS, Entry, Outbox
 from runtime.allocation.dr.member import Membership, Offer, Offers, Request, better
-from runtime.allocation.dr.messages import (NOT_MEMBER, REASONS, WIRE_MESSAGES, YIELD, DrAward, DrBid, DrBidRequest,
-                                            DrDeliver, DrExitLeader, DrLeaderAlive, DrLeaderRequest, DrLedger,
+from runtime.allocation.dr.messages import (FINISHED, NOT_MEMBER, REASONS, WIRE_MESSAGES, YIELD, DrAward, DrBid,
+                                            DrBidRequest, DrDeliver, DrExitLeader, DrLeaderAlive, DrLeaderRequest, DrLedger,
                                             DrLoad, DrRefuse, DrRobotAlive, DrSampleRequest, DrSvrSample)
 from runtime.allocation.dr.options import DrOptions
 from runtime.allocation.dr.world import TaskInfo, World
@@ -400,6 +400,9 @@ class DrAgent:
         return []
 
     def _on_exit(self, m: DrExitLeader, now: float) -> list:
+        if (m.reason == FINISHED and m.sender != self.robot_id and self.lead is not None and self.lead.task == m.task
+                and self.lead.finished is None):           # another leader of the task finished it: one DONE
+            return self.lead.resign(YIELD, now, f"robot {m.sender} finished it") + self._end_lead(now)
         info = self.world.tasks.get(m.task)
         if m.dest == BROADCAST and info is not None and info.leader == m.sender:
             info.leader = None                              # it no longer leads: the task is free to lead

@@ -239,9 +239,9 @@ class Leader:
                 out += self._open(now)
         if now >= self.next_alive:
             out += self._alive(now)
-        if self.info.ledger.done:
-            out += self.finish(now)
-        return out
+        if self.info.ledger.done and now - self.since >= 3 * self.o.leader_alive_period:
+            out += self.finish(now)     # a leader of a few periods may be a second one: the first says DONE (its
+        return out                      # EXIT_LEADER(task done) ends this one), or this one after the bound
 
     def _integrate(self, now: float) -> None:
         n = 1 + len(self.members)

@@ -39,7 +39,8 @@ def tasks_of(label: str, seed: int, setup: D.Setup) -> list[dict]:
     try:
         fr.run()
         return [{"d": max(0.0, math.hypot(o.x, o.y) - setup.delivery_area), "weight": o.weight,
-                 "appeared": o.appeared, "finished": o.finished, "coalition": list(o.coalition)}
+                 "appeared": o.appeared, "finished": o.finished, "coalition": list(o.coalition),
+                 "mean": o.mean_coalition(o.finished)}
                 for o in fr.objects.values() if o.finished is not None]
     finally:
         fr.close()
@@ -56,14 +57,12 @@ def spans(task: dict):
 
 def measure(task: dict, model: InterferenceModel) -> tuple[float, float, float]:
     """(weight / work the model predicts over the group's timeline, mean group, largest group)."""
-    d, work, robot_s, largest = task["d"], 0.0, 0.0, 0
+    d, work, largest = task["d"], 0.0, 0
     for n, dt in spans(task):
         if n > 0:
             work += max(0.0, M.group_capacity(n * work_capacity(d), model.predict(n, d))) * dt
-        robot_s += n * dt
         largest = max(largest, n)
-    life = task["finished"] - task["appeared"]
-    return (task["weight"] / work if work > 0 else math.inf), robot_s / life, largest
+    return (task["weight"] / work if work > 0 else math.inf), task["mean"], largest
 
 
 def quartiles(x) -> str:

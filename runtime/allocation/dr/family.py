@@ -327,11 +327,10 @@ class DrAgent:
 
     def _on_bid_request(self, m: DrBidRequest, now: float) -> list:
         if m.sender != self.robot_id:                        # only a leader of the task auctions it
-            if self.request is not None and self.request.task == m.task:
-                self.log.info("task %d: robot %d auctions it already: giving up", m.task, m.sender)
-                self.request, self.gave_up[m.task] = None, now
-            if self.lead is not None and self.lead.task == m.task:
-                return self._two_leaders(m.sender, now)
+            leading = self.lead is not None and self.lead.task == m.task
+            out = self._other_leads(m.task, m.sender, now)
+            if leading:
+                return out
         info = self.world.tasks.get(m.task)
         if not self._free() or info is None or info.task is None or m.sender in self.world.lost:
             return []
@@ -377,21 +376,22 @@ class DrAgent:
         if m.sender == self.robot_id:
             return []
         info.leader, info.leader_heard, info.alive, info.alive_at, info.left_heard = m.sender, now, m, now, m.left
-        out = []
-        if self.request is not None and self.request.task == m.task:
-            self.log.info("task %d: robot %d leads it already: giving up", m.task, m.sender)
-            self.request, self.gave_up[m.task] = None, now
-        if self.lead is not None and self.lead.task == m.task:
-            out += self._two_leaders(m.sender, now)
+        out = self._other_leads(m.task, m.sender, now)
         ms = self.membership
         if ms is not None and ms.task == m.task and ms.leader == m.sender:
             ms.leader_heard = now
             ms.partners = tuple(r for r in m.members if r != self.robot_id)
         return out
 
-    def _two_leaders(self, other: int, now: float) -> list:
-        """Robot ``other`` leads the task this robot leads (its LEADER_ALIVE or its BID_REQUEST said so): the
-        higher id keeps it.  Yield to a higher id; from a lower one, send LEADER_ALIVE at once so it yields."""
+    def _other_leads(self, task: int, other: int, now: float) -> list:
+        """Robot ``other`` leads ``task`` (its LEADER_ALIVE or its BID_REQUEST said so).  A candidate for it gives
+        up.  If this robot leads it too, the higher id keeps it: yield to a higher id; to a lower one, send
+        LEADER_ALIVE at once so it yields."""
+        if self.request is not None and self.request.task == task:
+            self.log.info("task %d: robot %d leads it already: giving up", task, other)
+            self.request, self.gave_up[task] = None, now
+        if self.lead is None or self.lead.task != task:
+            return []
         if other in self.lead.members:                 # a robot that leads the task is no member of mine (its
             self.lead.drop(other, now, "it leads the task itself")     # state naming the task is no keep-alive)
         if other > self.robot_id:
@@ -400,8 +400,8 @@ class DrAgent:
         return []
 
     def _on_exit(self, m: DrExitLeader, now: float) -> list:
-        if (m.reason == FINISHED and m.sender != self.robot_id and self.lead is not None and self.lead.task == m.task
-                and self.lead.finished is None):           # another leader of the task finished it: one DONE
+        if (m.reason == FINISHED and m.sender != self.robot_id and self.lead is not None
+                and self.lead.task == m.task):             # another leader of the task finished it: one DONE
             return self.lead.resign(YIELD, now, f"robot {m.sender} finished it") + self._end_lead(now)
         info = self.world.tasks.get(m.task)
         if m.dest == BROADCAST and info is not None and info.leader == m.sender:

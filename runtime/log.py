@@ -30,9 +30,21 @@ def get_logger(name: str, robot_id: int | str | None = None) -> logging.LoggerAd
     return RobotAdapter(logging.getLogger(f"mrta.{name}"), {"robot": "-" if robot_id is None else robot_id})
 
 
+class _Stderr(logging.StreamHandler):
+    """Writes to whatever ``sys.stderr`` is at the time of the record, not the one at setup (a host that swaps
+    stderr, as pytest's capture does, and closes the old one then gets no 'I/O operation on closed file')."""
+
+    def __init__(self):
+        logging.Handler.__init__(self)
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+
 def setup(level: int | str = logging.INFO, stream=None) -> None:
     root = logging.getLogger()
-    handler = logging.StreamHandler(stream or sys.stderr)
+    handler = logging.StreamHandler(stream) if stream is not None else _Stderr()
     handler.setFormatter(logging.Formatter(FORMAT))
     handler.addFilter(_RobotDefault())
     root.handlers[:] = [handler]

@@ -39,10 +39,10 @@ class Est:
 
 class World:
     """Three robots: 1 has no range sensor, 2 and 3 a sonar ring (everything within 5 m: the obstacles and the
-    other robots, as discs)."""
+    other robots, as discs).  The discs are whole obstacles, not echoes off their near side: no shadows."""
 
-    def __init__(self):
-        self.opts = ComutarOptions(region_period=0.2)
+    def __init__(self, **options):
+        self.opts = ComutarOptions(**{"region_period": 0.2, "shadow_depth": 0.0, **options})
         sensors = {1: (), 2: ("sonar",), 3: ("sonar",)}
         self.agents = {r: ComutarAgent(AgentContext(r, tuple(i for i in sensors if i != r), Est(RADIUS[r]), self.opts),
                                        sensors[r]) for r in sensors}
@@ -172,3 +172,76 @@ def test_echoes_become_discs_in_the_fleet_frame():
     assert d.shape == (2, 3)
     assert np.allclose(d[0, :2], [1.0, 4.0]) and np.allclose(d[1, :2], [0.0, 2.0])
     assert 0.05 <= d[0, 2] <= 0.3
+
+
+def test_a_sensor_covers_a_disc_only_whole_within_its_range_and_angle():
+    sonar, laser = C.Sensor(fov=2 * math.pi, range=5.0), C.Sensor(fov=math.pi, range=8.0)
+    here = (0.0, 0.0, 0.0)
+    assert sonar.covers(here, (-3.9, 0.0), 1.0) and not sonar.covers(here, (-4.1, 0.0), 1.0)
+    assert laser.covers(here, (3.0, 2.0), 1.0)
+    assert not laser.covers(here, (-3.0, 0.0), 1.0)                  # behind a 180 deg laser
+    assert not laser.covers(here, (0.2, 3.0), 1.0)                   # its centre in view, its side not
+    assert not laser.covers(here, (0.3, 0.0), 1.0)                   # the laser inside the disc
+
+
+def test_a_disc_heard_by_another_robot_is_followed_by_its_shadow():
+    from runtime.allocation.comutar.protocol import shadowed
+
+    d = shadowed(np.array([[3.0, 4.0, 0.1], [0.0, 0.0, 0.25]]), (0.0, 0.0), 0.3)
+    assert d.shape == (6, 3)
+    assert np.allclose(d[:2], [[3.0, 4.0, 0.1], [0.0, 0.0, 0.25]])
+    far = d[2:][d[2:, 2] == 0.1]
+    assert np.allclose(far[:, :2], [[3.09, 4.12], [3.18, 4.24]])      # along the beam, away from the sensor
+    assert np.allclose(d[2:][d[2:, 2] == 0.25][:, :2], 0.0)            # no beam, no shadow elsewhere
+    assert np.array_equal(shadowed(d, (1.0, 1.0), 0.0), d)
+
+
+def _borrowing_world():
+    """A world run until robot 1's avoidance reads robot 2's sonar and robot 2 knows robot 1's region."""
+    w = World(shadow_depth=ComutarOptions().shadow_depth)
+    assert w.run(20.0, stop=lambda: w.provider() == 2 and AVOID.id in w.agents[2].regions)
+    return w
+
+
+def test_the_borrower_puts_the_shadow_behind_each_streamed_disc():
+    w = _borrowing_world()
+    a1 = w.agents[1]
+    info = next(i for i, src in a1.bidder.links(AVOID.id)[0].items() if src == 2)
+    x, y, _ = a1.pose
+    ox, oy = x + 2.0, y                                           # the provider 2 m east, a disc 1 m east of robot 1
+    disc = pack_disc(x + 1.0, y, 0.1, ox, oy)
+    a1.on_message(CmStream(2, 1, AVOID.id, {"range_data": 1, "obstacle_list": 2}[info], w.now, ox, oy, (disc,)), w.now)
+    seen = a1.obstacle_input(AVOID.id, w.now)
+    mine = seen[-3:]                                              # the newest frame comes last
+    assert np.allclose(mine[:, 0] - x, [1.0, 0.85, 0.7], atol=0.011)     # heard from the east: the shadow is west
+    assert np.allclose(mine[:, 1], y, atol=0.011)
+    assert np.allclose(mine[:, 2], 0.1, atol=0.006)
+
+
+def test_a_reader_streams_only_while_its_sensor_takes_in_the_consumers_whole_region():
+    w = _borrowing_world()
+    a2 = w.agents[2]
+    x, y, _ = a2.pose
+    for gap, streams in ((3.9, True), (4.1, False)):             # a 1 m region, a 5 m sonar ring
+        a2.regions[AVOID.id] = (x + gap, y, 1.0)
+        a2._stream_at.clear()
+        sent = [m for m in a2._streams(w.now) if isinstance(m, CmStream) and m.task == AVOID.id]
+        assert bool(sent) == streams, gap
+
+
+def test_the_borrower_keeps_a_streamed_disc_for_the_feed_memory():
+    w = _borrowing_world()
+    a1 = w.agents[1]
+    info = next(i for i, src in a1.bidder.links(AVOID.id)[0].items() if src == 2)
+    code = {"range_data": 1, "obstacle_list": 2}[info]
+    x, y, _ = a1.pose
+    t0, memory = w.now, a1.options.feed_memory
+    a1.on_message(CmStream(2, 1, AVOID.id, code, t0, x + 2.0, y, (pack_disc(x + 1.0, y + 1.0, 0.1, x + 2.0, y),)), t0)
+
+    def holds(t):
+        a1.on_message(CmStream(2, 1, AVOID.id, code, t, x + 2.0, y, ()), t)          # echo frames that miss it
+        seen = a1.obstacle_input(AVOID.id, t)
+        return bool(np.any(np.hypot(seen[:, 0] - x - 1.0, seen[:, 1] - y - 1.0) < 0.02))
+
+    assert holds(t0 + 0.1) and holds(t0 + memory - 0.1)
+    assert not holds(t0 + memory + 0.1)

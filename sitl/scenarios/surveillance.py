@@ -83,6 +83,7 @@ class Scenario:
         self.awards: dict[int, list[tuple[float, tuple[int, ...]]]] = {}    # task -> [(when, robots)]
         self._seen: set = set()
         self.least = math.inf                     # the borrower's least distance to a pillar (m)
+        self.least_at: float | None = None        # sim time (s) of that least distance
         self.killed: tuple[float, int] | None = None
         self.stood_still: float | None = None     # s after the kill the borrower stood still
         self.moved_after_stop = 0.0               # m the borrower drove between standing still and re-allocation
@@ -158,7 +159,8 @@ class Scenario:
         cid = fleet.world.client_id
         for pid in self.pillar_ids:
             for pt in p.getClosestPoints(body.body_id, pid, 1.0, physicsClientId=cid):
-                self.least = min(self.least, float(pt[8]))
+                if float(pt[8]) < self.least:
+                    self.least, self.least_at = float(pt[8]), now
         if self.killed is not None:
             speed = math.hypot(*run.velocity(self.cfg.borrower)[:2])
             if self.stood_still is None and speed < STILL:
@@ -188,7 +190,7 @@ class Scenario:
         if tid is None or run.task_state(tid) != DONE:
             short.append("the region is not surveyed yet")
         if self.least <= self.cfg.clearance:
-            short.append(f"R{self.cfg.borrower} came within {self.least:.3f} m of a pillar")
+            short.append(f"R{self.cfg.borrower} came within {self.least:.3f} m of a pillar at {self.least_at:.1f} s")
         if self.cfg.kill_provider is not None:
             if self.killed is None:
                 short.append("the sensor robot not killed yet")
@@ -214,7 +216,8 @@ class Scenario:
             rows.append({"label": label, "task": tid, "state": STATE_NAMES.get(state, "-"),
                          "awards": [(round(t, 1), "+".join(f"R{r}" for r in rs)) for t, rs in self.awards.get(tid, [])],
                          "done_at": run.done_at.get(tid) if tid is not None else None})
-        res = {"tasks": rows, "least_clearance": self.least, "driven": dict(run.driven),
+        res = {"tasks": rows, "least_clearance": self.least, "least_clearance_at": self.least_at,
+               "driven": dict(run.driven),
                "valid": bool(rows) and rows[-1]["state"] == "done"}
         if self.killed is not None:
             re_ = self.reallocated()
@@ -231,7 +234,9 @@ class Scenario:
             done = "-" if r["done_at"] is None else f"{r['done_at']:.1f}"
             aw = ", ".join(f"{t}: {who}" for t, who in r["awards"]) or "-"
             print(f"{r['label']:9}  {tid:>8}  {r['state']:9}  {done:>11}  {aw}", file=out)
-        print(f"least clearance of the borrower to a pillar: {res['least_clearance']:.3f} m", file=out)
+        at = res.get("least_clearance_at")
+        print(f"least clearance of the borrower to a pillar: {res['least_clearance']:.3f} m"
+              + ("" if at is None else f" (at {at:.1f} s)"), file=out)
         k = res.get("kill")
         if k:
             still = "never" if k["stood_still_after"] is None else f"{k['stood_still_after']:.2f} s later"

@@ -228,6 +228,17 @@ class Sensor:
         b, d = bearing_distance(np.asarray(pose, float)[None, :], np.asarray(point, float)[None, :])
         return bool(_within(self, b, d, radius)[0, 0])
 
+    def covers(self, pose, point, radius: float = 0.0) -> bool:
+        """Does the view from ``pose`` take in all of the disc (``point``, ``radius``), to the sensor's full range
+        and angle (no margins)?  What a robot streaming this sensor's data to another can vouch for."""
+        b, d = bearing_distance(np.asarray(pose, float)[None, :], np.asarray(point, float)[None, :])
+        b, d = abs(float(b[0, 0])), float(d[0, 0])
+        if d + radius > self.range:
+            return False
+        if self.fov >= TAU - 1e-9:
+            return True
+        return d > radius and b + math.asin(radius / d) <= self.fov / 2.0
+
 
 def bearing_distance(poses, points, x=None, y=None, th=None):
     """Bearing (in the heading's frame) and distance of each robot's ``points`` (n, 2) from its pose, or from

@@ -301,7 +301,8 @@ def unpack_disc(v: int, ox: float, oy: float) -> tuple[float, float, float]:
 class CmStream:
     """A provider's output for ``task``'s consumer: ``info`` 1 (range data: one disc per echo) or 2 (an
     obstacle list), sensed at ``stamp`` (the provider's clock), as discs packed relative to (``ox``, ``oy``)
-    (:func:`pack_disc`; an empty list is news too: nothing seen)."""
+    (:func:`pack_disc`; an empty list is news too: nothing seen).  The origin is where the provider was: the
+    point the discs were heard from (its consumer puts their shadows on the far side)."""
     sender: int
     dest: int
     task: int

@@ -41,6 +41,10 @@ class ComutarOptions:
     # a stream (10 Hz range data, 5 Hz obstacle list) silent this many of its periods is overdue: its consumer stops
     feed_periods: float = field(default=2.5, metadata=rng(1.0, 100.0))
     region_radius: float = field(default=1.0, metadata=rng(0.0, 50.0))      # m: the region a consumer asks to watch
+    # m an obstacle heard by another robot's sensor may reach behind its echo (the side the sensor cannot see)
+    shadow_depth: float = field(default=0.3, metadata=rng(0.0, 5.0))
+    # s of a provider's streamed discs an avoider keeps (a disc one echo frame misses is still there)
+    feed_memory: float = field(default=0.5, metadata=rng(0.0, 60.0))
     max_options: int = field(default=2, metadata=rng(1, 8))                  # providers kept per input
     visit_radius: float = field(default=0.1, metadata=rng(0.01, 5.0))       # m: a waypoint this close is visited
     # m: a survey's claim moves to a free waypoint nearer by more than this (Alg. 2: the nearest at each

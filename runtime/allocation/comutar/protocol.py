@@ -78,7 +78,8 @@ class ComutarAgent:
         self.pose: tuple[float, float, float] | None = None
         self.obstacles = np.zeros((0, 3))
         self.sensed_at = -math.inf
-        self.feeds: dict[tuple[int, str], tuple[float, int, np.ndarray]] = {}   # (task, info) -> (heard, from, discs)
+        # (task, info) -> (last heard, from, [(heard, discs and their shadows)] of the last feed_memory s)
+        self.feeds: dict[tuple[int, str], tuple[float, int, list[tuple[float, np.ndarray]]]] = {}
         self._stream_at: dict[tuple[int, str, int], float] = {}
         self.boards: dict[int, Board] = {}
         self.regions: dict[int, tuple[float, float, float]] = {}
@@ -149,7 +150,9 @@ class ComutarAgent:
         None when it has none fresh: its provider's stream (obstacle list, or range data its own detector turns
         into one) is overdue (``options.feed_periods`` of its period: 0.25 s for 10 Hz range data), or this robot
         does not hold the task.  A robot's own
-        sensor counts as fresh.  Streamed discs on the robot's own body are dropped; the robots this one serves
+        sensor counts as fresh.  The streamed discs are those of the last ``options.feed_memory`` s (a disc that
+        one echo frame misses is still there), each followed by its shadow (:func:`shadowed`: the provider heard
+        only the side facing it); streamed discs on the robot's own body are dropped; the robots this one serves
         (regions it keeps in view) are added."""
         if task_id not in self.bidder.holdings:
             return None
@@ -163,7 +166,7 @@ class ComutarAgent:
         feed = self.feeds.get((task_id, info))
         if feed is None or feed[1] != src or now - feed[0] > self.feed_timeout(info):
             return None
-        discs = feed[2]
+        discs = np.vstack([d for t, d in feed[2] if now - t < self.options.feed_memory] or [feed[2][-1][1]])
         if len(discs) and self.pose is not None:
             gap = np.hypot(discs[:, 0] - self.pose[0], discs[:, 1] - self.pose[1])
             discs = discs[gap > self.estimator.profile.radius + SELF_ECHO]
@@ -265,15 +268,19 @@ class ComutarAgent:
             math.dist(self.position, (x, y)) <= A.SENSORS[spec.sensor].range + self.options.reader_reach
 
     def _sees(self, task_id: int) -> bool:
-        """Is the consumer of ``task_id`` (the centre of the region this robot keeps in view for it) within its
-        sensor's range?  A reader still on its way does not stream: its consumer would take the silence of an
-        unwatched region for a clear one.  (Alg. 3 keeps the whole region within ``far`` of the range: this
-        looser test keeps a stream from flickering at that margin.)"""
+        """Does my reader in ``task_id`` take in the whole region it keeps in view for the consumer (its sensor's
+        full range and angle, :meth:`~runtime.allocation.comutar.cspace.Sensor.covers`)?  A reader that does not
+        (still on its way, or left behind) does not stream: its consumer would take the silence of an unwatched
+        place for a clear one, and drive into what the sensor cannot reach.  (Alg. 3 keeps the region within
+        ``far`` of the range and off the angle's borders; this looser test keeps a stream from flickering at
+        that margin.)"""
         region = self.region(task_id)
-        if region is None or self.pose is None:
-            return region is None
-        reach = max((A.SENSORS[s].range for s in self.catalogue.sensors), default=0.0)
-        return math.dist(self.position, region[1:3]) <= reach
+        if region is None:
+            return True
+        if self.pose is None:
+            return False
+        return any(A.SENSORS[slot.spec.sensor].covers(self.pose, region[1:3], region[3])
+                   for slot in self.bidder.held_slots(task_id) if slot.spec.motion == A.SENSOR and slot.spec.sensor)
 
     def serves(self, spec: A.ActionSpec, task: Task) -> bool:
         """Can ``spec`` accomplish ``task`` on this robot (an avoider protects only its own robot)."""
@@ -488,7 +495,13 @@ class ComutarAgent:
         if isinstance(msg, CmStream):
             info = A.INFO_NAMES[msg.info]
             if msg.task in self.bidder.holdings and self.bidder.links(msg.task)[0].get(info) == msg.sender:
-                self.feeds[(msg.task, info)] = (now, msg.sender, np.asarray(msg.unpacked(), float).reshape(-1, 3))
+                key, memory = (msg.task, info), self.options.feed_memory
+                prev = self.feeds.get(key)
+                frames = [fr for fr in (prev[2] if prev is not None and prev[1] == msg.sender else ())
+                          if now - fr[0] < memory]
+                discs = np.asarray(msg.unpacked(), float).reshape(-1, 3)
+                frames.append((now, shadowed(discs, (msg.ox, msg.oy), self.options.shadow_depth)))
+                self.feeds[key] = (now, msg.sender, frames)
             else:
                 self.dropped["stream for a chain I do not hold"] += 1
             return []
@@ -505,6 +518,25 @@ def make_agent(ctx: AgentContext, sensors: Sequence[str] | None = None) -> Comut
     if sensors is None and ctx.base is not None:
         sensors = A.sensors_of(ctx.base, ctx.options)
     return ComutarAgent(ctx, sensors)
+
+
+def shadowed(discs: np.ndarray, origin, depth: float, step: float = 0.15) -> np.ndarray:
+    """``discs`` heard from ``origin`` (another robot's sensor) and what may hide behind each: the echo is the
+    side of an obstacle facing that sensor, and the obstacle may reach ``depth`` m further away from it (a
+    pillar seen from its far side ends nearer this robot than the echo says).  Each disc is repeated every
+    ``step`` m along its beam, away from ``origin``, to ``depth``, with its own radius; ``depth`` 0 adds none."""
+    discs = np.asarray(discs, float).reshape(-1, 3)
+    n = int(math.ceil(depth / step - 1e-9)) if depth > 0 else 0
+    if not len(discs) or n == 0:
+        return discs
+    ux, uy = discs[:, 0] - origin[0], discs[:, 1] - origin[1]
+    norm = np.hypot(ux, uy)
+    norm[norm < 1e-9] = np.inf                            # a disc at the sensor itself has no beam: no shadow
+    ux, uy = ux / norm, uy / norm
+    k = np.minimum(np.arange(1, n + 1) * step, depth)[:, None]
+    behind = np.stack([discs[None, :, 0] + k * ux, discs[None, :, 1] + k * uy,
+                       np.broadcast_to(discs[:, 2], (n, len(discs)))], axis=-1).reshape(-1, 3)
+    return np.vstack([discs, behind])
 
 
 def echo_discs(pose, ranges, max_range: float = math.inf) -> np.ndarray:

@@ -1,0 +1,93 @@
+"""How close the sensorless Create of configs/fleets/comutar_3.yaml comes to the pillars, over many seeds: the
+fleet in lock-step (deterministic per seed, about 15-25 s of wall time a run), the fleet's ``seed`` set to each
+of [from, to).  Prints one line a run (least clearance of the borrower's body to a pillar, when, the verdict)
+and then the spread: runs that touched, the least clearances' minimum, 10th percentile and median, and how many
+met the goal (every waypoint visited, no touch, stopped and re-allocated after the kill).
+
+    PYTHONPATH=. python benchmarks/comutar_clearance.py --from 1 --to 41 [--jobs 2] [--option feed_memory=0.5 ...]
+
+``--option NAME=VALUE`` sets an ``allocation:`` option of the borrower's robot config (the consumer of the
+borrowed sensor) for every run: how the avoider's inputs are tuned.
+
+tests/test_comutar_sitl.py runs the same fleet once, as daemon processes; this is its spread.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+
+def one(job: tuple[int, dict]) -> dict:
+    import logging
+
+    import yaml
+
+    from sitl import launcher
+    from sitl.ports import free_udp_base
+    from tests.sitl_util import shipped_fleet
+
+    seed, options = job
+    logging.disable(logging.WARNING)
+    base = free_udp_base(3, start=30000 + (seed * 31 + os.getpid()) % 250 * 101)   # apart from other workers
+    with tempfile.TemporaryDirectory(prefix="comutar-clearance-") as tmp:
+        path = shipped_fleet(Path(tmp), "comutar_3.yaml", seed=seed, base_port=base, gcs=f"127.0.0.1:{base}")
+        if options:
+            fleet = yaml.safe_load(path.read_text())
+            borrower = fleet["scenario"]["borrower"]
+            entry = next(r for r in fleet["robots"] if r["id"] == borrower)
+            robot = yaml.safe_load(Path(entry.get("robot") or fleet["robot"]).read_text())
+            robot["allocation"].update(options)
+            entry["robot"] = str(Path(tmp) / "borrower.yaml")
+            Path(entry["robot"]).write_text(yaml.safe_dump(robot, sort_keys=False))
+            path.write_text(yaml.safe_dump(fleet, sort_keys=False))
+        f = launcher.build(path, Path(tmp) / "run")
+        try:
+            res = launcher.run_lockstep(f)
+        finally:
+            f.close()
+    return {"seed": seed, "least": res["least_clearance"], "at": res["least_clearance_at"],
+            "goal": res["goal_met"], "verdict": res["verdict"], "sim_time": res["sim_time"]}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--from", dest="lo", type=int, default=1)
+    ap.add_argument("--to", dest="hi", type=int, default=41)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--option", action="append", default=[], metavar="NAME=VALUE")
+    args = ap.parse_args()
+    import yaml
+
+    options = {}
+    for item in args.option:
+        name, sep, value = item.partition("=")
+        if not sep:
+            ap.error(f"--option {item!r}: expected NAME=VALUE")
+        options[name] = yaml.safe_load(value)
+    seeds = list(range(args.lo, args.hi))
+    rows = []
+    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
+        for r in pool.map(one, [(seed, options) for seed in seeds]):
+            rows.append(r)
+            at = "-" if r["at"] is None else f"{r['at']:.1f} s"
+            print(f"seed {r['seed']:3d}: least clearance {r['least']:6.3f} m at {at:>8}, sim {r['sim_time']:5.1f} s: "
+                  f"{r['verdict']}", flush=True)
+    least = np.array([r["least"] for r in rows])
+    touched = int((least <= 0.0).sum())
+    print(f"\n{len(rows)} runs: {touched} touched a pillar; least clearance min {least.min():.3f} m, "
+          f"p10 {np.percentile(least, 10):.3f} m, median {np.median(least):.3f} m; goal met in "
+          f"{sum(r['goal'] for r in rows)}; sim time median {np.median([r['sim_time'] for r in rows]):.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

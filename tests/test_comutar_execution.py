@@ -245,3 +245,34 @@ def test_the_borrower_keeps_a_streamed_disc_for_the_feed_memory():
 
     assert holds(t0 + 0.1) and holds(t0 + memory - 0.1)
     assert not holds(t0 + memory + 0.1)
+
+
+def test_a_reader_left_behind_and_stuck_takes_a_detour_toward_the_region():
+    from runtime.allocation.comutar import actions as A
+    from runtime.execution import detour as D
+    from runtime.execution.avoidance import AvoidanceExecutor
+    from runtime.tasks import Commitment
+
+    class Agent:
+        window = C.Window()
+        where = (3.5, 0.0)                                   # the consumer: past 0.8 x 5 m with its 1 m region
+
+        def region(self, task_id):
+            return (1, *self.where, 1.0)
+
+        def obstacle_input_any(self, now):
+            return np.array([[1.0, 0.2, 0.3]])               # between the two, a little to the left
+
+    agent = Agent()
+    ctx = SimpleNamespace(agent=agent, log=logging.getLogger("test.reader"), radius=0.25)
+    ex = AvoidanceExecutor(Commitment(AVOID, params=(("actions", (A.SONAR.name,)),)), ctx)
+    here = (0.0, 0.0, 0.0)
+    names = []
+    for i in range(int(D.STUCK_TIME / DT) + 3):                # held where it is
+        ex.update(here, i * DT)
+        names.append(ex.constraints()[0].name)
+    assert set(names[:int(D.STUCK_TIME / DT)]) == {"sensor"} and names[-1] == "survey"
+    assert ex.detour.count == 1
+    agent.where = (2.5, 0.0)                                 # in view again: Alg. 3 again, no detour
+    ex.update(here, len(names) * DT)
+    assert ex.constraints()[0].name == "sensor"

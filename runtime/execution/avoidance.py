@@ -6,7 +6,10 @@ robot runs, as constraint functions over the next-frame window.
   stream of the robot whose sensor it borrows).  When that is stale or missing the constraint allows only
   standing still: the robot stops at the next control cycle and stays stopped until the task has a provider
   again (the agent resigns the task when the provider is lost, and it is auctioned again).
-* a ``*_reader`` keeping another robot's region in view (Alg. 3): the agent's :meth:`region`.
+* a ``*_reader`` keeping another robot's region in view (Alg. 3): the agent's :meth:`region`.  A reader that has
+  fallen behind (the region past ``far`` of its range) and gets no nearer takes a detour
+  (:mod:`runtime.execution.detour`): Alg. 3's push toward the region and Alg. 4's from an obstacle between the
+  two hold it still, and its consumer, whose region it no longer covers, stands still too.
 * ``obstacle_detector`` alone: no motion constraint (the agent streams its output).
 """
 from __future__ import annotations
@@ -16,6 +19,7 @@ import numpy as np
 from runtime.allocation.comutar import actions as A
 from runtime.allocation.comutar import cspace as C
 from runtime.execution.cspace_vote import CspaceExecutor, stop_only
+from runtime.execution.detour import Detour
 from runtime.tasks import Commitment, Progress
 
 MARGIN = 0.15        # m kept between the robot's body and an obstacle disc (pose errors between two robots' frames)
@@ -27,6 +31,7 @@ class AvoidanceExecutor(CspaceExecutor):
     def __init__(self, commitment: Commitment, ctx):
         super().__init__(commitment, ctx)
         self.blind = False
+        self.detour = Detour(ctx.log, f"avoid_obstacles {self.task.id} reader")
         self.recommit(commitment, 0.0)
 
     def recommit(self, commitment: Commitment, now: float) -> None:
@@ -53,8 +58,25 @@ class AvoidanceExecutor(CspaceExecutor):
                 cons.append(c)
         region = agent.region(self.task.id)
         if region is not None and self.reader is not None:
-            c = C.sensor_view(self.window, p, [region[1:3]], region[3], A.SENSORS[self.reader.sensor])
+            sensor = A.SENSORS[self.reader.sensor]
+            centre = region[1:3]
+            goal = None
+            if np.hypot(centre[0] - pose[0], centre[1] - pose[1]) + region[3] > sensor.far * sensor.range:
+                goal = self.detour.goal(pose, centre, now, lambda: agent.obstacle_input_any(now))
+            else:
+                self._in_view(now)
+            if goal is not None and goal != tuple(centre):
+                c = C.survey(self.window, p, [goal])          # on a detour: out of view anyway
+            else:
+                c = C.sensor_view(self.window, p, [centre], region[3], sensor)
             c.weight = self.reader.weight
             cons.append(c)
+        else:
+            self._in_view(now)
         self._cons = cons
         return []
+
+    def _in_view(self, now: float) -> None:
+        """No region out of view: no detour, and being stuck counts from now."""
+        self.detour.held(now)
+        self.detour.cancel()

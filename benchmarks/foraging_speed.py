@@ -124,10 +124,12 @@ def main() -> None:
     ap.add_argument("--method", default="standin", help="standin (tests/foraging_standin.py) or a registered method")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--no-sonar", action="store_true", help="robots avoid by bumpers only")
+    ap.add_argument("--control-period", type=float, default=ForagingConfig.control_period,
+                    help="s between control cycles (default %(default)s; the reproductions' figures stand on it)")
     args = ap.parse_args()
     method, options = method_of(args.method)
     cfg = ForagingConfig(robots=args.robots, method=method, options=options, seed=args.seed, time_limit=args.seconds,
-                         sonar=not args.no_sonar)
+                         sonar=not args.no_sonar, control_period=args.control_period)
     print(f"{args.robots} robots, 3 objects of 40 wu, method {args.method}, control period {cfg.control_period} s, "
           f"fast world: physics step {cfg.dt * 1000:g} ms, {cfg.solver_iterations} solver iterations, disc bodies, "
           f"closed-form sonar")

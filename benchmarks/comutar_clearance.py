@@ -67,11 +67,17 @@ def main() -> int:
     args = ap.parse_args()
     import yaml
 
+    from dataclasses import fields
+
+    from runtime.allocation.comutar.options import ComutarOptions
+
+    known = {f.name for f in fields(ComutarOptions)} - {"method"}
     options = {}
     for item in args.option:
         name, sep, value = item.partition("=")
-        if not sep:
-            ap.error(f"--option {item!r}: expected NAME=VALUE")
+        if not sep or name not in known:
+            ap.error(f"--option {item!r}: expected NAME=VALUE with NAME one of the comutar allocation options "
+                     f"({', '.join(sorted(known))})")
         options[name] = yaml.safe_load(value)
     seeds = list(range(args.lo, args.hi))
     rows = []

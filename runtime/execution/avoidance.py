@@ -60,12 +60,12 @@ class AvoidanceExecutor(CspaceExecutor):
         if region is not None and self.reader is not None:
             sensor = A.SENSORS[self.reader.sensor]
             centre = region[1:3]
-            goal = None
+            goal = centre
             if np.hypot(centre[0] - pose[0], centre[1] - pose[1]) + region[3] > sensor.far * sensor.range:
                 goal = self.detour.goal(pose, centre, now, lambda: agent.obstacle_input_any(now))
             else:
                 self._in_view(now)
-            if goal is not None and goal != tuple(centre):
+            if goal != centre:
                 c = C.survey(self.window, p, [goal])          # on a detour: out of view anyway
             else:
                 c = C.sensor_view(self.window, p, [centre], region[3], sensor)

@@ -54,6 +54,7 @@ CHOOSE_PERIOD = 0.25                      # s between re-evaluations of the near
 STREAM_PERIOD = {A.RANGE_DATA: 0.1, A.OBSTACLE_LIST: 0.2}   # s: the 10 Hz and 5 Hz of ActionSpec.rates
 SENSE_FRESH = 0.5                         # s: a provider streams only readings newer than this
 SELF_ECHO = 0.12                          # m past a consumer's body: a streamed disc this close is the consumer itself
+OWN_SENSOR = object()                     # ComutarAgent._feed: the avoider reads this robot's own sensor
 
 
 class ComutarAgent:
@@ -154,6 +155,20 @@ class ComutarAgent:
         one echo frame misses is still there), each followed by its shadow (:func:`shadowed`: the provider heard
         only the side facing it); streamed discs on the robot's own body are dropped; the robots this one serves
         (regions it keeps in view) are added."""
+        feed = self._feed(task_id, now)
+        if feed is None:
+            return None
+        if feed is OWN_SENSOR:
+            return self._with_consumers(self.obstacles)
+        discs = np.vstack([d for t, d in feed[2] if now - t < self.options.feed_memory] or [feed[2][-1][1]])
+        if len(discs) and self.pose is not None:
+            gap = np.hypot(discs[:, 0] - self.pose[0], discs[:, 1] - self.pose[1])
+            discs = discs[gap > self.estimator.profile.radius + SELF_ECHO]
+        return self._with_consumers(discs)
+
+    def _feed(self, task_id: int, now: float):
+        """What this robot's avoider in ``task_id`` reads now: :data:`OWN_SENSOR`, its provider's feed while it is
+        fresh, or None (the task not held, or the feed overdue)."""
         if task_id not in self.bidder.holdings:
             return None
         ins, _ = self.bidder.links(task_id)
@@ -162,15 +177,11 @@ class ComutarAgent:
         if src == self.robot_id:
             src, info = ins.get(A.RANGE_DATA, self.robot_id), A.RANGE_DATA
         if src is None or src == self.robot_id:
-            return self._with_consumers(self.obstacles)
+            return OWN_SENSOR
         feed = self.feeds.get((task_id, info))
         if feed is None or feed[1] != src or now - feed[0] > self.feed_timeout(info):
             return None
-        discs = np.vstack([d for t, d in feed[2] if now - t < self.options.feed_memory] or [feed[2][-1][1]])
-        if len(discs) and self.pose is not None:
-            gap = np.hypot(discs[:, 0] - self.pose[0], discs[:, 1] - self.pose[1])
-            discs = discs[gap > self.estimator.profile.radius + SELF_ECHO]
-        return self._with_consumers(discs)
+        return feed
 
     def feed_timeout(self, info: str) -> float:
         """Seconds after which a stream of ``info`` is overdue: ``feed_periods`` of its period."""
@@ -193,7 +204,7 @@ class ComutarAgent:
         not move (the surveillance executor stops)."""
         for tid, t in self.tasks.items():
             if t.kind == "avoid_obstacles" and getattr(t.spec, "robot", None) == self.robot_id:
-                if self.obstacle_input(tid, now) is None:
+                if self._feed(tid, now) is None:
                     return False
         return True
 

@@ -14,7 +14,6 @@ tests/test_comutar_sitl.py runs the same fleet once, as daemon processes; this i
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import tempfile
 from concurrent.futures import ProcessPoolExecutor
@@ -32,14 +31,12 @@ def one(job: tuple[int, dict]) -> dict:
     import yaml
 
     from sitl import launcher
-    from sitl.ports import free_udp_base
-    from tests.sitl_util import shipped_fleet
+    from tests.sitl_util import worker_fleet
 
     seed, options = job
     logging.disable(logging.WARNING)
-    base = free_udp_base(3, start=30000 + (seed * 31 + os.getpid()) % 250 * 101)   # apart from other workers
     with tempfile.TemporaryDirectory(prefix="comutar-clearance-") as tmp:
-        path = shipped_fleet(Path(tmp), "comutar_3.yaml", seed=seed, base_port=base, gcs=f"127.0.0.1:{base}")
+        path = worker_fleet(Path(tmp), "comutar_3.yaml", seed)
         if options:
             fleet = yaml.safe_load(path.read_text())
             borrower = fleet["scenario"]["borrower"]

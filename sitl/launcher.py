@@ -159,8 +159,9 @@ def claim_ports(fleet: C.FleetConfig, instance: int = 0) -> C.FleetConfig:
 
 def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: str | Path | None = None,
           seed: int | None = None, signing: bool = True, method: str | None = None,
-          speedup: float | None = None, instance: int = 0) -> Fleet:
-    """Load the fleet, build the world and devices, write robot configs and the manifest."""
+          speedup: float | None = None, instance: int = 0, peer_loss: float | None = None) -> Fleet:
+    """Load the fleet, build the world and devices, write robot configs and the manifest.  ``peer_loss`` (else
+    the fleet's ``peer_loss``, else each template's) becomes every robot's ``comms.peer_loss``."""
     from sitl import scenarios
 
     fleet = claim_ports(C.load_fleet(fleet_path), instance)
@@ -212,6 +213,9 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
             "planning": {"map": str(Path(fleet.world).resolve())},
             "datum": C.to_dict(world_cfg.datum),
         }
+        loss = fleet.peer_loss if peer_loss is None else peer_loss
+        if loss is not None:
+            overrides["comms"]["peer_loss"] = loss
         if method:
             overrides["allocation"] = {"method": method}
         data = C.deep_merge(template, overrides)
@@ -607,6 +611,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--method", choices=registry.names(), default=None, help="allocation method")
     r.add_argument("--timeout", type=float, default=None,
                    help="sim seconds before giving up (%g..%g)" % fleet_range("timeout"))
+    r.add_argument("--peer-loss", type=float, default=None, metavar="P",
+                   help="every robot drops this share of its datagrams to each peer at random, a lossy radio "
+                        "(%g..%g; default: the fleet's peer_loss, else none)" % fleet_range("peer_loss"))
     r.add_argument("--json", default=None, help="write the result here as JSON")
     r.set_defaults(func=_main)
 
@@ -616,7 +623,7 @@ def _main(args) -> int:
 
     run_args.check(args)          # every option, before the world is built
     f = build(args.fleet, args.run_dir, args.manifest, args.seed, args.signing, args.method, args.speedup,
-              args.instance)
+              args.instance, args.peer_loss)
     speedup = args.speedup or f.fleet.speedup
     stop = {"flag": False}
 

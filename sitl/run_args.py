@@ -1,6 +1,6 @@
 """`mrta sitl run`'s options, checked before the world is built: each wrong one is one InputError line naming it.
 
-Numbers that override the fleet config (``--speedup``, ``--timeout``, ``--seed``) take the fleet config's own
+Numbers that override the fleet config (``--speedup``, ``--timeout``, ``--seed``, ``--peer-loss``) take the fleet config's own
 ranges; ``--instance`` must leave every port of the fleet in 1..65535; the run folder, the manifest and the JSON
 result must be writable now, not only when the run ends.
 """
@@ -22,9 +22,9 @@ def fleet_range(name: str) -> tuple[float | None, float | None]:
 
 def check(args) -> None:
     """InputError naming the option unless ``args`` (parsed `mrta sitl run` options) can start a run."""
-    for name in ("speedup", "timeout", "seed"):
+    for name in ("speedup", "timeout", "seed", "peer_loss"):
         lo, hi = fleet_range(name)
-        argcheck.number(getattr(args, name), f"--{name}", lo, hi)
+        argcheck.number(getattr(args, name), "--" + name.replace("_", "-"), lo, hi)
     argcheck.number(args.instance, "--instance", 0, MAX_INSTANCE)
     argcheck.output_dir(args.run_dir, "--run-dir")
     argcheck.output_file(args.manifest, "--manifest", make_parents=True)

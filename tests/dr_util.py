@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import math
+from types import SimpleNamespace
 
 from runtime.allocation.agent import AgentContext
 from runtime.allocation.dr.family import DrAgent
@@ -100,6 +101,21 @@ class Watch:
         for t in list(self.dual):
             if t not in leading:
                 del self.dual[t]
+
+
+class DaemonsWatch(Watch):
+    """:class:`Watch` over a lock-step SITL run (:class:`sitl.launcher.Lockstep`): call it with the run after every
+    control cycle; the daemons' agents, the world's clock, the daemons not stopped."""
+
+    def __init__(self, slack: float = 0.35):
+        super().__init__(None, slack)
+
+    def __call__(self, run) -> None:
+        if self.o is None:
+            self.o = next(iter(run.daemons.values())).node.agent.o
+        super().__call__(SimpleNamespace(
+            now=run.f.world.t, robots={rid: SimpleNamespace(agent=d.node.agent) for rid, d in run.daemons.items()},
+            live=lambda: [rid for rid in run.daemons if rid not in run.stopped]))
 
 
 def forage(f, objects: int, present: int, rnd, weight=(8.0, 16.0), deadline: float = 60.0, until: float = 900.0,

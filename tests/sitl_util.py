@@ -16,8 +16,9 @@ ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"
 
 
-def shipped_fleet(tmp_path: Path, name: str, **changes) -> Path:
-    """A copy of configs/fleets/NAME with absolute paths and a block of free UDP ports."""
+def shipped_fleet(tmp_path: Path, name: str, ports_from: int = 21000, **changes) -> Path:
+    """A copy of configs/fleets/NAME with absolute paths and a block of free UDP ports (the first found from
+    ``ports_from``); ``changes`` set fleet keys."""
     src = CONFIGS / "fleets" / name
     data = yaml.safe_load(src.read_text())
     for key in ("world", "robot"):
@@ -25,12 +26,20 @@ def shipped_fleet(tmp_path: Path, name: str, **changes) -> Path:
     for r in data["robots"]:
         if r.get("robot"):
             r["robot"] = str((src.parent / r["robot"]).resolve())
-    base = free_udp_base(len(data["robots"]))
+    base = free_udp_base(len(data["robots"]), start=ports_from)
     data["base_port"], data["gcs"] = base, f"127.0.0.1:{base}"
     data.update(changes)
     path = tmp_path / f"fleet_{name}"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path
+
+
+def worker_fleet(tmp_path: Path, name: str, seed: int, **changes) -> Path:
+    """:func:`shipped_fleet` with the fleet's ``seed`` set, for one of several processes building fleets at once
+    (a benchmark's workers): its ports are searched from a start of its own (by seed and process), so two workers
+    do not find the same free block."""
+    return shipped_fleet(tmp_path, name, ports_from=30000 + (seed * 31 + os.getpid()) % 250 * 101, seed=seed,
+                         **changes)
 
 
 class StockGcs:

@@ -64,6 +64,8 @@ def _robot(tmp_path) -> Path:
     ("--timeout", "-5", "--timeout: expected a number in [1, 36000], got -5.0"),
     ("--timeout", "nan", "--timeout: expected a number in [1, 36000], got nan"),
     ("--instance", "-1", "--instance: expected a number in [0, 400], got -1"),
+    ("--peer-loss", "1.5", "--peer-loss: expected a number in [0, 1], got 1.5"),
+    ("--peer-loss", "nan", "--peer-loss: expected a number in [0, 1], got nan"),
     ("--run-dir", "/dev/null/run", "--run-dir /dev/null/run: expected a path whose folders can be made"),
     ("--manifest", "/dev/null/m.json", "--manifest /dev/null/m.json: expected a path whose folders can be made"),
     ("--json", "/dev/null/r.json", "--json /dev/null/r.json: expected a file in an existing folder"),
@@ -94,9 +96,10 @@ def test_sitl_run_takes_good_options_as_they_are(tmp_path, no_fleet):
     run_dir = tmp_path / "new" / "run"
     with pytest.raises(Started):
         cli.main(["sitl", "run", str(FLEET), "--speedup", "0.1", "--seed", "0", "--timeout", "1", "--run-dir",
-                  str(run_dir), "--manifest", str(tmp_path / "a" / "b" / "m.json"), "--json", str(tmp_path / "r.json")])
-    fleet, rd, manifest, seed, signing, method, speedup, instance = no_fleet["args"]
-    assert (rd, seed, speedup, instance) == (str(run_dir), 0, 0.1, 0)
+                  str(run_dir), "--manifest", str(tmp_path / "a" / "b" / "m.json"), "--json", str(tmp_path / "r.json"),
+                  "--peer-loss", "0.1"])
+    fleet, rd, manifest, seed, signing, method, speedup, instance, peer_loss = no_fleet["args"]
+    assert (rd, seed, speedup, instance, peer_loss) == (str(run_dir), 0, 0.1, 0, 0.1)
     assert not list(tmp_path.iterdir())           # checked, not made (nor left a probe behind)
 
 

@@ -66,6 +66,25 @@ def test_two_links_exchange_every_agent_message(links):
     assert a.counters.agent_received == len(ALL) and b.counters.sent == len(ALL)
 
 
+def test_peer_loss_drops_its_share_of_each_peers_copies_and_counts_them(links):
+    a, c = links(1), links(3)
+    b = links(2, peers=[a, c], peer_loss=0.25, loss_seed=7)
+    msgs = [M.Bid(2, 0, 1, k, float(k)) for k in range(200)]     # each receiver's socket holds them all
+    b.send_agent(msgs, 0.0)
+    n = b.counters
+    assert n.loss_injected + n.peer_sent == 400 and n.sent == n.peer_sent and 60 < n.loss_injected < 140
+    got_a = pump(a, 0.0, lambda got: False, limit=0.3)
+    got_c = pump(c, 0.0, lambda got: False, limit=0.3)
+    assert len(got_a) + len(got_c) == n.peer_sent
+    assert {m.task for m in got_a} != {m.task for m in got_c}      # each receiver misses its own copies
+    none, every = links(5, peers=[a], peer_loss=1.0), links(6, peers=[a])
+    none.send_agent(msgs[:10], 0.0)
+    every.send_agent(msgs[:10], 0.0)
+    assert none.counters.peer_sent == 0 and none.counters.loss_injected == 10 and every.counters.peer_sent == 10
+    with pytest.raises(InputError, match="comms.peer_loss"):
+        links(7, peer_loss=1.5)
+
+
 def test_addressing_and_own_echo(links):
     a = links(1)
     b = links(2, peers=[a])

@@ -16,6 +16,10 @@ Liveness: :meth:`MavlinkLink.poll` sends a HEARTBEAT to every peer once per ``he
 records the HEARTBEATs it hears; :meth:`MavlinkLink.peers_lost` names peers silent for more than
 ``heartbeat_timeout`` (once per silence).
 
+Loss injection (``peer_loss``, for tests and SITL): each datagram to each peer is left unsent with that
+probability (a seeded draw per copy, counted in ``loss_injected``), as a lossy radio drops a broadcast for one
+receiver and not another; ground-station traffic is not touched.  0 (the default) sends everything.
+
 Signing (MAVLink 2, pymavlink's implementation): with a key, every frame sent is signed (timestamp in 10 us
 units since 2015-01-01 UTC, never behind the wall clock).  Incoming frames must be signed with the same key, with
 one exception: an *unsigned* HEARTBEAT whose type is MAV_TYPE_GCS is accepted, so a stock ground station without
@@ -51,6 +55,7 @@ from __future__ import annotations
 import ipaddress
 import math
 import os
+import random
 import socket
 import time
 from dataclasses import dataclass, fields
@@ -176,8 +181,10 @@ class LinkCounters:
     frames_dropped: int = 0         # frames and runs of junk refused, in any datagram
     # sending
     sent: int = 0                   # datagrams sent (one per message and destination)
+    peer_sent: int = 0              # of which to peers (agent messages, peer HEARTBEATs)
     send_errors: int = 0
     encode_errors: int = 0          # agent messages whose values do not fit the wire types
+    loss_injected: int = 0          # datagrams to peers not sent: ``peer_loss`` (a lossy radio, for testing)
 
     def as_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -261,7 +268,8 @@ class MavlinkLink:
 
     def __init__(self, robot_id: int, listen: str, peers: Iterable[str], gcs: str | None = None,
                  signing_key: bytes | None = None, heartbeat_timeout: float = 3.0, *,
-                 heartbeat_period: float = 1.0, wallclock: Callable[[], float] = time.time):
+                 heartbeat_period: float = 1.0, wallclock: Callable[[], float] = time.time,
+                 peer_loss: float = 0.0, loss_seed: int | None = None):
         if not 1 <= int(robot_id) <= 250:
             raise InputError(f"robot id: expected 1..250, got {robot_id!r}")
         if signing_key is not None and len(signing_key) != 32:
@@ -269,6 +277,10 @@ class MavlinkLink:
         self.robot_id = int(robot_id)
         self.heartbeat_timeout = float(heartbeat_timeout)
         self.heartbeat_period = float(heartbeat_period)
+        if not 0.0 <= float(peer_loss) <= 1.0:
+            raise InputError(f"comms.peer_loss: expected a share of datagrams 0..1, got {peer_loss!r}")
+        self.peer_loss = float(peer_loss)
+        self._loss_rng = random.Random(self.robot_id if loss_seed is None else loss_seed)
         self.counters = LinkCounters()
         self.log = get_logger("comms.link", self.robot_id)
         self._wallclock = wallclock
@@ -358,8 +370,16 @@ class MavlinkLink:
                 self.counters.encode_errors += 1
                 self.log.error("not sent: %s", e)
                 continue
-            for addr in self._peers:
-                self._sendto(frame, addr)
+            self._to_peers(frame)
+
+    def _to_peers(self, frame: bytes) -> None:
+        """Send ``frame`` to every peer; with ``peer_loss``, each copy is left unsent with that probability, as a
+        lossy radio loses it for one receiver and not another."""
+        for addr in self._peers:
+            if self.peer_loss and self._loss_rng.random() < self.peer_loss:
+                self.counters.loss_injected += 1
+                continue
+            self.counters.peer_sent += self._sendto(frame, addr)
 
     def gcs_addresses(self) -> list[tuple]:
         """Where telemetry goes: the configured ground station and those heard within GCS_TIMEOUT."""
@@ -404,9 +424,7 @@ class MavlinkLink:
     def _heartbeat_peers(self, now: float) -> None:
         if self._next_heartbeat is not None and now < self._next_heartbeat:
             return
-        frame = self._pack(self.heartbeat(), PEER_LINK)
-        for addr in self._peers:
-            self._sendto(frame, addr)
+        self._to_peers(self._pack(self.heartbeat(), PEER_LINK))
         nxt = (now if self._next_heartbeat is None else self._next_heartbeat) + self.heartbeat_period
         self._next_heartbeat = nxt if nxt > now else now + self.heartbeat_period
 

@@ -40,6 +40,8 @@ class FleetConfig:
     speedup: float = field(default=1.0, metadata=rng(0.1, 100))
     timeout: float = field(default=120.0, metadata=rng(1, 36000))    # sim seconds
     gps_noise: float = field(default=0.3, metadata=rng(0.0, 50))     # m, 1-sigma
+    # every robot's comms.peer_loss (share of datagrams to each peer lost; null: each template's own)
+    peer_loss: Optional[float] = field(default=None, metadata=rng(0.0, 1.0))
     source: str = ""
 
     def template(self, robot_id: int) -> str:

@@ -63,6 +63,8 @@ class CommsConfig:
     signing_key: Optional[str] = None     # path to a fleet key file (32 bytes hex)
     heartbeat_timeout: float = field(default=3.0, metadata=rng(0.1, 60))
     startup_grace: float = field(default=15.0, metadata=rng(0.1, 3600))   # s: a peer never heard by then is lost
+    # share of datagrams to each peer left unsent at random (a lossy radio, for testing; 0: none)
+    peer_loss: float = field(default=0.0, metadata=rng(0.0, 1.0))
 
 
 @dataclass(frozen=True)

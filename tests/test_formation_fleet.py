@@ -7,9 +7,10 @@ from __future__ import annotations
 import math
 
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, example, given, settings, strategies as st
 
-from runtime.allocation.formation.assignment import hungarian
+from runtime.allocation.formation.assignment import NO_TASK, hungarian
+from runtime.allocation.formation.messages import BROADCAST, Price, RoundLeave, Status
 from runtime.allocation.agent import DONE
 from runtime.fleet.messages import DONE as T_DONE
 from runtime.fleet.simulate import SimFleet
@@ -108,3 +109,52 @@ def test_every_task_is_done_once_over_a_lossy_bus(method, seed, drop, duplicate)
     assert all(f.table_state(t) == T_DONE for t in ids), (f.now, {t: f.table_state(t) for t in ids})
     by = done_by(f)
     assert all(len(by[t]) == 1 for t in ids), by
+
+
+# ------------------------------------------------------------------------------------------------ ten robots
+TEN = {k + 1: (-3.6 + 0.8 * k, -3.5) for k in range(10)}
+RING = [(2.5 * math.cos(2 * math.pi * k / 10), 2.5 * math.sin(2 * math.pi * k / 10)) for k in range(10)]
+
+
+def settle(method: str, drop: float, seed: int, limit: float = 600.0, hold: float = 300.0) -> tuple[float, bool]:
+    """Ten robots in a line, a ring of ten station-keeping positions handed to robot 1, ``drop`` of the messages
+    lost: (s from the hand-in until every robot holds one task, every task is held and every round has converged,
+    inf if not within ``limit``; whether the formation still holds ``hold`` s later)."""
+    f = SimFleet(TEN, method=method, drop=drop, jitter=0.005, seed=seed)
+    f.run(0.5)
+    ids = sorted(f.hand_in(1, [Goto(x, y, hold=None) for x, y in RING]))
+    t0 = f.now
+
+    def formation(fl) -> bool:
+        return sorted(c.task_id for r in fl.robots.values() for c in r.agent.commitments) == ids
+
+    def settled(fl) -> bool:
+        return formation(fl) and all(r.agent.converged for r in fl.robots.values())
+
+    f.run(t0 + limit, stop=settled)
+    if not settled(f):
+        return math.inf, False
+    took = f.now - t0
+    f.run(f.now + hold)
+    return took, formation(f)
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.sampled_from(METHODS), st.integers(0, 10_000), st.sampled_from([0.0, 0.1]))
+@example("auction", 2, 0.0)      # robot 2 started a round beside robot 1's; one robot of robot 1's never joined
+@example("auction", 1, 0.1)      # ... and robot 8 waited for its rung at the epsilon barrier for ever
+@example("bs", 2, 0.1)           # three robots each alone in a round of two tasks, each left "silent" and restarted
+def test_ten_robots_settle_a_ring_formation_and_keep_it(method, seed, drop):
+    took, kept = settle(method, drop, seed)
+    assert math.isfinite(took) and kept, (took, kept)
+
+
+def test_a_robot_asked_about_a_round_it_is_not_in_says_so_at_most_once_a_bid_timeout():
+    f = SimFleet({1: (0.0, 0.0), 2: (1.0, 0.0)}, method="auction")
+    a = f.robots[1].agent
+    other = 2 << 16 | 5                                   # robot 2's fifth round: robot 1 is not in it
+    ask = Status(2, BROADCAST, 0, NO_TASK, False, round=other)
+    assert a.on_message(ask, 10.0) == [RoundLeave(1, BROADCAST, other)]
+    assert a.on_message(ask, 10.5) == []                                              # once a bid timeout
+    assert a.on_message(Price(2, BROADCAST, 0, 2, 1.0, 0, round=other), 12.0) == []  # a broadcast entry: no question
+    assert a.on_message(Price(2, 1, 0, 2, 1.0, 0, round=other), 12.0) == [RoundLeave(1, BROADCAST, other)]

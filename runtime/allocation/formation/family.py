@@ -19,6 +19,9 @@ get lost and are disarmed.  :class:`FormationAgent` runs the solver in **rounds*
 * Robots tell each other what they hold (``RobotState``, every second and on each change).  Tasks a
   live robot holds are not offered again; a lost robot's tasks are.  If two robots end up holding the
   same task (rounds that overlapped), the lower id keeps it and the other lets it go.
+* A robot asked something in a round it is not in (a message addressed to it, a ``Status`` or an ``Announce``)
+  answers ``RoundLeave`` for it, at most once a bid timeout: the asker counts it as one of the round's live robots
+  (its ``RoundLeave`` was lost, or the ``RoundStart`` never reached it) and would wait for it for ever.
 * A round that got no task taken is not repeated by its initiator with the same tasks and free robots
   until a back-off (doubling, at most 30 s) has passed: a task nobody can reach is not auctioned in a
   tight loop (the robot an operator hands it to refuses a task it cannot reach in the first place).
@@ -33,7 +36,8 @@ index beyond the round's task list (the epsilon auction's "no task" slots except
 that is not in the round, a task set (``TaskInfo``, ``Announce``) that contradicts the round's tasks in the
 fleet table (size or position), a ``RoundStart`` whose round id is not its sender's or that names robots
 outside the fleet.  A round that stays unconverged with nothing heard from its peers for ``SILENT_ROUNDS``
-bid timeouts (a forged ``RoundStart``, or an initiator that died at once) is left.  Values within all of
+bid timeouts (a forged ``RoundStart``, or an initiator that died at once) is left; a round of one robot, which has
+no peers to hear, is not (its solver ends it: left that way, BS went round in circles).  Values within all of
 these from a sender whose id is forged cannot be told from genuine ones without signing (the fleet's default):
 a forged ``Price`` from a round member at a plausible price, an ``Award`` at the winner's own bid.  For two
 robots that end up holding one task, whatever the cause, the lower id keeps it once both have settled.
@@ -111,6 +115,7 @@ class FormationAgent:
         self._now = 0.0
         self.dropped: Counter = Counter()             # round messages that did not fit their round, by reason
         self._clash: dict[int, int | None] = {}       # peer -> my task its last state named too (same round)
+        self._not_in_told: dict[int, float] = {}      # round I am not in -> when I last said so
         self.log = get_logger(f"alloc.{getattr(self.options, 'method', 'formation')}", self.robot_id)
 
     # ------------------------------------------------------------------ what the daemon reads
@@ -214,7 +219,7 @@ class FormationAgent:
             return []
         r = self.rounds.get(rid)
         if r is None:
-            return []                             # a round I am not in (or have left): none of my business
+            return self._not_in(rid, msg, now)
         why = self._outside(r, msg)
         if why is not None:
             self.dropped[why] += 1
@@ -222,6 +227,23 @@ class FormationAgent:
             return []
         r.last_heard = r.last_in = now
         return self._from(r, r.solver.on_message(msg, now), now) + self._settle(now)
+
+    def _not_in(self, rid: int, msg, now: float) -> list:
+        """A message of a round I am not in (never joined, or left).  None of my business, unless it asks me
+        something (addressed to me; a ``Status``, the epsilon auction asking for entries it misses; an ``Announce``,
+        BS and RTMA asking for bids): then its sender may count me as one of the round's live robots (my
+        ``RoundLeave`` was lost, or I never heard its ``RoundStart``) and wait for me for ever, at the epsilon
+        auction's barrier or for my bid.  I say I am not in it, ``RoundLeave`` to all, at most once per round and
+        bid timeout."""
+        if getattr(msg, "dest", BROADCAST) != self.robot_id and not isinstance(msg, (Status, Announce)):
+            return []
+        if now - self._not_in_told.get(rid, -math.inf) < self.options.bid_timeout:
+            return []
+        horizon = SILENT_ROUNDS * self.options.bid_timeout
+        self._not_in_told = {k: t for k, t in self._not_in_told.items() if now - t < horizon}
+        self._not_in_told[rid] = now
+        self.dropped["asked about a round I am not in"] += 1
+        return [RoundLeave(self.robot_id, BROADCAST, rid)]
 
     def _outside(self, r: Round, msg) -> str | None:
         """Why ``msg`` cannot be a message of round ``r``, or None."""
@@ -361,7 +383,8 @@ class FormationAgent:
                 out += self._leave(r, now, tell=False)          # done or withdrawn: I am free
             elif task is None and r.solver.converged and now - r.last_heard >= self.options.linger:
                 out += self._leave(r, now, tell=False)          # the round left me without a task
-            elif not r.solver.converged and now - r.last_in >= SILENT_ROUNDS * self.options.bid_timeout:
+            elif (not r.solver.converged and len(r.robots) > 1
+                  and now - r.last_in >= SILENT_ROUNDS * self.options.bid_timeout):   # alone, there is none to hear
                 self.log.warning("round %s: nothing heard for %.1f s and not converged: leaving it", _rid(r.id),
                                  now - r.last_in)
                 self.dropped["silent round left"] += 1

@@ -5,6 +5,7 @@ and then the spread: runs that touched, the least clearances' minimum, 10th perc
 met the goal (every waypoint visited, no touch, stopped and re-allocated after the kill).
 
     PYTHONPATH=. python benchmarks/comutar_clearance.py --from 1 --to 41 [--jobs 2] [--option feed_memory=0.5 ...]
+                                                        [--peer-loss 0.1]
 
 ``--option NAME=VALUE`` sets an ``allocation:`` option of the borrower's robot config (the consumer of the
 borrowed sensor) for every run: how the avoider's inputs are tuned.
@@ -25,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
-def one(job: tuple[int, dict]) -> dict:
+def one(job: tuple[int, dict, float]) -> dict:
     import logging
 
     import yaml
@@ -33,10 +34,10 @@ def one(job: tuple[int, dict]) -> dict:
     from sitl import launcher
     from tests.sitl_util import worker_fleet
 
-    seed, options = job
+    seed, options, loss = job
     logging.disable(logging.WARNING)
     with tempfile.TemporaryDirectory(prefix="comutar-clearance-") as tmp:
-        path = worker_fleet(Path(tmp), "comutar_3.yaml", seed)
+        path = worker_fleet(Path(tmp), "comutar_3.yaml", seed, peer_loss=loss)
         if options:
             fleet = yaml.safe_load(path.read_text())
             borrower = fleet["scenario"]["borrower"]
@@ -61,6 +62,8 @@ def main() -> int:
     ap.add_argument("--to", dest="hi", type=int, default=41)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--option", action="append", default=[], metavar="NAME=VALUE")
+    ap.add_argument("--peer-loss", type=float, default=0.0, metavar="P",
+                    help="every robot's link loses this share of its datagrams to each peer (default 0)")
     args = ap.parse_args()
     import yaml
 
@@ -76,10 +79,12 @@ def main() -> int:
             ap.error(f"--option {item!r}: expected NAME=VALUE with NAME one of the comutar allocation options "
                      f"({', '.join(sorted(known))})")
         options[name] = yaml.safe_load(value)
+    if not 0.0 <= args.peer_loss <= 1.0:
+        ap.error(f"--peer-loss {args.peer_loss}: expected a share of datagrams 0..1")
     seeds = list(range(args.lo, args.hi))
     rows = []
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        for r in pool.map(one, [(seed, options) for seed in seeds]):
+        for r in pool.map(one, [(seed, options, args.peer_loss) for seed in seeds]):
             rows.append(r)
             at = "-" if r["at"] is None else f"{r['at']:.1f} s"
             print(f"seed {r['seed']:3d}: least clearance {r['least']:6.3f} m at {at:>8}, sim {r['sim_time']:5.1f} s: "

@@ -6,7 +6,7 @@ tests/test_dr_fleet.py checks the kinematic fleet's (tests/dr_util.py ``Watch``)
 view nor holding two commitments, a leader's member list stale for at most member_timeout, no object with two
 leaders for longer than three LEADER_ALIVE periods.
 
-    PYTHONPATH=. python benchmarks/dr_sitl_loss.py --from 1 --to 11 [--loss 0.1] [--jobs 2]
+    PYTHONPATH=. python benchmarks/dr_sitl_loss.py --from 1 --to 11 [--loss 0.1] [--burst 0] [--jobs 2]
 
 One line a run (goal, the new leader's delay after the kill, the share of peer datagrams lost, the longest spell of
 two leaders and of a stale member, violations), then the spread.  tests/test_sitl_foraging.py runs seed 1.
@@ -26,16 +26,16 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
-def one(job: tuple[int, float]) -> dict:
+def one(job: tuple[int, float, float]) -> dict:
     from sitl import launcher
     from sitl.operator import RunView
     from tests.dr_util import DaemonsWatch
     from tests.sitl_util import worker_fleet
 
-    seed, loss = job
+    seed, loss, burst = job
     logging.disable(logging.WARNING)
     with tempfile.TemporaryDirectory(prefix="dr-sitl-loss-") as tmp:
-        path = worker_fleet(Path(tmp), "foraging_4.yaml", seed, peer_loss=loss)
+        path = worker_fleet(Path(tmp), "foraging_4.yaml", seed, peer_loss=loss, loss_burst=burst)
         f = launcher.build(path, Path(tmp) / "run")
         run, watch = launcher.Lockstep(f), DaemonsWatch()
         try:
@@ -61,13 +61,15 @@ def main() -> int:
     ap.add_argument("--from", dest="lo", type=int, default=1)
     ap.add_argument("--to", dest="hi", type=int, default=11)
     ap.add_argument("--loss", type=float, default=0.1, help="comms.peer_loss of every robot (default 0.1)")
+    ap.add_argument("--burst", type=float, default=0.0, help="comms.loss_burst: mean s of a loss spell (default 0)")
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args()
-    if not 0.0 <= args.loss <= 1.0 or args.hi <= args.lo:
-        ap.error(f"--loss {args.loss} / --from {args.lo} --to {args.hi}: expected a share 0..1 and from < to")
+    if not 0.0 <= args.loss <= 1.0 or args.hi <= args.lo or not 0.0 <= args.burst <= 3600.0:
+        ap.error(f"--loss {args.loss} / --burst {args.burst} / --from {args.lo} --to {args.hi}: expected a share 0..1, "
+                 "a burst 0..3600 s and from < to")
     rows = []
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        for r in pool.map(one, [(seed, args.loss) for seed in range(args.lo, args.hi)]):
+        for r in pool.map(one, [(seed, args.loss, args.burst) for seed in range(args.lo, args.hi)]):
             rows.append(r)
             after = "-" if r["after"] is None else f"{r['after']:.1f} s"
             print(f"seed {r['seed']:3d}: {'goal met' if r['goal'] else 'NOT MET'} in {r['sim']:5.1f} s, new leader "
@@ -75,7 +77,8 @@ def main() -> int:
                   f"{r['dual']:.2f} s, a stale member at most {r['stale']:.2f} s, {len(r['violations'])} violations"
                   + (f": {r['violations'][:2]}" if r["violations"] else ""), flush=True)
     afters = [r["after"] for r in rows if r["after"] is not None]
-    print(f"\n{len(rows)} runs at {100 * args.loss:g} % loss: goal met in {sum(r['goal'] for r in rows)}, "
+    burst = f" in spells of {args.burst:g} s" if args.burst else ""
+    print(f"\n{len(rows)} runs at {100 * args.loss:g} % loss{burst}: goal met in {sum(r['goal'] for r in rows)}, "
           f"{sum(bool(r['violations']) for r in rows)} with a violation; new leader after the kill "
           f"{min(afters):.1f}-{max(afters):.1f} s (median {np.median(afters):.1f}); longest two leaders "
           f"{max(r['dual'] for r in rows):.2f} s, longest stale member {max(r['stale'] for r in rows):.2f} s"

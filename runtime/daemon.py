@@ -74,7 +74,8 @@ class Daemon:
             key = load_key(cfg.comms.signing_key) if cfg.comms.signing_key else None
             link = MavlinkLink(self.id, cfg.comms.listen, [p.address for p in cfg.comms.peers],
                                cfg.comms.gcs, signing_key=key,
-                               heartbeat_timeout=cfg.comms.heartbeat_timeout, peer_loss=cfg.comms.peer_loss)
+                               heartbeat_timeout=cfg.comms.heartbeat_timeout, peer_loss=cfg.comms.peer_loss,
+                               loss_burst=cfg.comms.loss_burst, loss_seed=cfg.comms.loss_seed)
         self.link = link
         self.telemetry = GcsTelemetry(link, self.id, cfg.datum, armed=cfg.robot.armed)
         self.ekf = PoseEKF(cfg.localization)

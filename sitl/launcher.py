@@ -159,9 +159,11 @@ def claim_ports(fleet: C.FleetConfig, instance: int = 0) -> C.FleetConfig:
 
 def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: str | Path | None = None,
           seed: int | None = None, signing: bool = True, method: str | None = None,
-          speedup: float | None = None, instance: int = 0, peer_loss: float | None = None) -> Fleet:
-    """Load the fleet, build the world and devices, write robot configs and the manifest.  ``peer_loss`` (else
-    the fleet's ``peer_loss``, else each template's) becomes every robot's ``comms.peer_loss``."""
+          speedup: float | None = None, instance: int = 0, peer_loss: float | None = None,
+          loss_burst: float | None = None) -> Fleet:
+    """Load the fleet, build the world and devices, write robot configs and the manifest.  ``peer_loss`` and
+    ``loss_burst`` (else the fleet's, else each template's) become every robot's ``comms.peer_loss`` and
+    ``comms.loss_burst``."""
     from sitl import scenarios
 
     fleet = claim_ports(C.load_fleet(fleet_path), instance)
@@ -213,9 +215,11 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
             "planning": {"map": str(Path(fleet.world).resolve())},
             "datum": C.to_dict(world_cfg.datum),
         }
-        loss = fleet.peer_loss if peer_loss is None else peer_loss
-        if loss is not None:
-            overrides["comms"]["peer_loss"] = loss
+        for name, given in (("peer_loss", peer_loss), ("loss_burst", loss_burst)):
+            value = getattr(fleet, name) if given is None else given
+            if value is not None:
+                overrides["comms"][name] = value
+                overrides["comms"]["loss_seed"] = seed * 1000 + r.id      # the run's seed, as the GPS noise's
         if method:
             overrides["allocation"] = {"method": method}
         data = C.deep_merge(template, overrides)
@@ -614,6 +618,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--peer-loss", type=float, default=None, metavar="P",
                    help="every robot drops this share of its datagrams to each peer at random, a lossy radio "
                         "(%g..%g; default: the fleet's peer_loss, else none)" % fleet_range("peer_loss"))
+    r.add_argument("--loss-burst", type=float, default=None, metavar="S",
+                   help="with --peer-loss: the losses come in spells of this mean length in seconds, as fading "
+                        "brings them (%g..%g; default: the fleet's loss_burst, else 0: each on its own)"
+                        % fleet_range("loss_burst"))
     r.add_argument("--json", default=None, help="write the result here as JSON")
     r.set_defaults(func=_main)
 
@@ -623,7 +631,7 @@ def _main(args) -> int:
 
     run_args.check(args)          # every option, before the world is built
     f = build(args.fleet, args.run_dir, args.manifest, args.seed, args.signing, args.method, args.speedup,
-              args.instance, args.peer_loss)
+              args.instance, args.peer_loss, args.loss_burst)
     speedup = args.speedup or f.fleet.speedup
     stop = {"flag": False}
 

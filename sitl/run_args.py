@@ -1,8 +1,8 @@
 """`mrta sitl run`'s options, checked before the world is built: each wrong one is one InputError line naming it.
 
-Numbers that override the fleet config (``--speedup``, ``--timeout``, ``--seed``, ``--peer-loss``) take the fleet config's own
-ranges; ``--instance`` must leave every port of the fleet in 1..65535; the run folder, the manifest and the JSON
-result must be writable now, not only when the run ends.
+Numbers that override the fleet config (``--speedup``, ``--timeout``, ``--seed``, ``--peer-loss``, ``--loss-burst``)
+take the fleet config's own ranges; ``--instance`` must leave every port of the fleet in 1..65535; the run folder,
+the manifest and the JSON result must be writable now, not only when the run ends.
 """
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ def fleet_range(name: str) -> tuple[float | None, float | None]:
 
 def check(args) -> None:
     """InputError naming the option unless ``args`` (parsed `mrta sitl run` options) can start a run."""
-    for name in ("speedup", "timeout", "seed", "peer_loss"):
+    for name in ("speedup", "timeout", "seed", "peer_loss", "loss_burst"):
         lo, hi = fleet_range(name)
         argcheck.number(getattr(args, name), "--" + name.replace("_", "-"), lo, hi)
     argcheck.number(args.instance, "--instance", 0, MAX_INSTANCE)

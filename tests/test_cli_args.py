@@ -66,6 +66,7 @@ def _robot(tmp_path) -> Path:
     ("--instance", "-1", "--instance: expected a number in [0, 400], got -1"),
     ("--peer-loss", "1.5", "--peer-loss: expected a number in [0, 1], got 1.5"),
     ("--peer-loss", "nan", "--peer-loss: expected a number in [0, 1], got nan"),
+    ("--loss-burst", "-1", "--loss-burst: expected a number in [0, 3600], got -1.0"),
     ("--run-dir", "/dev/null/run", "--run-dir /dev/null/run: expected a path whose folders can be made"),
     ("--manifest", "/dev/null/m.json", "--manifest /dev/null/m.json: expected a path whose folders can be made"),
     ("--json", "/dev/null/r.json", "--json /dev/null/r.json: expected a file in an existing folder"),
@@ -97,9 +98,9 @@ def test_sitl_run_takes_good_options_as_they_are(tmp_path, no_fleet):
     with pytest.raises(Started):
         cli.main(["sitl", "run", str(FLEET), "--speedup", "0.1", "--seed", "0", "--timeout", "1", "--run-dir",
                   str(run_dir), "--manifest", str(tmp_path / "a" / "b" / "m.json"), "--json", str(tmp_path / "r.json"),
-                  "--peer-loss", "0.1"])
-    fleet, rd, manifest, seed, signing, method, speedup, instance, peer_loss = no_fleet["args"]
-    assert (rd, seed, speedup, instance, peer_loss) == (str(run_dir), 0, 0.1, 0, 0.1)
+                  "--peer-loss", "0.1", "--loss-burst", "2"])
+    fleet, rd, manifest, seed, signing, method, speedup, instance, peer_loss, loss_burst = no_fleet["args"]
+    assert (rd, seed, speedup, instance, peer_loss, loss_burst) == (str(run_dir), 0, 0.1, 0, 0.1, 2.0)
     assert not list(tmp_path.iterdir())           # checked, not made (nor left a probe behind)
 
 

@@ -85,6 +85,22 @@ def test_peer_loss_drops_its_share_of_each_peers_copies_and_counts_them(links):
         links(7, peer_loss=1.5)
 
 
+def test_loss_in_bursts_keeps_the_share_and_loses_runs_of_copies(links):
+    a = links(1)
+    b = links(2, peers=[a], peer_loss=0.2, loss_burst=1.0, loss_seed=3)
+    lost = []
+    for k in range(20_000):                               # a copy every 0.1 s for 2000 s, no socket needed
+        lost.append(b.peer_loss and b._loses(a.address, 0.1 * k))
+    share = sum(lost) / len(lost)
+    runs = [len(r) for r in "".join("x" if x else "." for x in lost).split(".") if r]
+    assert 0.15 < share < 0.25                            # the share asked for
+    assert 6 < sum(runs) / len(runs) < 14                 # spells of a mean 1 s: about 10 copies in a row
+    b.send_agent([M.Bid(2, 0, 1, 1, 1.0)], 0.0)           # the send path goes through it
+    assert b.counters.loss_injected + b.counters.peer_sent == 1
+    with pytest.raises(InputError, match="comms.loss_burst"):
+        links(3, peer_loss=0.1, loss_burst=-1.0)
+
+
 def test_addressing_and_own_echo(links):
     a = links(1)
     b = links(2, peers=[a])

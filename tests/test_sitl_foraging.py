@@ -269,6 +269,14 @@ def test_the_fleets_peer_loss_or_the_runs_becomes_every_robots(tmp_path):
     lossy = shipped_fleet(tmp_path, FLEET.name, peer_loss=0.2)
     assert losses(lossy) == {0.2}
     assert losses(lossy, peer_loss=0.05) == {0.05}                               # mrta sitl run --peer-loss
+    f = launcher.build(lossy, tmp_path / "burst", loss_burst=2.0)
+    try:
+        assert {C.load_robot(r.config_path).comms.loss_burst for r in f.robots.values()} == {2.0}
+        assert isinstance(f.key, bytes) and len(f.key) == 32                   # still the fleet's signing key
+        seeds = {C.load_robot(r.config_path).comms.loss_seed for r in f.robots.values()}
+        assert seeds == {1000 * f.fleet.seed + rid for rid in f.robots}          # the run's seed: runs differ
+    finally:
+        f.close()
     bad = shipped_fleet(tmp_path, FLEET.name, peer_loss=2)
     with pytest.raises(ConfigError, match="peer_loss"):
         C.load_fleet(bad)

@@ -18,7 +18,11 @@ records the HEARTBEATs it hears; :meth:`MavlinkLink.peers_lost` names peers sile
 
 Loss injection (``peer_loss``, for tests and SITL): each datagram to each peer is left unsent with that
 probability (a seeded draw per copy, counted in ``loss_injected``), as a lossy radio drops a broadcast for one
-receiver and not another; ground-station traffic is not touched.  0 (the default) sends everything.
+receiver and not another; ground-station traffic is not touched.  0 (the default) sends everything.  With
+``loss_burst`` > 0 the losses come in bursts, as fading and interference bring them (a Gilbert-Elliott channel in
+time, per peer): bad spells of a mean ``loss_burst`` s lose every copy, good spells between them lose none, both of
+exponential length, the good ones long enough (``loss_burst (1 - peer_loss) / peer_loss`` on average) that the
+share lost is still ``peer_loss``.
 
 Signing (MAVLink 2, pymavlink's implementation): with a key, every frame sent is signed (timestamp in 10 us
 units since 2015-01-01 UTC, never behind the wall clock).  Incoming frames must be signed with the same key, with
@@ -269,7 +273,7 @@ class MavlinkLink:
     def __init__(self, robot_id: int, listen: str, peers: Iterable[str], gcs: str | None = None,
                  signing_key: bytes | None = None, heartbeat_timeout: float = 3.0, *,
                  heartbeat_period: float = 1.0, wallclock: Callable[[], float] = time.time,
-                 peer_loss: float = 0.0, loss_seed: int | None = None):
+                 peer_loss: float = 0.0, loss_burst: float = 0.0, loss_seed: int | None = None):
         if not 1 <= int(robot_id) <= 250:
             raise InputError(f"robot id: expected 1..250, got {robot_id!r}")
         if signing_key is not None and len(signing_key) != 32:
@@ -279,8 +283,12 @@ class MavlinkLink:
         self.heartbeat_period = float(heartbeat_period)
         if not 0.0 <= float(peer_loss) <= 1.0:
             raise InputError(f"comms.peer_loss: expected a share of datagrams 0..1, got {peer_loss!r}")
+        if not (math.isfinite(loss_burst) and loss_burst >= 0.0):
+            raise InputError(f"comms.loss_burst: expected a mean burst length >= 0 s, got {loss_burst!r}")
         self.peer_loss = float(peer_loss)
+        self.loss_burst = float(loss_burst)
         self._loss_rng = random.Random(self.robot_id if loss_seed is None else loss_seed)
+        self._spells: dict[tuple, tuple[bool, float]] = {}      # peer -> (in a bad spell, until when)
         self.counters = LinkCounters()
         self.log = get_logger("comms.link", self.robot_id)
         self._wallclock = wallclock
@@ -370,16 +378,35 @@ class MavlinkLink:
                 self.counters.encode_errors += 1
                 self.log.error("not sent: %s", e)
                 continue
-            self._to_peers(frame)
+            self._to_peers(frame, now)
 
-    def _to_peers(self, frame: bytes) -> None:
-        """Send ``frame`` to every peer; with ``peer_loss``, each copy is left unsent with that probability, as a
-        lossy radio loses it for one receiver and not another."""
+    def _to_peers(self, frame: bytes, now: float) -> None:
+        """Send ``frame`` to every peer; with ``peer_loss``, a copy is lost with that probability (or, with
+        ``loss_burst``, while that peer's channel is in a bad spell), as a lossy radio loses it for one receiver and
+        not another."""
         for addr in self._peers:
-            if self.peer_loss and self._loss_rng.random() < self.peer_loss:
+            if self.peer_loss and self._loses(addr, now):
                 self.counters.loss_injected += 1
                 continue
             self.counters.peer_sent += self._sendto(frame, addr)
+
+    def _loses(self, addr, now: float) -> bool:
+        rng, p = self._loss_rng, self.peer_loss
+        if not self.loss_burst or p >= 1.0:
+            return rng.random() < p
+
+        def spell(bad: bool) -> float:              # exponential, mean loss_burst bad, loss_burst (1 - p) / p good
+            return rng.expovariate(p / (self.loss_burst * (1.0 - p)) if not bad else 1.0 / self.loss_burst)
+
+        if addr not in self._spells:                # the first copy finds the channel as it is on average
+            bad = rng.random() < p
+            self._spells[addr] = (bad, now + spell(bad))
+        bad, until = self._spells[addr]
+        while until <= now:
+            bad = not bad
+            until += spell(bad)
+        self._spells[addr] = (bad, until)
+        return bad
 
     def gcs_addresses(self) -> list[tuple]:
         """Where telemetry goes: the configured ground station and those heard within GCS_TIMEOUT."""
@@ -424,7 +451,7 @@ class MavlinkLink:
     def _heartbeat_peers(self, now: float) -> None:
         if self._next_heartbeat is not None and now < self._next_heartbeat:
             return
-        self._to_peers(self._pack(self.heartbeat(), PEER_LINK))
+        self._to_peers(self._pack(self.heartbeat(), PEER_LINK), now)
         nxt = (now if self._next_heartbeat is None else self._next_heartbeat) + self.heartbeat_period
         self._next_heartbeat = nxt if nxt > now else now + self.heartbeat_period
 

@@ -42,6 +42,7 @@ class FleetConfig:
     gps_noise: float = field(default=0.3, metadata=rng(0.0, 50))     # m, 1-sigma
     # every robot's comms.peer_loss (share of datagrams to each peer lost; null: each template's own)
     peer_loss: Optional[float] = field(default=None, metadata=rng(0.0, 1.0))
+    loss_burst: Optional[float] = field(default=None, metadata=rng(0.0, 3600.0))   # every robot's comms.loss_burst
     source: str = ""
 
     def template(self, robot_id: int) -> str:

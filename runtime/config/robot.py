@@ -65,6 +65,9 @@ class CommsConfig:
     startup_grace: float = field(default=15.0, metadata=rng(0.1, 3600))   # s: a peer never heard by then is lost
     # share of datagrams to each peer left unsent at random (a lossy radio, for testing; 0: none)
     peer_loss: float = field(default=0.0, metadata=rng(0.0, 1.0))
+    # s: mean length of a spell in which every datagram to a peer is lost (bursts); 0: each lost on its own
+    loss_burst: float = field(default=0.0, metadata=rng(0.0, 3600.0))
+    loss_seed: Optional[int] = field(default=None, metadata=rng(0, 2**32 - 1))   # of the loss draws; null: robot id
 
 
 @dataclass(frozen=True)

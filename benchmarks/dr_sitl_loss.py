@@ -28,32 +28,25 @@ sys.path.insert(0, str(ROOT))
 
 def one(job: tuple[int, float, float]) -> dict:
     from sitl import launcher
-    from sitl.operator import RunView
     from tests.dr_util import DaemonsWatch
     from tests.sitl_util import worker_fleet
 
     seed, loss, burst = job
     logging.disable(logging.WARNING)
     with tempfile.TemporaryDirectory(prefix="dr-sitl-loss-") as tmp:
-        path = worker_fleet(Path(tmp), "foraging_4.yaml", seed, peer_loss=loss, loss_burst=burst)
-        f = launcher.build(path, Path(tmp) / "run")
-        run, watch = launcher.Lockstep(f), DaemonsWatch()
+        f = launcher.build(worker_fleet(Path(tmp), "foraging_4.yaml", seed, peer_loss=loss, loss_burst=burst),
+                           Path(tmp) / "run")
+        watch = DaemonsWatch()
         try:
-            goal = False
-            while f.world.t < f.fleet.timeout and not goal:
-                run.step()
-                watch(run)
-                goal = f.scenario.goal(RunView(run.op))
-            res = launcher.finish(f, run.op, "goal" if goal else "timeout")
-            links = [d.link.counters for d in run.daemons.values()]
+            res = launcher.run_lockstep(f, on_step=watch)
+            links = [r.daemon.link.counters for r in f.robots.values()]
             lost, sent = sum(c.loss_injected for c in links), sum(c.peer_sent for c in links)
         finally:
-            run.close()
             f.close()
     kill = res.get("kill") or {}
-    return {"seed": seed, "goal": goal, "verdict": res["verdict"], "sim": f.world.t, "after": kill.get("after"),
-            "lost": lost / max(lost + sent, 1), "dual": watch.longest_dual, "stale": watch.longest_stale,
-            "violations": watch.violations}
+    return {"seed": seed, "goal": res["goal_met"], "verdict": res["verdict"], "sim": res["sim_time"],
+            "after": kill.get("after"), "lost": lost / max(lost + sent, 1), "dual": watch.longest_dual,
+            "stale": watch.longest_stale, "violations": watch.violations}
 
 
 def main() -> int:

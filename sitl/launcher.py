@@ -73,6 +73,7 @@ class Fleet:
     events: list[str] = field(default_factory=list)
     device_hook: object = None          # called with the sim time after every device service
     withdrawn: set[int] = field(default_factory=set)     # robots taken out of the arena
+    stopped: set[int] = field(default_factory=set)       # robots whose lock-step daemon no longer runs (killed)
 
     # -------------------------------------------------------------- devices
     def service_devices(self) -> None:
@@ -211,7 +212,8 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
             "localization": {"initial_pose": list(r.start)},
             "comms": {"listen": f"127.0.0.1:{ports[r.id]}", "gcs": fleet.gcs,
                       "peers": [{"id": o, "address": f"127.0.0.1:{p}"} for o, p in ports.items() if o != r.id],
-                      "signing_key": str(key_path) if key_path else None},
+                      "signing_key": str(key_path) if key_path else None,
+                      "loss_seed": seed * 1000 + r.id},          # the run's seed, as the GPS noise's
             "planning": {"map": str(Path(fleet.world).resolve())},
             "datum": C.to_dict(world_cfg.datum),
         }
@@ -219,7 +221,6 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
             value = getattr(fleet, name) if given is None else given
             if value is not None:
                 overrides["comms"][name] = value
-                overrides["comms"]["loss_seed"] = seed * 1000 + r.id      # the run's seed, as the GPS noise's
         if method:
             overrides["allocation"] = {"method": method}
         data = C.deep_merge(template, overrides)
@@ -377,7 +378,7 @@ class Lockstep:
             r.daemon.open(self.clock.now())
         self.op = Operator(f)
         self.period = min(d.period for d in self.daemons.values())
-        self.stopped: set[int] = set()          # robots whose daemon no longer runs (killed by a test)
+        self.stopped = f.stopped                # robots whose daemon no longer runs (killed), kept on the Fleet
         self._preroll()
 
     def _preroll(self) -> None:

@@ -104,18 +104,18 @@ class Watch:
 
 
 class DaemonsWatch(Watch):
-    """:class:`Watch` over a lock-step SITL run (:class:`sitl.launcher.Lockstep`): call it with the run after every
-    control cycle; the daemons' agents, the world's clock, the daemons not stopped."""
+    """:class:`Watch` over a lock-step SITL run: call it with the launcher's Fleet after every control cycle (as
+    ``launcher.run_lockstep``'s ``on_step``); the daemons' agents, the world's clock, the daemons not stopped."""
 
     def __init__(self, slack: float = 0.35):
         super().__init__(None, slack)
 
-    def __call__(self, run) -> None:
+    def __call__(self, f) -> None:
+        robots = {rid: SimpleNamespace(agent=r.daemon.node.agent) for rid, r in f.robots.items()}
         if self.o is None:
-            self.o = next(iter(run.daemons.values())).node.agent.o
-        super().__call__(SimpleNamespace(
-            now=run.f.world.t, robots={rid: SimpleNamespace(agent=d.node.agent) for rid, d in run.daemons.items()},
-            live=lambda: [rid for rid in run.daemons if rid not in run.stopped]))
+            self.o = next(iter(robots.values())).agent.o
+        super().__call__(SimpleNamespace(now=f.world.t, robots=robots,
+                                         live=lambda: [rid for rid in f.robots if rid not in f.stopped]))
 
 
 def forage(f, objects: int, present: int, rnd, weight=(8.0, 16.0), deadline: float = 60.0, until: float = 900.0,

@@ -196,8 +196,8 @@ def test_bad_scenarios_are_refused_naming_the_key(tmp_path, changes, key):
 
 def _lockstep(tmp_path, fleet: Path, until: float, read=lambda run, res: None, observe=None, **changes):
     """A lock-step run of the shipped ``fleet`` (``changes``: fleet keys set) until its goal or ``until`` s:
-    (goal met, shortfall, summary, ``read(run, summary)`` taken before the daemons close); ``observe(run)`` after
-    every control cycle."""
+    (goal met, shortfall, summary, ``read(run, summary)`` taken before the daemons close); ``observe(fleet)`` after
+    every control cycle, as ``launcher.run_lockstep``'s ``on_step``."""
     from sitl import launcher
     from sitl.operator import RunView
     from tests.sitl_util import shipped_fleet
@@ -209,7 +209,7 @@ def _lockstep(tmp_path, fleet: Path, until: float, read=lambda run, res: None, o
         while f.world.t < until and not goal:
             run.step()
             if observe is not None:
-                observe(run)
+                observe(f)
             goal = f.scenario.goal(RunView(run.op))
         res = launcher.finish(f, run.op, "goal" if goal else "timeout")
         return goal, f.scenario.shortfall(RunView(run.op)), res, read(run, res)

@@ -391,22 +391,22 @@ class MavlinkLink:
             self.counters.peer_sent += self._sendto(frame, addr)
 
     def _loses(self, addr, now: float) -> bool:
-        rng, p = self._loss_rng, self.peer_loss
-        if not self.loss_burst or p >= 1.0:
-            return rng.random() < p
-
-        def spell(bad: bool) -> float:              # exponential, mean loss_burst bad, loss_burst (1 - p) / p good
-            return rng.expovariate(p / (self.loss_burst * (1.0 - p)) if not bad else 1.0 / self.loss_burst)
-
+        if not self.loss_burst or self.peer_loss >= 1.0:
+            return self._loss_rng.random() < self.peer_loss
         if addr not in self._spells:                # the first copy finds the channel as it is on average
-            bad = rng.random() < p
-            self._spells[addr] = (bad, now + spell(bad))
+            bad = self._loss_rng.random() < self.peer_loss
+            self._spells[addr] = (bad, now + self._spell(bad))
         bad, until = self._spells[addr]
         while until <= now:
             bad = not bad
-            until += spell(bad)
+            until += self._spell(bad)
         self._spells[addr] = (bad, until)
         return bad
+
+    def _spell(self, bad: bool) -> float:
+        """A spell's length: exponential, of mean ``loss_burst`` bad and ``loss_burst (1 - p) / p`` good."""
+        p, b = self.peer_loss, self.loss_burst
+        return self._loss_rng.expovariate(1.0 / b if bad else p / (b * (1.0 - p)))
 
     def gcs_addresses(self) -> list[tuple]:
         """Where telemetry goes: the configured ground station and those heard within GCS_TIMEOUT."""

@@ -78,7 +78,7 @@ class Daemon:
                                loss_burst=cfg.comms.loss_burst, loss_seed=cfg.comms.loss_seed)
         self.link = link
         self.telemetry = GcsTelemetry(link, self.id, cfg.datum, armed=cfg.robot.armed)
-        self.ekf = PoseEKF(cfg.localization)
+        self.ekf = PoseEKF(cfg.localization, robot_id=self.id)
         if cfg.localization.initial_pose is not None:
             self.ekf.initialise(*cfg.localization.initial_pose)
         radius = float(base.footprint.radius)       # obstacle inflation and avoidance

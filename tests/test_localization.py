@@ -66,9 +66,11 @@ class Run:
 
 
 def drive_loop(seed=1, T=120.0, dt=0.05, start=(0.0, -3.0, 0.0), known=True, outlier_at=None,
-               scale=1.02, yaw_bias=0.02, gps_sigma=0.5, cfg=CFG) -> Run:
-    """A robot driving loops (0.4 m/s, 3 m radius, a reverse bend every minute); wheel odometry with a
-    scale error and a yaw-rate bias at 20 Hz, GPS at 5 Hz.  RMSE of each estimate against truth."""
+               scale=1.02, yaw_bias=0.02, gps_sigma=0.5, cfg=CFG, knock=None, speed=0.4) -> Run:
+    """A robot driving loops (``speed`` m/s, 3 m radius, a reverse bend every minute); wheel odometry with a
+    scale error and a yaw-rate bias at 20 Hz, GPS at 5 Hz.  RMSE of each estimate against truth.
+    ``knock=(t, angle)``: at t the robot is turned by angle on the spot (another robot ran into it) and the
+    wheels do not see it."""
     rng = np.random.default_rng(seed)
     ekf = PoseEKF(cfg)
     x, y, th = start
@@ -79,7 +81,9 @@ def drive_loop(seed=1, T=120.0, dt=0.05, start=(0.0, -3.0, 0.0), known=True, out
     outlier_ok = None
     for k in range(int(T / dt)):
         t = k * dt
-        v, w = 0.4, (0.4 / 3.0) * (1.0 if t % 60 < 47 else -0.5)
+        v, w = speed, (speed / 3.0) * (1.0 if t % 60 < 47 else -0.5)
+        if knock is not None and abs(t - knock[0]) < dt / 2:
+            th = wrap_angle(th + knock[1])
         m = th + w * dt / 2
         x, y, th = x + v * math.cos(m) * dt, y + v * math.sin(m) * dt, wrap_angle(th + w * dt)
         vo, wo = scale * v + rng.normal(0, 0.01), w + yaw_bias + rng.normal(0, 0.02)
@@ -150,6 +154,59 @@ def test_heading_stays_unknown_while_standing_still():
     assert ekf.initialised and not ekf.heading_known
     x, y, _ = ekf.pose()
     assert math.hypot(x - 4.0, y + 1.0) < 0.3
+
+
+def go_to(goal, seed=1, T=90.0, dt=0.05, knock=None, gps_sigma=0.3, cfg=CFG):
+    """A robot steering by its own filter's pose to ``goal`` and holding it there (0.5 m/s at most, a turn-then-
+    drive law), odometry at 20 Hz, GPS at 5 Hz; ``knock=(t, angle)`` as in :func:`drive_loop`.  Returns the
+    filter, the true pose per step and the filter's heading error per step."""
+    rng = np.random.default_rng(seed)
+    ekf = PoseEKF(cfg)
+    x, y, th = 0.0, 0.0, 0.0
+    ekf.initialise(x, y, th, sigma_xy=0.1)
+    poses, herr = [], []
+    for k in range(int(T / dt)):
+        t = k * dt
+        px, py, ph = ekf.pose()
+        bearing = math.atan2(goal[1] - py, goal[0] - px)
+        dist = math.hypot(goal[0] - px, goal[1] - py)
+        turn = wrap_angle(bearing - ph)
+        w = max(-1.5, min(1.5, 2.0 * turn)) if dist > 0.08 else 0.0
+        v = min(0.5, 0.8 * dist) * max(0.0, math.cos(turn)) if dist > 0.08 else 0.0
+        if knock is not None and abs(t - knock[0]) < dt / 2:
+            th = wrap_angle(th + knock[1])
+        m = th + w * dt / 2
+        x, y, th = x + v * math.cos(m) * dt, y + v * math.sin(m) * dt, wrap_angle(th + w * dt)
+        ekf.predict(dt)
+        ekf.update_odometry(v + rng.normal(0, 0.01), w + rng.normal(0, 0.02))
+        if k % 4 == 0:
+            ekf.update_gps(x + rng.normal(0, gps_sigma), y + rng.normal(0, gps_sigma))
+        poses.append((x, y, th))
+        herr.append(abs(wrap_angle(ekf.pose()[2] - th)) if ekf.heading_known else math.nan)
+    return ekf, np.array(poses), np.array(herr)
+
+
+@pytest.mark.parametrize("seed,angle,at", [(1, math.pi, 5.0), (2, -2.5, 5.0), (3, 2.0, 3.0), (4, math.pi, 8.0), (5, math.pi, 9.0), (6, 2.8, 9.5),
+                                           (7, 1.5, 6.0)])
+def test_a_knock_the_wheels_do_not_see_is_found_and_heading_found_again(seed, angle, at):
+    """A robot turned by a collision that its wheels did not see steers by a heading that is wrong: near its
+    goal the GPS innovations pile up in one direction, some inside the gate and some not, while its steering
+    drives it further off.  The window of their squared Mahalanobis distances fails the consistency test, the
+    position is taken from GPS and heading found again from motion, and the robot gets to its goal.  (Seen in
+    SITL: can_2 at 10 % peer loss, seed 2: a robot turned by pi in a collision drove the wrong way for 100 s.)"""
+    ekf, poses, herr = go_to((5.0, 0.0), seed=seed, knock=(at, angle))
+    d = np.hypot(5.0 - poses[:, 0], poses[:, 1])
+    from_knock = d[int(at / 0.05):]
+    # before: 5-16 m the wrong way, one to five position resets, on the goal to stay 20-81 s after the knock
+    assert from_knock.max() < 6.0, f"drove {from_knock.max():.1f} m from the goal"
+    settled = int((at + 30.0) / 0.05)
+    assert d[settled:].max() < 0.3 and herr[settled:].max() < 0.35
+    assert ekf.stats.relocalised >= 1
+
+
+def test_no_false_relocalisation_on_a_clean_run():
+    for seed in range(1, 6):
+        assert drive_loop(seed=seed, T=300.0).ekf.stats.relocalised == 0
 
 
 def test_persistent_disagreement_resets_position_to_gps():

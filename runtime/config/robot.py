@@ -44,6 +44,10 @@ class LocalizationConfig:
     odom_sigma_v: float = field(default=0.02, metadata=rng(0.0, 10))       # m/s
     odom_sigma_w: float = field(default=0.05, metadata=rng(0.0, 10))       # rad/s
     gate: float = field(default=13.8, metadata=rng(0.1, 1000))             # chi^2(2) 99.9 %
+    # the filter relocalises (position from GPS, heading found again from motion) when the squared Mahalanobis
+    # distances of the last consistency_window fixes sum above chi^2(2 x window) at this probability; 0: off
+    consistency_window: int = field(default=10, metadata=rng(0, 1000))     # GPS fixes
+    consistency: float = field(default=0.9999, metadata=rng(0.5, 0.999999))
     # x, y, heading in the fleet frame where the operator placed the robot; null: from the first GPS fix
     # with heading unknown until the robot has moved
     initial_pose: Optional[tuple[float, float, float]] = None

@@ -28,6 +28,7 @@ from pathlib import Path
 
 from runtime import config as C
 from runtime.clock import Clock, ClockStalled, ScaledClock, SharedClock, WallClock
+from runtime.execution import peer_readings
 from runtime.log import get_logger
 
 
@@ -224,7 +225,10 @@ class Daemon:
         ex = self.executive
         ex.sync(self.agent.commitments if self.node.armed else (), now)
         ex.make_way = self.node.armed
-        (v, w), progress = ex.step(self.pose(), self.base.sensors, now)
+        pose, sensors = self.pose(), self.base.sensors
+        ex.peers = () if pose is None or sensors.ranges else \
+            peer_readings.readings(pose, self.node.positions, now, ex.ctx.radius)    # no ranges of its own
+        (v, w), progress = ex.step(pose, sensors, now)
         self.base.set_velocity(v, w, now)
         out = []
         for p in progress:

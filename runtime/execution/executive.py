@@ -64,6 +64,7 @@ class Executive:
     arbiter: Arbiter | None = None
     escapes: int = 0                  # stalls escaped by backing up
     make_way: bool = False            # idle, move off when something comes this close (the daemon: when armed)
+    peers: tuple = ()                 # (bearing, distance) readings of where peers report they stand (making way)
     made_way: int = 0                 # cycles spent making way
     cspace: object = None             # CoMutaR's c-space behaviour, once an executor has constraints
 
@@ -183,8 +184,9 @@ class Executive:
     def _make_way(self, sensors, now: float) -> tuple[float, float]:
         """An idle robot stands still, unless (``make_way``) something is within ``MAKE_WAY_GAP`` of its body:
         then it creeps straight away from the nearest reading, if that side is clear.  A robot with nothing to do
-        parked on a mark (the delivery point, a goal) moves off when another robot comes to it."""
-        ranges = getattr(sensors, "ranges", None)
+        parked on a mark (the delivery point, a goal) moves off when another robot comes to it.  Readings are the
+        base's ranges and, for a robot that has none, where the peers report they stand (``peers``)."""
+        ranges = tuple(getattr(sensors, "ranges", None) or ()) + tuple(self.peers)
         if not self.make_way or not ranges:
             return 0.0, 0.0
         r = self.ctx.radius

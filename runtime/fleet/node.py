@@ -52,6 +52,7 @@ class FleetNode:
         self.events: list[TaskEvent] = []          # every agent event, for the run's trace
         self.done_by: dict[int, tuple[int, ...]] = {}   # tasks this robot saw done: by whom
         self.holding: dict[int, tuple[int, ...]] = {}   # peer -> the tasks its last RobotState named
+        self.positions: dict[int, tuple[float, float, float]] = {}   # peer -> (x, y, when) of its last RobotState
         self._last_state: tuple | None = None
         self._next_state = -math.inf
         self.log = get_logger("fleet", self.robot_id)
@@ -101,6 +102,7 @@ class FleetNode:
             return [] if msg.digest == self.table.digest else self.table.records(msg.sender)
         if isinstance(msg, RobotState):
             self.holding[msg.sender] = tuple(msg.tasks)
+            self.positions[msg.sender] = (float(msg.x), float(msg.y), now)
             return self.table.compare(msg.sender, msg.known, msg.digest, now) + self.agent.on_message(msg, now)
         return self.agent.on_message(msg, now)
 
@@ -119,6 +121,7 @@ class FleetNode:
 
     def on_peer_lost(self, robot_id: int, now: float) -> list:
         self.holding.pop(robot_id, None)
+        self.positions.pop(robot_id, None)
         return self.agent.on_peer_lost(robot_id, now)
 
     def holders(self, task_id: int) -> tuple[int, ...]:

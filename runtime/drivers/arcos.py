@@ -59,6 +59,7 @@ class ArcosBase(MobileBase):
     """One ARCOS robot on one link; non-blocking, polled with the current time."""
 
     Config = ArcosConfig
+    ranging = True             # the sonar ring
 
     @classmethod
     def from_config(cls, cfg: ArcosConfig, robot_id=None) -> "ArcosBase":

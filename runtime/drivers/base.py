@@ -145,6 +145,7 @@ class MobileBase(abc.ABC):
     sensors: BaseSensors
     stats: LinkStats
     latches_faults = False     # True: ``sensors.faults`` stay, and the base stands, until reset_faults() clears them
+    ranging = False            # True: it has range sensors (``sensors.ranges`` empty then means nothing in range)
 
     def __init__(self, footprint: Footprint, watchdog: float, log):
         if not (isinstance(watchdog, (int, float)) and math.isfinite(watchdog) and watchdog > 0):

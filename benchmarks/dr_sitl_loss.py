@@ -6,7 +6,7 @@ tests/test_dr_fleet.py checks the kinematic fleet's (tests/dr_util.py ``Watch``)
 view nor holding two commitments, a leader's member list stale for at most member_timeout, no object with two
 leaders for longer than three LEADER_ALIVE periods.
 
-    PYTHONPATH=. python benchmarks/dr_sitl_loss.py --from 1 --to 11 [--loss 0.1] [--burst 0] [--jobs 2]
+    PYTHONPATH=. python benchmarks/dr_sitl_loss.py --from 1 --to 11 [--loss 0.1] [--burst 0] [--carrier-leads] [--jobs 2]
 
 One line a run (goal, the new leader's delay after the kill, the share of peer datagrams lost, the longest spell of
 two leaders and of a stale member, violations), then the spread.  tests/test_sitl_foraging.py runs seed 1.
@@ -26,16 +26,31 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
-def one(job: tuple[int, float, float]) -> dict:
+def carrier_template(tmp: Path) -> Path:
+    """foraging_4's robot template with the DR option ``carrier_leads`` on (its paths made absolute)."""
+    import yaml
+
+    src = ROOT / "configs" / "robots" / "pioneer3dx_forage.yaml"
+    data = yaml.safe_load(src.read_text())
+    alloc = data["allocation"]
+    alloc["model"] = str((src.parent / alloc["model"]).resolve())
+    alloc["carrier_leads"] = True
+    out = tmp / "pioneer3dx_forage_carrier_leads.yaml"
+    out.write_text(yaml.safe_dump(data, sort_keys=False))
+    return out
+
+
+def one(job: tuple[int, float, float, bool]) -> dict:
     from sitl import launcher
     from tests.dr_util import DaemonsWatch
     from tests.sitl_util import worker_fleet
 
-    seed, loss, burst = job
+    seed, loss, burst, carrier_leads = job
     logging.disable(logging.WARNING)
     with tempfile.TemporaryDirectory(prefix="dr-sitl-loss-") as tmp:
-        f = launcher.build(worker_fleet(Path(tmp), "foraging_4.yaml", seed, peer_loss=loss, loss_burst=burst),
-                           Path(tmp) / "run")
+        changes = {"robot": str(carrier_template(Path(tmp)))} if carrier_leads else {}
+        f = launcher.build(worker_fleet(Path(tmp), "foraging_4.yaml", seed, peer_loss=loss, loss_burst=burst,
+                                        **changes), Path(tmp) / "run")
         watch = DaemonsWatch()
         try:
             res = launcher.run_lockstep(f, on_step=watch)
@@ -55,6 +70,8 @@ def main() -> int:
     ap.add_argument("--to", dest="hi", type=int, default=11)
     ap.add_argument("--loss", type=float, default=0.1, help="comms.peer_loss of every robot (default 0.1)")
     ap.add_argument("--burst", type=float, default=0.0, help="comms.loss_burst: mean s of a loss spell (default 0)")
+    ap.add_argument("--carrier-leads", action="store_true",
+                    help="DR option carrier_leads: a robot with a load of a leaderless task may ask to lead it")
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args()
     if not 0.0 <= args.loss <= 1.0 or args.hi <= args.lo or not 0.0 <= args.burst <= 3600.0:
@@ -62,7 +79,8 @@ def main() -> int:
                  "a burst 0..3600 s and from < to")
     rows = []
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        for r in pool.map(one, [(seed, args.loss, args.burst) for seed in range(args.lo, args.hi)]):
+        for r in pool.map(one, [(seed, args.loss, args.burst, args.carrier_leads)
+                                   for seed in range(args.lo, args.hi)]):
             rows.append(r)
             after = "-" if r["after"] is None else f"{r['after']:.1f} s"
             print(f"seed {r['seed']:3d}: {'goal met' if r['goal'] else 'NOT MET'} in {r['sim']:5.1f} s, new leader "

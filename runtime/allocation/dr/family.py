@@ -451,22 +451,34 @@ class DrAgent:
             info = self.world.tasks.get(r.task)
             if info is None or info.task is None or not self.available or not self.localized:
                 return []
+            if self.carrying == r.task:
+                self.carrying = None                        # the load on board is the leader's own now
             self.lead = Leader(self, info, now)
             return self.lead.start(now)
-        if not self._free() or self.offers:
+        if self.offers:
             return []
-        info = self._nearest_leaderless(now)
+        if self._free():
+            info = self._nearest_leaderless(now)
+        elif self.o.carrier_leads and self._carrier_only():
+            info = self._nearest_leaderless(now, only=self.carrying)
+        else:
+            return []
         if info is None:
             return []
         self.request = Request(info.id, now, self.capacity(info))
         self.log.info("asking to lead task %d", info.id)
         return [DrLeaderRequest(self.robot_id, BROADCAST, info.id, self.request.capacity)]
 
-    def _nearest_leaderless(self, now: float) -> TaskInfo | None:
+    def _carrier_only(self) -> bool:
+        """Carrying a load and nothing else (``carrier_leads``: it may ask to lead the task of that load)."""
+        return (self.carrying is not None and self.available and self.localized and self.lead is None
+                and self.membership is None and self.request is None)
+
+    def _nearest_leaderless(self, now: float, only: int | None = None) -> TaskInfo | None:
         window = self.o.time_leadership + self.o.leader_alive_period + self.o.time_auction
         cands = [i for i in self.world.open_tasks()
                  if not i.ledger.done and self.world.leader_of(i, now) is None and not self.world.claimed(i, now)
-                 and now - self.gave_up.get(i.id, -math.inf) > window]
+                 and now - self.gave_up.get(i.id, -math.inf) > window and only in (None, i.id)]
         if not cands:
             return None
         costs = [e.cost for e in self.estimator.estimates([i.task for i in cands])]

@@ -23,6 +23,8 @@ class DrOptions:
     online: bool = False                                         # on-line SVR learning (§4.2.2)
     late: Literal["all", "fastest"] = "all"                      # eq. 8 cannot hold: award every bidder (the
                                                                  # paper) | only those that bring fT forward
+    carrier_leads: bool = False                                  # a robot carrying a load of a leaderless task
+                                                                 # may ask to lead it (ours; §5.5.2: free robots)
     speed_belief: Optional[float] = field(default=None, metadata=rng(0.001, 10))   # m/s in eq. 5; null: cruise
     load_capacity: float = field(default=2.0, metadata=rng(0.0, 1e6, lo_open=True))   # wu per trip
     load_time: float = field(default=0.12, metadata=rng(0.0, 3600))     # s per wu to load, and again to unload

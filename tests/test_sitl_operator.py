@@ -243,8 +243,9 @@ def test_an_operator_mission_is_done_waypoint_by_waypoint_even_when_the_robot_it
 
 @pytest.mark.slow
 def test_a_ground_station_connects_and_the_cruise_speed_it_sets_is_driven(tmp_path):
-    """QGroundControl's and MAVProxy's connection steps against a SITL robot, each answered within 1 s; then a
-    PARAM_SET of CTL_CRUISE_SPD changes how fast that robot drives (its peers keep the configured speed)."""
+    """QGroundControl's and MAVProxy's connection steps against a SITL robot, each answered within 1 s once the
+    robot's HEARTBEAT is heard; then a PARAM_SET of CTL_CRUISE_SPD changes how fast that robot drives (its peers
+    keep the configured speed)."""
     fleet = _Fleet(tmp_path, shipped_fleet(tmp_path, "operator_4.yaml"), speedup=2)
     listen = mavutil.mavlink_connection(f"udpin:{fleet.manifest['ground_station']}", source_system=254,
                                         dialect="common")
@@ -260,7 +261,10 @@ def test_a_ground_station_connects_and_the_cruise_speed_it_sets_is_driven(tmp_pa
         return seen
 
     try:
-        g.heartbeat()
+        for _ in range(30):               # as QGC does: connect once the vehicle's HEARTBEAT is heard (a loaded
+            g.heartbeat()                 # machine may take seconds to boot the fleet), then ask
+            if g.wait(lambda m: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 1, 1.0):
+                break
         seen = ask("AUTOPILOT_VERSION", lambda: g.mav.command_long_send(1, 1, MAV.MAV_CMD_REQUEST_MESSAGE, 0,
                                                                          MAV.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
                                                                          0, 0, 0, 0, 0, 0),

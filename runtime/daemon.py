@@ -226,8 +226,8 @@ class Daemon:
         ex.sync(self.agent.commitments if self.node.armed else (), now)
         ex.make_way = self.node.armed
         pose, sensors = self.pose(), self.base.sensors
-        ex.peers = () if pose is None or self.base.ranging else \
-            peer_readings.readings(pose, self.node.positions, now, ex.ctx.radius)    # no range sensors of its own
+        ex.peers = () if pose is None or self.base.ranging or not ex.idle else \
+            peer_readings.readings(pose, self.node.positions, now, ex.ctx.radius)    # idle, no range sensors
         (v, w), progress = ex.step(pose, sensors, now)
         self.base.set_velocity(v, w, now)
         out = []

@@ -204,6 +204,15 @@ def test_a_knock_the_wheels_do_not_see_is_found_and_heading_found_again(seed, an
     assert ekf.stats.relocalised >= 1
 
 
+def test_the_consistency_gate_is_the_chi_square_quantile():
+    from scipy.stats import chi2
+
+    from runtime.localization.ekf import chi2_quantile
+    for dof in (10, 20, 40, 200):
+        for p in (0.9, 0.99, 0.999, 0.9999):
+            assert chi2_quantile(p, dof) == pytest.approx(chi2.ppf(p, dof), rel=0.012)
+
+
 def test_no_false_relocalisation_on_a_clean_run():
     for seed in range(1, 6):
         assert drive_loop(seed=seed, T=300.0).ekf.stats.relocalised == 0

@@ -66,8 +66,9 @@ class EkfStats:
 
 
 def chi2_quantile(p: float, dof: int) -> float:
-    """Chi-square quantile by Wilson and Hilferty's cube-root normal approximation (within 1 % of the exact value
-    for dof >= 10 at p <= 0.9999: 52.66 against 52.39 for 20 dof), to keep scipy.stats out of the daemon."""
+    """Chi-square quantile by Wilson and Hilferty's cube-root normal approximation (within 1.2 % of the exact
+    value for dof >= 10 at p <= 0.9999; 52.66 against 52.39 for the default 20 dof), to keep scipy.stats out of
+    the daemon."""
     z = NormalDist().inv_cdf(p)
     a = 2.0 / (9.0 * dof)
     return dof * (1.0 - a + z * math.sqrt(a)) ** 3

@@ -5,6 +5,7 @@ fail (weight delivered, table state, one DONE per task).  The property test draw
 this looks for the rare ones, which then become its explicit examples.
 
     PYTHONPATH=. python benchmarks/dr_lossy_sweep.py --from 0 --to 150 [--mult 13 --add 5] [--strategies ...]
+                                                     [--carrier-leads]
 
 Seed k of [from, to) is ``k * mult + add``; its strategy cycles through ``--strategies`` by k.
 """
@@ -28,24 +29,27 @@ def main() -> int:
     ap.add_argument("--mult", type=int, default=13)
     ap.add_argument("--add", type=int, default=5)
     ap.add_argument("--strategies", default="M_NI,NM_NI,M_I,NM_I")
+    ap.add_argument("--carrier-leads", action="store_true", help="DR option carrier_leads on")
     args = ap.parse_args()
     strategies = args.strategies.split(",")
-    bad = runs = 0
+    bad = runs = asked = 0
     for k in range(args.lo, args.hi):
         seed, strategy = k * args.mult + args.add, strategies[k % len(strategies)]
         for auction in ("dr", "sr", "greedy"):
-            f, watch, handed = _lossy(seed, TEN, 12, DrOptions(auction=auction, strategy=strategy))
+            f, watch, handed = _lossy(seed, TEN, 12, DrOptions(auction=auction, strategy=strategy,
+                                                                      carrier_leads=args.carrier_leads))
             runs += 1
             try:
                 check_books(f, handed)
                 books = ""
             except AssertionError as exc:
                 books = f"books: {exc!r}"
+            asked += sum(f.robots[r].agent.carrier_requests for r in f.robots)
             if watch.violations or books:
                 bad += 1
                 print(f"seed {seed} {auction} {strategy}: {watch.violations[:1]} {books}", flush=True)
         print(f"  {k + 1 - args.lo}/{args.hi - args.lo} seeds, {bad} bad", file=sys.stderr, flush=True)
-    print(f"bad {bad} of {runs} runs")
+    print(f"bad {bad} of {runs} runs" + (f"; carriers asked to lead {asked} times" if args.carrier_leads else ""))
     return 1 if bad else 0
 
 

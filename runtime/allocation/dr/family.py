@@ -79,6 +79,7 @@ class DrAgent:
         self.lead: Leader | None = None
         self.membership: Membership | None = None
         self.carrying: int | None = None              # task of the load a carrier delivers
+        self.carrier_requests = 0                      # times it asked to lead as a carrier (``carrier_leads``)
         self.offers = Offers()
         self.outboxes: dict[int, Outbox] = {}
         self.accounts: dict[int, Entry] = {}           # task -> this robot's own entry (kept after the task ends)
@@ -461,6 +462,7 @@ class DrAgent:
             info = self._nearest_leaderless(now)
         elif self.o.carrier_leads and self._carrier_only():
             info = self._nearest_leaderless(now, only=self.carrying)
+            self.carrier_requests += info is not None
         else:
             return []
         if info is None:

@@ -257,6 +257,8 @@ class Daemon:
             "base": vars(self.base.stats) if hasattr(self.base, "stats") else {},
             "link": self.link.counters.as_dict() if hasattr(self.link, "counters") else {},
             "gps_rejected": getattr(self.ekf, "gps_rejected", 0),
+            "relocalised": self.ekf.stats.relocalised,     # the pose filter gave up its position and heading
+            "made_way": self.executive.made_way,           # idle cycles spent moving off for another robot
             "plan_fallbacks": p.plan_fallbacks, "plan_failures": p.plan_failures, "bid_fallbacks": p.bid_fallbacks,
             "table": len(self.node.table.entries),
             "fleet_dropped": dict(self.node.dropped),

@@ -20,8 +20,8 @@ def _run(tmp_path, name: str, seed: int, **changes):
     f = launcher.build(shipped_fleet(tmp_path, name, seed=seed, **changes), tmp_path / "run")
     try:
         res = launcher.run_lockstep(f)
-        daemons = {rid: r.daemon for rid, r in f.robots.items()}
-        return res, {rid: (d.ekf.stats.relocalised, d.executive.made_way) for rid, d in daemons.items()}
+        snaps = {rid: r.daemon.snapshot() for rid, r in f.robots.items()}        # what --stats files show
+        return res, {rid: (s["relocalised"], s["made_way"]) for rid, s in snaps.items()}
     finally:
         f.close()
 

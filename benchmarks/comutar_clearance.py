@@ -31,8 +31,7 @@ def one(job: tuple[int, dict, float]) -> dict:
 
     import yaml
 
-    from sitl import launcher
-    from tests.sitl_util import worker_fleet
+    from tests.sitl_util import lockstep_run, robot_template, worker_fleet
 
     seed, options, loss = job
     logging.disable(logging.WARNING)
@@ -42,16 +41,10 @@ def one(job: tuple[int, dict, float]) -> dict:
             fleet = yaml.safe_load(path.read_text())
             borrower = fleet["scenario"]["borrower"]
             entry = next(r for r in fleet["robots"] if r["id"] == borrower)
-            robot = yaml.safe_load(Path(entry.get("robot") or fleet["robot"]).read_text())
-            robot["allocation"].update(options)
-            entry["robot"] = str(Path(tmp) / "borrower.yaml")
-            Path(entry["robot"]).write_text(yaml.safe_dump(robot, sort_keys=False))
+            entry["robot"] = str(robot_template(Path(tmp), Path(entry.get("robot") or fleet["robot"]),
+                                                "borrower.yaml", **options))
             path.write_text(yaml.safe_dump(fleet, sort_keys=False))
-        f = launcher.build(path, Path(tmp) / "run")
-        try:
-            res = launcher.run_lockstep(f)
-        finally:
-            f.close()
+        res, _ = lockstep_run(path, Path(tmp) / "run")
     return {"seed": seed, "least": res["least_clearance"], "at": res["least_clearance_at"],
             "goal": res["goal_met"], "verdict": res["verdict"], "sim_time": res["sim_time"]}
 

@@ -26,38 +26,25 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
-def carrier_template(tmp: Path) -> Path:
-    """foraging_4's robot template with the DR option ``carrier_leads`` on (its paths made absolute)."""
-    import yaml
-
-    src = ROOT / "configs" / "robots" / "pioneer3dx_forage.yaml"
-    data = yaml.safe_load(src.read_text())
-    alloc = data["allocation"]
-    alloc["model"] = str((src.parent / alloc["model"]).resolve())
-    alloc["carrier_leads"] = True
-    out = tmp / "pioneer3dx_forage_carrier_leads.yaml"
-    out.write_text(yaml.safe_dump(data, sort_keys=False))
-    return out
-
-
 def one(job: tuple[int, float, float, bool]) -> dict:
-    from sitl import launcher
     from tests.dr_util import DaemonsWatch
-    from tests.sitl_util import worker_fleet
+    from tests.sitl_util import lockstep_run, robot_template, worker_fleet
 
     seed, loss, burst, carrier_leads = job
     logging.disable(logging.WARNING)
+
+    def read(f) -> tuple[int, int]:
+        links = [r.daemon.link.counters for r in f.robots.values()]
+        return sum(c.loss_injected for c in links), sum(c.peer_sent for c in links)
+
     with tempfile.TemporaryDirectory(prefix="dr-sitl-loss-") as tmp:
-        changes = {"robot": str(carrier_template(Path(tmp)))} if carrier_leads else {}
-        f = launcher.build(worker_fleet(Path(tmp), "foraging_4.yaml", seed, peer_loss=loss, loss_burst=burst,
-                                        **changes), Path(tmp) / "run")
+        changes = {}
+        if carrier_leads:                # foraging_4's robot template with the DR option on
+            changes["robot"] = str(robot_template(Path(tmp), ROOT / "configs" / "robots" / "pioneer3dx_forage.yaml",
+                                                  "carrier_leads.yaml", carrier_leads=True))
         watch = DaemonsWatch()
-        try:
-            res = launcher.run_lockstep(f, on_step=watch)
-            links = [r.daemon.link.counters for r in f.robots.values()]
-            lost, sent = sum(c.loss_injected for c in links), sum(c.peer_sent for c in links)
-        finally:
-            f.close()
+        res, (lost, sent) = lockstep_run(worker_fleet(Path(tmp), "foraging_4.yaml", seed, peer_loss=loss,
+                                                      loss_burst=burst, **changes), Path(tmp) / "run", read, watch)
     kill = res.get("kill") or {}
     return {"seed": seed, "goal": res["goal_met"], "verdict": res["verdict"], "sim": res["sim_time"],
             "after": kill.get("after"), "lost": lost / max(lost + sent, 1), "dual": watch.longest_dual,

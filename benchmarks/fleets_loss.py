@@ -29,21 +29,18 @@ FLEETS = ("create2_4", "create2_4_boxes", "create2_10", "pioneer_4", "mixed_4", 
 
 
 def one(job: tuple[str, int, float, float]) -> dict:
-    from sitl import launcher
-    from tests.sitl_util import worker_fleet
+    from tests.sitl_util import lockstep_run, worker_fleet
 
     name, seed, loss, burst = job
     logging.disable(logging.WARNING)
+
+    def read(f) -> tuple[int, int]:
+        daemons = [r.daemon for r in f.robots.values() if r.daemon is not None]
+        return sum(d.ekf.stats.relocalised for d in daemons), sum(d.executive.made_way for d in daemons)
+
     with tempfile.TemporaryDirectory(prefix="fleets-loss-") as tmp:
-        f = launcher.build(worker_fleet(Path(tmp), f"{name}.yaml", seed, peer_loss=loss, loss_burst=burst),
-                           Path(tmp) / "run")
-        try:
-            res = launcher.run_lockstep(f)
-            daemons = [r.daemon for r in f.robots.values() if r.daemon is not None]
-            reloc = sum(d.ekf.stats.relocalised for d in daemons)
-            made_way = sum(d.executive.made_way for d in daemons)
-        finally:
-            f.close()
+        res, (reloc, made_way) = lockstep_run(worker_fleet(Path(tmp), f"{name}.yaml", seed, peer_loss=loss,
+                                                           loss_burst=burst), Path(tmp) / "run", read)
     gap = None                          # a formation's global cost above the Hungarian optimum, %
     if res.get("optimum") and math.isfinite(res.get("global_cost", math.nan)):
         gap = 100.0 * (res["global_cost"] - res["optimum"]) / res["optimum"]

@@ -42,6 +42,32 @@ def worker_fleet(tmp_path: Path, name: str, seed: int, **changes) -> Path:
                          **changes)
 
 
+def robot_template(tmp_path: Path, src: Path, name: str, **allocation) -> Path:
+    """A copy of the robot template ``src`` with ``allocation`` options set, its relative paths anchored as the
+    launcher anchors them, written to ``tmp_path/name``."""
+    from sitl.launcher import _anchor_paths
+
+    data = yaml.safe_load(Path(src).read_text())
+    _anchor_paths(data, Path(src).parent)
+    data.setdefault("allocation", {}).update(allocation)
+    out = tmp_path / name
+    out.write_text(yaml.safe_dump(data, sort_keys=False))
+    return out
+
+
+def lockstep_run(fleet_path: Path, run_dir: Path, read=lambda f: None, on_step=None):
+    """Build the fleet at ``fleet_path``, run it in lock-step to its end (goal, timeout, ...), and return (the
+    run's result, ``read(fleet)`` taken before the daemons close)."""
+    from sitl import launcher
+
+    f = launcher.build(fleet_path, run_dir)
+    try:
+        res = launcher.run_lockstep(f, on_step=on_step)
+        return res, read(f)
+    finally:
+        f.close()
+
+
 class StockGcs:
     """pymavlink's own connection to one robot's MAVLink port (udpout, as MAVProxy's --master=udpout does):
     requests go out from its socket and the robot answers to where they came from."""

@@ -12,18 +12,15 @@ from __future__ import annotations
 
 import pytest
 
-from sitl import launcher
-from tests.sitl_util import shipped_fleet
+from tests.sitl_util import lockstep_run, shipped_fleet
 
 
 def _run(tmp_path, name: str, seed: int, **changes):
-    f = launcher.build(shipped_fleet(tmp_path, name, seed=seed, **changes), tmp_path / "run")
-    try:
-        res = launcher.run_lockstep(f)
-        snaps = {rid: r.daemon.snapshot() for rid, r in f.robots.items()}        # what --stats files show
-        return res, {rid: (s["relocalised"], s["made_way"]) for rid, s in snaps.items()}
-    finally:
-        f.close()
+    def read(f):                                             # what --stats files show, per robot
+        snaps = {rid: r.daemon.snapshot() for rid, r in f.robots.items()}
+        return {rid: (s["relocalised"], s["made_way"]) for rid, s in snaps.items()}
+
+    return lockstep_run(shipped_fleet(tmp_path, name, seed=seed, **changes), tmp_path / "run", read)
 
 
 @pytest.mark.slow

@@ -3,12 +3,12 @@ take to settle a 10-robot ring formation on a lossy link: the in-memory bus with
 (runtime/fleet/simulate.py), ten robots in a line, ten station-keeping positions on a 2.5 m ring handed to robot 1,
 ``--drops`` of the messages lost (5 ms of jitter), one run per seed (tests/test_formation_fleet.py ``settle``).  A
 run settles when every robot holds one task, every task is held, and every robot's rounds have converged; it then
-runs 300 s more and must still hold a valid formation.
+runs 300 s more, and the time in it when some task was held by two robots or by none is counted.
 
     PYTHONPATH=. python benchmarks/formation_loss.py [--methods auction,bs,rtma] [--drops 0,0.1] [--seeds 1-12]
 
 Prints per method and loss: how many runs settled within ``--limit`` s (600), the median and largest time to
-settle, and the runs that lost a settled formation.
+settle, and the runs whose settled formation broke afterwards, with for how long.
 """
 from __future__ import annotations
 
@@ -46,10 +46,11 @@ def main() -> int:
         for drop in drops:
             runs = [settle(method, drop, seed, args.limit) for seed in range(lo, hi + 1)]
             took = [t for t, _ in runs if math.isfinite(t)]
-            lost = [seed for seed, (t, kept) in zip(range(lo, hi + 1), runs) if math.isfinite(t) and not kept]
+            broken = {seed: b for seed, (t, b) in zip(range(lo, hi + 1), runs) if math.isfinite(t) and b > 0}
             spread = f"median {statistics.median(took):.1f} s, largest {max(took):.1f} s" if took else "-"
+            where = ", ".join(f"seed {k}: {b:.1f} s" for k, b in broken.items()) or "none"
             print(f"{method:8s} {100 * drop:4.0f} % loss: {len(took)}/{len(runs)} settled within {args.limit:g} s "
-                  f"({spread}); lost a settled formation: {lost or 'none'}", flush=True)
+                  f"({spread}); broken in the 300 s after: {where}", flush=True)
     return 0
 
 

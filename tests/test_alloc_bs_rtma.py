@@ -408,3 +408,74 @@ def test_what_the_codec_lets_through_never_raises_and_what_an_agent_ignores_is_c
         if not hasattr(m, "sender") or isinstance(m, Price):
             assert sum(a.dropped.values()) == before + 1
     assert len([t for t in a.won if t not in a.selling]) <= 1
+
+
+# ------------------------------------------------------------------ a peer declared lost that is not
+def awarded(a: BSAgent, to: int) -> int:
+    """Robot 1 auctions task 0 among 2, 3, 4 and awards it to ``to``, which acknowledges; the auction id."""
+    a.start({0: (0.0, 0.0)}, 0.0)
+    for rid in (2, 3, 4):
+        a.on_message(Bid(rid, 1, 1, 0, 1.0 if rid == to else 8.0), 0.01)
+    a.on_message(Status(to, 1, 1, 0, False), 0.02)
+    assert a.awarded_to == {0: to} and not a.auctions
+    return 1
+
+
+def test_a_holder_declared_lost_that_answers_within_the_bid_timeout_keeps_its_task():
+    """A lossy link makes a live peer look lost now and then.  The others' bids come at once; the holder's "I hold
+    it" a little later: the re-auction waits its bid timeout for it and is cancelled, nobody else gets the task."""
+    a = BSAgent(1, [2, 3, 4], [5.0].__getitem__, bid_timeout=1.0)
+    awarded(a, 2)
+    out = a.on_peer_lost(2, 10.0)
+    (ann,) = [m for m in out if isinstance(m, Announce)]
+    assert ann.task == 0 and ann.reserve == math.inf
+    out = a.on_message(Bid(3, 1, ann.auction, 0, 2.0), 10.01) + a.on_message(Bid(4, 1, ann.auction, 0, 3.0), 10.01)
+    assert not [m for m in out if isinstance(m, Award)]            # not closed on the others' bids alone
+    a.on_message(Status(2, 1, ann.auction, 0, False), 10.3)      # the holder, late
+    assert not a.auctions and a.awarded_to == {0: 2}
+    assert not [m for m in a.on_tick(12.0) if isinstance(m, Award)]
+
+
+def test_a_lost_holder_is_asked_again_and_then_its_task_goes_to_the_best_bid():
+    a = BSAgent(1, [2, 3, 4], [5.0].__getitem__, bid_timeout=1.0)
+    awarded(a, 2)
+    ann = [m for m in a.on_peer_lost(2, 10.0) if isinstance(m, Announce)][0]
+    a.on_message(Bid(3, 1, ann.auction, 0, 2.0), 10.01)
+    a.on_message(Bid(4, 1, ann.auction, 0, 3.0), 10.01)
+    asked = []
+    for k in range(1, 3):
+        asked += a.on_tick(10.0 + k)
+    assert [m.dest for m in asked if isinstance(m, Announce)] == [2, 2]     # only the silent holder, twice
+    awards = [m for m in a.on_tick(13.0) if isinstance(m, Award)]
+    assert [(m.task, m.winner) for m in awards] == [(0, 3)]
+
+
+def test_a_task_resold_back_to_me_is_not_reauctioned_when_its_first_winner_is_lost():
+    a = BSAgent(1, [2, 3], [5.0, 1.0].__getitem__, bid_timeout=1.0)
+    a.start({0: (0.0, 0.0)}, 0.0)
+    a.on_message(Bid(2, 1, 1, 0, 1.0), 0.01)
+    a.on_message(Bid(3, 1, 1, 0, 8.0), 0.01)
+    a.on_message(Status(2, 1, 1, 0, False), 0.02)                 # robot 2 holds task 0 ...
+    a.on_message(Announce(2, 0, 1, 0, 0.0, 0.0, 0.5), 1.0)        # ... and resells it
+    a.on_message(Award(2, 1, 1, 0, 1, 5.0, 5.0), 1.1)             # to me
+    assert a.assignment == 0 and 0 not in a.awarded_to
+    assert a.on_peer_lost(2, 5.0) == [] and not a.auctions
+
+
+def test_a_task_a_live_robot_says_it_holds_is_not_reauctioned_when_a_former_holder_is_lost():
+    """My award record says robot 2; robot 3 has said (its fleet state) that it holds the task since: robot 2
+    resold it in an auction of its own.  Robot 2's loss leaves the task alone, as does a re-auction's close."""
+    holds = set()
+    a = BSAgent(1, [2, 3, 4], [5.0].__getitem__, bid_timeout=1.0, held_elsewhere=holds.__contains__)
+    awarded(a, 2)
+    holds.add(0)
+    assert a.on_peer_lost(2, 10.0) == [] and not a.auctions
+    b = BSAgent(1, [2, 3, 4], [5.0].__getitem__, bid_timeout=1.0, held_elsewhere=holds.__contains__)
+    holds.clear()
+    awarded(b, 2)
+    ann = [m for m in b.on_peer_lost(2, 10.0) if isinstance(m, Announce)][0]
+    b.on_message(Bid(3, 1, ann.auction, 0, 2.0), 10.01)
+    b.on_message(Bid(4, 1, ann.auction, 0, 3.0), 10.01)
+    holds.add(0)                                                  # robot 2 says so, in another round
+    out = [m for k in range(1, 4) for m in b.on_tick(10.0 + k)]
+    assert not [m for m in out if isinstance(m, Award)] and not b.auctions

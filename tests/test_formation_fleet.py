@@ -116,10 +116,11 @@ TEN = {k + 1: (-3.6 + 0.8 * k, -3.5) for k in range(10)}
 RING = [(2.5 * math.cos(2 * math.pi * k / 10), 2.5 * math.sin(2 * math.pi * k / 10)) for k in range(10)]
 
 
-def settle(method: str, drop: float, seed: int, limit: float = 600.0, hold: float = 300.0) -> tuple[float, bool]:
+def settle(method: str, drop: float, seed: int, limit: float = 600.0, hold: float = 300.0) -> tuple[float, float]:
     """Ten robots in a line, a ring of ten station-keeping positions handed to robot 1, ``drop`` of the messages
     lost: (s from the hand-in until every robot holds one task, every task is held and every round has converged,
-    inf if not within ``limit``; whether the formation still holds ``hold`` s later)."""
+    inf if not within ``limit``; s of the ``hold`` s after that in which the formation was broken: some task
+    held by two robots or by none)."""
     f = SimFleet(TEN, method=method, drop=drop, jitter=0.005, seed=seed)
     f.run(0.5)
     ids = sorted(f.hand_in(1, [Goto(x, y, hold=None) for x, y in RING]))
@@ -133,10 +134,17 @@ def settle(method: str, drop: float, seed: int, limit: float = 600.0, hold: floa
 
     f.run(t0 + limit, stop=settled)
     if not settled(f):
-        return math.inf, False
+        return math.inf, math.inf
     took = f.now - t0
-    f.run(f.now + hold)
-    return took, formation(f)
+    broken = [0.0, f.now]
+
+    def watch(fl) -> None:
+        if not formation(fl):
+            broken[0] += fl.now - broken[1]
+        broken[1] = fl.now
+
+    f.run(f.now + hold, observe=watch)
+    return took, broken[0]
 
 
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -145,8 +153,9 @@ def settle(method: str, drop: float, seed: int, limit: float = 600.0, hold: floa
 @example("auction", 1, 0.1)      # ... and robot 8 waited for its rung at the epsilon barrier for ever
 @example("bs", 2, 0.1)           # three robots each alone in a round of two tasks, each left "silent" and restarted
 def test_ten_robots_settle_a_ring_formation_and_keep_it(method, seed, drop):
-    took, kept = settle(method, drop, seed)
-    assert math.isfinite(took) and kept, (took, kept)
+    """Kept at every step: a peer that a lossy link makes look lost for a moment does not lose its task."""
+    took, broken = settle(method, drop, seed)
+    assert math.isfinite(took) and broken == 0.0, (took, broken)
 
 
 def test_a_robot_asked_about_a_round_it_is_not_in_says_so_at_most_once_a_bid_timeout():

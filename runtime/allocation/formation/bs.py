@@ -56,6 +56,7 @@ from runtime.allocation.formation.messages import (BROADCAST, Announce, Award, B
 from runtime.log import get_logger
 
 INF = math.inf
+LOST_PROBES = 3         # bid timeouts a lost holder's task waits for the holder to say it still holds it
 
 
 @dataclass
@@ -69,6 +70,7 @@ class _Auction:
     tries: int = 0
     rearms: int = 0                       # times it closed with no bid it could take and was re-armed
     award: Award | None = None            # sent, waiting for the winner's Status
+    lost_holder: int | None = None        # re-auctioning the task of this lost peer: asked too, LOST_PROBES times
 
 
 class BSAgent:
@@ -78,8 +80,9 @@ class BSAgent:
 
     def __init__(self, robot_id: int, peers: Sequence[int], cost: Callable[[int], float], *,
                  bid_timeout: float = 1.0, quiet: float | None = None, max_retries: int = 10,
-                 resell_to_worse: bool = True):
+                 resell_to_worse: bool = True, held_elsewhere: Callable[[int], bool] | None = None):
         self.robot_id = int(robot_id)
+        self.held_elsewhere = held_elsewhere        # task -> a live robot says it holds it (outside this protocol)
         self.peers = sorted({int(p) for p in peers} - {self.robot_id})
         self.alive = set(self.peers)
         self.bid_timeout = float(bid_timeout)
@@ -165,6 +168,8 @@ class BSAgent:
             if now < a.deadline:
                 continue
             if a.award is None:
+                if a.lost_holder is not None and a.tries + 1 >= LOST_PROBES:
+                    a.expected.discard(a.lost_holder)            # not heard: lost indeed
                 missing = a.expected - set(a.bids)
                 if missing and a.tries < self.max_retries:
                     a.tries += 1
@@ -200,21 +205,33 @@ class BSAgent:
             if a.award is not None and a.award.winner == robot_id:
                 a.award = None
                 out += self._close(a, now)
-            elif a.award is None and not (a.expected - set(a.bids)):
+            elif a.award is None and not (a.expected - set(a.bids)) and a.lost_holder is None:
                 out += self._close(a, now)
         for task, winner in list(self.awarded_to.items()):
             if winner == robot_id:
                 del self.awarded_to[task]
+                if task in self.won:               # it came back to me by resales since: nothing to re-auction
+                    continue
+                if self.held_elsewhere is not None and self.held_elsewhere(task):
+                    self.log.info("robot %d lost; task %d I once awarded it is held by a live robot", robot_id, task)
+                    continue
                 self.log.info("robot %d lost holding task %d: re-auctioning it", robot_id, task)
-                out += self._open(task, INF, now)
+                out += self._open(task, INF, now, lost_holder=robot_id)
         return self._out(out)
 
     # ------------------------------------------------------------------ auctioneer side
-    def _open(self, task: int, reserve: float, now: float) -> list:
+    def _open(self, task: int, reserve: float, now: float, lost_holder: int | None = None) -> list:
+        """Auction ``task``.  ``lost_holder``: the peer that was lost holding it.  A peer is declared lost after a
+        silence, which a lossy link makes now and then for a live one; were the auction to close on the other
+        bids alone, which come at once, the holder's "I hold it" would come too late and the task would be held
+        twice.  So the auction runs its whole bid timeout, where a robot holding the task (the lost one, or one it
+        was resold to) has time to say so and cancel it, and the lost one is asked again each bid timeout, for
+        ``LOST_PROBES`` of them; at its close, a task a live robot is known to hold by then is not awarded."""
         self._touch(now)
         aid = self._next_auction
         self._next_auction += 1
-        a = _Auction(aid, task, reserve, set(self.alive), now + self.bid_timeout)
+        a = _Auction(aid, task, reserve, set(self.alive) | ({lost_holder} if lost_holder is not None else set()),
+                     now + self.bid_timeout, lost_holder=lost_holder)
         if reserve == INF:
             mine = self.my_bid(task)
             if mine is not None:
@@ -241,6 +258,10 @@ class BSAgent:
 
     def _close(self, a: _Auction, now: float) -> list:
         self._touch(now)
+        if a.lost_holder is not None and self.held_elsewhere is not None and self.held_elsewhere(a.task):
+            self.log.info("task %d is held by a live robot after all: cancelling auction %d", a.task, a.id)
+            del self.auctions[a.id]
+            return []
         cands = self._candidates(a)
         if not cands:
             if a.reserve == -INF and a.rearms >= self.max_retries and not (a.expected - set(a.bids)):
@@ -298,7 +319,7 @@ class BSAgent:
         self._touch(now)
         a.bids[m.sender] = float(m.cost)
         a.expected.add(m.sender)
-        if not (a.expected - set(a.bids)):
+        if not (a.expected - set(a.bids)) and a.lost_holder is None:
             return self._close(a, now)
         return []
 
@@ -367,6 +388,7 @@ class BSAgent:
         self._touch(now)
         if task in self.won:
             return []
+        self.awarded_to.pop(task, None)            # awarded away once, back to me by resales
         self.won[task] = bid
         self.means[task] = mean
         out = []

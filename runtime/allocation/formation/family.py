@@ -17,7 +17,10 @@ get lost and are disarmed.  :class:`FormationAgent` runs the solver in **rounds*
   is done or withdrawn it drops the solver and is free again.  A robot the round left without a task
   drops out once the round has been quiet for ``linger`` seconds.
 * Robots tell each other what they hold (``RobotState``, every second and on each change).  Tasks a
-  live robot holds are not offered again; a lost robot's tasks are.  If two robots end up holding the
+  live robot holds are not offered again; a lost robot's tasks are.  A lossy link makes a live robot look
+  lost now and then; BS and RTMA re-auction its task then, and are told what the live robots hold by their
+  states, so a task resold since, or held by its robot in another round, is not re-auctioned (see
+  :meth:`~runtime.allocation.formation.bs.BSAgent._open` for the robot that is not lost after all).  If two robots end up holding the
   same task (rounds that overlapped), the lower id keeps it and the other lets it go.
 * A robot asked something in a round it is not in (a message addressed to it, a ``Status`` or an ``Announce``)
   answers ``RoundLeave`` for it, at most once a bid timeout: the asker counts it as one of the round's live robots
@@ -36,7 +39,8 @@ index beyond the round's task list (the epsilon auction's "no task" slots except
 that is not in the round, a task set (``TaskInfo``, ``Announce``) that contradicts the round's tasks in the
 fleet table (size or position), a ``RoundStart`` whose round id is not its sender's or that names robots
 outside the fleet.  A round that stays unconverged with nothing heard from its peers for ``SILENT_ROUNDS``
-bid timeouts (a forged ``RoundStart``, or an initiator that died at once) is left; a round of one robot, which has
+bid timeouts (a forged ``RoundStart``, or an initiator that died at once) is left, the silence counted from when
+it last went from converged to not (a settled round is quiet: there is nothing to say); a round of one robot, which has
 no peers to hear, is not (its solver ends it: left that way, BS went round in circles).  Values within all of
 these from a sender whose id is forged cannot be told from genuine ones without signing (the fleet's default):
 a forged ``Price`` from a round member at a plausible price, an ``Award`` at the winner's own bid.  For two
@@ -75,6 +79,7 @@ class Round:
     solver: object | None = None       # None: I only know of it
     last_heard: float = 0.0            # last message of this round in or out
     last_in: float = 0.0               # last message of this round from a peer (or when I joined it)
+    busy_since: float | None = None    # when its solver last went from converged to not (None: converged)
 
 
 @dataclass
@@ -93,13 +98,14 @@ class _Backoff:
 class FormationAgent:
     """One robot's formation-family agent (see the module docstring)."""
 
-    def __init__(self, ctx: AgentContext, solver: type, solver_options: dict):
+    def __init__(self, ctx: AgentContext, solver: type, solver_options: dict, holders: bool = False):
         self.robot_id = int(ctx.robot_id)
         self.peers = tuple(sorted(set(ctx.peers) - {self.robot_id}))
         self.estimator = ctx.estimator
         self.options = ctx.options
         self.solver_cls = solver
         self.solver_options = solver_options
+        self.holders = holders                        # the solver takes held_elsewhere (who holds what, by state)
         self.tasks: dict[int, Task] = {}              # open fleet tasks I know of
         self.lost: set[int] = set()
         self.view: dict[int, PeerView] = {p: PeerView() for p in self.peers}
@@ -316,8 +322,13 @@ class FormationAgent:
         def cost(local: int) -> float:          # one estimate batch for the round's tasks (cached by the estimator)
             return self.estimator.estimates(tasks)[local].cost
 
+        def held_elsewhere(local: int) -> bool:  # a live peer's last state names it, or another round gives it me
+            task = r.tasks[local]
+            return task == self._assigned() or any(task in v.tasks for p, v in self.view.items() if p not in self.lost)
+
         peers = [p for p in r.robots if p != self.robot_id]
-        return self.solver_cls(self.robot_id, peers, cost, **self.solver_options)
+        extra = {"held_elsewhere": held_elsewhere} if self.holders else {}
+        return self.solver_cls(self.robot_id, peers, cost, **self.solver_options, **extra)
 
     def _candidates(self) -> tuple[list[int], list[int]]:
         """(open tasks no live robot holds, free robots I know of with me first), lowest ids first."""
@@ -383,10 +394,14 @@ class FormationAgent:
                 out += self._leave(r, now, tell=False)          # done or withdrawn: I am free
             elif task is None and r.solver.converged and now - r.last_heard >= self.options.linger:
                 out += self._leave(r, now, tell=False)          # the round left me without a task
-            elif (not r.solver.converged and len(r.robots) > 1
-                  and now - r.last_in >= SILENT_ROUNDS * self.options.bid_timeout):   # alone, there is none to hear
+            elif r.solver.converged:
+                r.busy_since = None
+            elif r.busy_since is None:
+                r.busy_since = now          # a settled round is quiet: its silence counts from here
+            elif (len(r.robots) > 1            # alone, there is none to hear
+                  and now - max(r.last_in, r.busy_since) >= SILENT_ROUNDS * self.options.bid_timeout):
                 self.log.warning("round %s: nothing heard for %.1f s and not converged: leaving it", _rid(r.id),
-                                 now - r.last_in)
+                                 now - max(r.last_in, r.busy_since))
                 self.dropped["silent round left"] += 1
                 out += self._leave(r, now, tell=True)
         held = self._assigned()
@@ -404,11 +419,11 @@ def _rid(round_id: int) -> str:
     return f"{round_id >> 16}.{round_id & 0xFFFF}"
 
 
-def _make(solver: type, extra: tuple[str, ...]):
+def _make(solver: type, extra: tuple[str, ...], holders: bool = False):
     def make(ctx: AgentContext) -> FormationAgent:
         o = ctx.options
         opts = {"bid_timeout": o.bid_timeout, **{k: getattr(o, k) for k in extra}}
-        return FormationAgent(ctx, solver, opts)
+        return FormationAgent(ctx, solver, opts, holders)
     return make
 
 
@@ -416,8 +431,8 @@ _XML = str(__import__("pathlib").Path(__file__).with_name("formation.xml"))
 _MSGS = AGENT_MESSAGES + ROUND_MESSAGES
 
 BS = Method("bs", "paper 002 basic market algorithm: auction, resell the dearer of two tasks", BSOptions,
-            _make(BSAgent, ("max_retries",)), ("goto",), _MSGS, _XML, BSAgent)
+            _make(BSAgent, ("max_retries",), holders=True), ("goto",), _MSGS, _XML, BSAgent)
 RTMA = Method("rtma", "paper 002 RTMA: BS with bids relative to each robot's mean cost", RTMAOptions,
-              _make(RTMAAgent, ("max_retries",)), ("goto",), _MSGS, _XML, RTMAAgent)
+              _make(RTMAAgent, ("max_retries",), holders=True), ("goto",), _MSGS, _XML, RTMAAgent)
 AUCTION = Method("auction", "epsilon-scaling auction (Bertsekas): optimal assignment, the default", AuctionOptions,
                  _make(EpsAuctionAgent, ("cost_unit", "theta")), ("goto",), _MSGS, _XML, EpsAuctionAgent)

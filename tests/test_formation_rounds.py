@@ -1,0 +1,60 @@
+"""The formation family's round rules (runtime/allocation/formation/family.py), agents driven by hand."""
+from __future__ import annotations
+
+from runtime.allocation import registry
+from runtime.allocation.agent import AgentContext
+from runtime.allocation.formation.messages import RoundLeave, RoundStart
+from runtime.fleet.simulate import StraightLineEstimator
+from runtime.tasks import Profile, Task
+from runtime.tasks.goto import Goto
+
+T1, T2 = Task(65537, "goto", Goto(1.0, 0.0)), Task(65538, "goto", Goto(0.0, 1.0))
+ROUND = 1 << 16 | 1                                  # robot 1's first round
+
+
+def agent(method: str = "bs", rid: int = 2, peers=(1, 2, 3), at=(0.0, 0.0)):
+    m = registry.method(method)
+    est = StraightLineEstimator(Profile(0.25, 0.17), lambda: at)
+    return m.make(AgentContext(rid, peers, est, m.options()))
+
+
+def exchange(agents: dict, out: list, now: float) -> None:
+    """Deliver ``out`` and everything it causes, at once."""
+    while out:
+        msg = out.pop(0)
+        for rid, a in agents.items():
+            if rid != msg.sender and msg.dest in (0, rid):
+                out += a.on_message(msg, now)
+
+
+def sent(out, kind):
+    return [m for m in out if isinstance(m, kind)]
+
+
+def test_a_busy_robot_leaves_an_invitation_at_once():
+    a = agent()
+    a.set_available(False, 0.0)
+    a.add_tasks([T1, T2], 0.0)
+    assert a.on_message(RoundStart(1, 0, ROUND, (T1.id, T2.id), (1, 2)), 0.0) == [RoundLeave(2, 0, ROUND)]
+
+
+def test_a_settled_round_that_reopens_after_a_long_quiet_is_not_left_as_silent():
+    """Two robots settle a round of two tasks, then nothing is said in it for minutes (nothing to say).  Robot 1
+    declares robot 2 lost (its state went missing) and re-auctions robot 2's task: the round is open again, and
+    its silence counts from there, not from the last message of the negotiation."""
+    agents = {1: agent(rid=1, peers=(1, 2), at=(0.9, 0.0)), 2: agent(rid=2, peers=(1, 2), at=(0.0, 0.9))}
+    for a in agents.values():
+        a.add_tasks([T1, T2], 0.0)
+    t = 0.0
+    while t < 10.0:
+        for a in agents.values():
+            exchange(agents, a.on_tick(t), t)
+        t = round(t + 0.05, 2)
+    assert all(a.converged and a.commitments for a in agents.values())
+    one = agents[1]
+    (rid,) = one.rounds
+    assert one.on_peer_lost(2, 300.0)                    # the re-auction of robot 2's task
+    assert one.allocating and one.rounds[rid].busy_since == 300.0
+    one.on_tick(300.05)
+    assert rid in one.rounds and one.commitments
+    assert not one.dropped["silent round left"]

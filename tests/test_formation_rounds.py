@@ -1,9 +1,15 @@
-"""The formation family's round rules (runtime/allocation/formation/family.py), agents driven by hand."""
+"""The formation family's round rules (runtime/allocation/formation/family.py), agents driven by hand: an
+invitation naming a task my table lacks yet, and the silence rule of a round that was settled."""
 from __future__ import annotations
+
+import dataclasses
+import math
+
+import pytest
 
 from runtime.allocation import registry
 from runtime.allocation.agent import AgentContext
-from runtime.allocation.formation.messages import RoundLeave, RoundStart
+from runtime.allocation.formation.messages import Announce, RoundLeave, RoundStart
 from runtime.fleet.simulate import StraightLineEstimator
 from runtime.tasks import Profile, Task
 from runtime.tasks.goto import Goto
@@ -29,6 +35,31 @@ def exchange(agents: dict, out: list, now: float) -> None:
 
 def sent(out, kind):
     return [m for m in out if isinstance(m, kind)]
+
+
+@pytest.mark.parametrize("method", ["bs", "rtma", "auction"])
+def test_invited_to_a_round_naming_a_task_my_table_lacks_i_wait_for_it_and_join(method):
+    a = agent(method)
+    a.add_tasks([T1], 0.0)
+    assert a.on_message(RoundStart(1, 0, ROUND, (T1.id, T2.id), (1, 2)), 0.0) == []     # no RoundLeave
+    out = [m for t in (0.1, 0.2, 0.3) for m in a.on_tick(t)]
+    assert not sent(out, RoundStart) and not sent(out, RoundLeave)                         # no round of my own
+    ask = dataclasses.replace(Announce(1, 0, 1, 0, 1.0, 0.0, math.inf), round=ROUND)
+    assert a.on_message(ask, 0.35) == []                    # asked before I am in: quiet, its solver asks again
+    a.add_tasks([T2], 0.4)                                                                  # the digest caught up
+    a.on_tick(0.45)
+    assert ROUND in a.rounds and not sent(a.on_tick(0.5), RoundLeave)
+
+
+def test_an_invitation_whose_task_never_comes_is_left_after_a_bid_timeout():
+    a = agent()
+    a.add_tasks([T1], 0.0)
+    a.on_message(RoundStart(1, 0, ROUND, (T1.id, T2.id), (1, 2)), 0.0)
+    assert not sent(a.on_tick(0.9), RoundLeave)
+    assert sent(a.on_tick(1.0), RoundLeave) == [RoundLeave(2, 0, ROUND)]
+    assert ROUND not in a.rounds
+    out = [m for t in (1.1, 3.5) for m in a.on_tick(t)]                     # free again: may start its own
+    assert [m.tasks for m in sent(out, RoundStart)] == [(T1.id,)]
 
 
 def test_a_busy_robot_leaves_an_invitation_at_once():
@@ -58,3 +89,19 @@ def test_a_settled_round_that_reopens_after_a_long_quiet_is_not_left_as_silent()
     one.on_tick(300.05)
     assert rid in one.rounds and one.commitments
     assert not one.dropped["silent round left"]
+
+
+def test_a_question_that_overtakes_its_round_start_is_not_answered_with_a_leave():
+    """A round's first Announces go out with its RoundStart and may arrive first: answering "not in it" then would
+    have the starter count me out of a round I am about to join.  Asked again (a bid timeout later) about a round
+    whose start never came, I say I am not in it."""
+    a = agent()
+    a.add_tasks([T1, T2], 0.0)
+    ask = dataclasses.replace(Announce(1, 0, 1, 0, 1.0, 0.0, math.inf), round=ROUND)
+    assert a.on_message(ask, 0.0) == []
+    assert a.on_message(RoundStart(1, 0, ROUND, (T1.id, T2.id), (1, 2)), 0.002) == [] and ROUND in a.rounds
+    other = ROUND + 1
+    later = dataclasses.replace(ask, round=other)
+    assert a.on_message(later, 1.0) == []
+    assert a.on_message(later, 2.0) == [RoundLeave(2, 0, other)]
+    assert a.on_message(later, 2.5) == []                                   # once a bid timeout

@@ -9,9 +9,13 @@ get lost and are disarmed.  :class:`FormationAgent` runs the solver in **rounds*
   robots that are free (armed, localized, holding no task).  The lowest-id free robot starts it with a
   ``RoundStart`` naming the tasks and the robots, then runs its solver's ``start``; a free robot named
   in it joins with a solver of its own, one that is not free answers ``RoundLeave`` and its peers in the
-  round treat it as lost there.  If the lowest free robot has not started a round within ``start_wait``
-  seconds, the next one does.  Inside a round, task ids are indices into the ``RoundStart``'s list and
-  every message carries the round id, so rounds never mix.
+  round treat it as lost there.  A free robot whose table lacks one of the round's tasks (its record was lost
+  on the way; the state digests bring it within a second or two) waits for it, quiet and starting no round of
+  its own, up to a bid timeout, then joins, or answers ``RoundLeave``: leaving at once would have it start a
+  round for the tasks it knows and split the problem, each robot taking its own best instead of the fleet's.
+  If the lowest free robot has not started a round within ``start_wait`` seconds, the next one does.  Inside
+  a round, task ids are indices into the ``RoundStart``'s list and every message carries the round id, so
+  rounds never mix.
 * A robot's commitment is its solver's current assignment (it follows re-auctions inside the round).
   It keeps its solver, and so keeps answering as the holder, while it works on the task; when the task
   is done or withdrawn it drops the solver and is free again.  A robot the round left without a task
@@ -20,11 +24,12 @@ get lost and are disarmed.  :class:`FormationAgent` runs the solver in **rounds*
   live robot holds are not offered again; a lost robot's tasks are.  A lossy link makes a live robot look
   lost now and then; BS and RTMA re-auction its task then, and are told what the live robots hold by their
   states, so a task resold since, or held by its robot in another round, is not re-auctioned (see
-  :meth:`~runtime.allocation.formation.bs.BSAgent._open` for the robot that is not lost after all).  If two robots end up holding the
-  same task (rounds that overlapped), the lower id keeps it and the other lets it go.
+  :meth:`~runtime.allocation.formation.bs.BSAgent._open` for the robot that is not lost after all).  If two
+  robots end up holding the same task (rounds that overlapped), the lower id keeps it and the other lets it go.
 * A robot asked something in a round it is not in (a message addressed to it, a ``Status`` or an ``Announce``)
   answers ``RoundLeave`` for it, at most once a bid timeout: the asker counts it as one of the round's live robots
-  (its ``RoundLeave`` was lost, or the ``RoundStart`` never reached it) and would wait for it for ever.
+  (its ``RoundLeave`` was lost, or the ``RoundStart`` never reached it) and would wait for it for ever; a robot
+  invited to the round and waiting for its table stays quiet (the round's solvers ask again once it is in).
 * A round that got no task taken is not repeated by its initiator with the same tasks and free robots
   until a back-off (doubling, at most 30 s) has passed: a task nobody can reach is not auctioned in a
   tight loop (the robot an operator hands it to refuses a task it cannot reach in the first place).
@@ -122,6 +127,8 @@ class FormationAgent:
         self.dropped: Counter = Counter()             # round messages that did not fit their round, by reason
         self._clash: dict[int, int | None] = {}       # peer -> my task its last state named too (same round)
         self._not_in_told: dict[int, float] = {}      # round I am not in -> when I last said so
+        self._not_in_asked: dict[int, float] = {}     # round I am not in -> when it first asked me something
+        self._invited: dict[int, tuple[RoundStart, float]] = {}   # round naming tasks my table lacks -> (it, when)
         self.log = get_logger(f"alloc.{getattr(self.options, 'method', 'formation')}", self.robot_id)
 
     # ------------------------------------------------------------------ what the daemon reads
@@ -240,12 +247,17 @@ class FormationAgent:
         BS and RTMA asking for bids): then its sender may count me as one of the round's live robots (my
         ``RoundLeave`` was lost, or I never heard its ``RoundStart``) and wait for me for ever, at the epsilon
         auction's barrier or for my bid.  I say I am not in it, ``RoundLeave`` to all, at most once per round and
-        bid timeout."""
-        if getattr(msg, "dest", BROADCAST) != self.robot_id and not isinstance(msg, (Status, Announce)):
+        bid timeout, and not when first asked: its first questions go out with its ``RoundStart`` and may overtake
+        it (the asker asks again after a bid timeout)."""
+        if rid in self._invited or (
+                getattr(msg, "dest", BROADCAST) != self.robot_id and not isinstance(msg, (Status, Announce))):
+            return []                # invited, waiting for my table: its solvers ask again once I am in
+        horizon = SILENT_ROUNDS * self.options.bid_timeout
+        self._not_in_asked = {k: t for k, t in self._not_in_asked.items() if now - t < horizon}
+        if now - self._not_in_asked.setdefault(rid, now) < self.options.bid_timeout / 2:
             return []
         if now - self._not_in_told.get(rid, -math.inf) < self.options.bid_timeout:
             return []
-        horizon = SILENT_ROUNDS * self.options.bid_timeout
         self._not_in_told = {k: t for k, t in self._not_in_told.items() if now - t < horizon}
         self._not_in_told[rid] = now
         self.dropped["asked about a round I am not in"] += 1
@@ -273,7 +285,7 @@ class FormationAgent:
 
     def on_tick(self, now: float) -> list:
         self._now = now
-        out = []
+        out = self._answer_invitations(now)
         for r in list(self.rounds.values()):
             out += self._from(r, r.solver.on_tick(now), now)
         out += self._settle(now)
@@ -308,8 +320,26 @@ class FormationAgent:
         if m.round >> 16 != m.sender or not set(m.robots) <= {self.robot_id, *self.peers}:
             self.dropped["round start outside the protocol"] += 1
             return []
-        if not self.free or any(t not in self.tasks for t in m.tasks):    # busy, or my table is behind
+        if not self.free:
             return [RoundLeave(self.robot_id, BROADCAST, m.round)]
+        if any(t not in self.tasks for t in m.tasks):      # my table is behind: wait for it (module docstring)
+            self._invited.setdefault(m.round, (m, now))
+            return []
+        return self._join(m, now)
+
+    def _answer_invitations(self, now: float) -> list:
+        """Join the rounds I was invited to once my table has their tasks; leave them after a bid timeout."""
+        out = []
+        for rid, (m, since) in list(self._invited.items()):
+            if not self.free or now - since >= self.options.bid_timeout:
+                del self._invited[rid]
+                out.append(RoundLeave(self.robot_id, BROADCAST, rid))
+            elif all(t in self.tasks for t in m.tasks):
+                del self._invited[rid]
+                out += self._join(m, now)
+        return out
+
+    def _join(self, m: RoundStart, now: float) -> list:
         r = Round(m.round, tuple(m.tasks), tuple(m.robots), last_heard=now, last_in=now)
         r.solver = self._solver(r)
         self.rounds[r.id] = r
@@ -343,7 +373,7 @@ class FormationAgent:
         return v is not None and v.state == IDLE and not v.tasks
 
     def _maybe_start(self, now: float) -> list:
-        if not self.free:
+        if not self.free or self._invited:
             self._free_since = None
             return []
         tasks, robots = self._candidates()

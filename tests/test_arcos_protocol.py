@@ -237,6 +237,7 @@ def test_packets_after_garbage_are_found(garbage, bodies):
 
 @settings(max_examples=200, deadline=None)
 @given(_packets(), st.integers(1, 40), st.binary(min_size=1, max_size=1))
+@example([b"\x00I\x00\xb1"], 8, b"\x00")     # its checksum's last byte is the next packet's first sync byte
 def test_a_truncated_packet_is_held_then_dropped_when_the_next_one_comes(bodies, cut, _):
     wire = P.frame(bodies[0])
     cut = min(cut, len(wire) - 1)
@@ -244,7 +245,11 @@ def test_a_truncated_packet_is_held_then_dropped_when_the_next_one_comes(bodies,
     p = P.PacketParser()
     assert p.feed(wire[:cut]) == []
     out = p.feed(follow + FILL)               # the cut packet's count may claim bytes of the ones after it
-    assert out[-1] == b"\x00" and _accounts(p) and p.pending == 0
+    assert _accounts(p) and p.pending == 0
+    completed = wire[:cut] + (follow + FILL)[:len(wire) - cut]
+    if P.PacketParser().feed(completed):      # the next bytes happen to complete it with a good checksum (1 in 256
+        return                                # for one byte missing): a packet on the wire, and what followed is cut
+    assert out[-1] == b"\x00"
 
 
 @settings(max_examples=300, deadline=None)

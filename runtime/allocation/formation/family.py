@@ -45,8 +45,8 @@ that is not in the round, a task set (``TaskInfo``, ``Announce``) that contradic
 fleet table (size or position), a ``RoundStart`` whose round id is not its sender's or that names robots
 outside the fleet.  A round that stays unconverged with nothing heard from its peers for ``SILENT_ROUNDS``
 bid timeouts (a forged ``RoundStart``, or an initiator that died at once) is left, the silence counted from when
-it last went from converged to not (a settled round is quiet: there is nothing to say); a round of one robot, which has
-no peers to hear, is not (its solver ends it: left that way, BS went round in circles).  Values within all of
+it last went from converged to not (a settled round is quiet: there is nothing to say); a round of one robot,
+which has no peers to hear, is not (its solver ends it: left that way, BS went round in circles).  Values within all of
 these from a sender whose id is forged cannot be told from genuine ones without signing (the fleet's default):
 a forged ``Price`` from a round member at a plausible price, an ``Award`` at the winner's own bid.  For two
 robots that end up holding one task, whatever the cause, the lower id keeps it once both have settled.
@@ -251,7 +251,7 @@ class FormationAgent:
         it (the asker asks again after a bid timeout)."""
         if rid in self._invited or (
                 getattr(msg, "dest", BROADCAST) != self.robot_id and not isinstance(msg, (Status, Announce))):
-            return []                # invited, waiting for my table: its solvers ask again once I am in
+            return []                # no question; or invited, waiting for my table: it asks again once I am in
         horizon = SILENT_ROUNDS * self.options.bid_timeout
         self._not_in_asked = {k: t for k, t in self._not_in_asked.items() if now - t < horizon}
         if now - self._not_in_asked.setdefault(rid, now) < self.options.bid_timeout / 2:

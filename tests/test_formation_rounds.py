@@ -10,6 +10,7 @@ import pytest
 from runtime.allocation import registry
 from runtime.allocation.agent import AgentContext
 from runtime.allocation.formation.messages import Announce, RoundLeave, RoundStart
+from runtime.fleet.messages import ALLOCATING, EXECUTING, RobotState
 from runtime.fleet.simulate import StraightLineEstimator
 from runtime.tasks import Profile, Task
 from runtime.tasks.goto import Goto
@@ -105,3 +106,34 @@ def test_a_question_that_overtakes_its_round_start_is_not_answered_with_a_leave(
     assert a.on_message(later, 1.0) == []
     assert a.on_message(later, 2.0) == [RoundLeave(2, 0, other)]
     assert a.on_message(later, 2.5) == []                                   # once a bid timeout
+
+
+def test_the_starter_sends_its_round_start_again_to_the_robots_that_have_not_spoken_in_it():
+    """Ten robots at 10 % loss: one of nine invitees misses the one RoundStart more often than not, starts a round
+    of its own after start_wait, and the two rounds split the problem.  So the starter sends it again each bid
+    timeout, while its round negotiates, to those not heard in it."""
+    one, two = agent(rid=1, peers=(1, 2, 3), at=(0.9, 0.0)), agent(rid=2, peers=(1, 2, 3), at=(0.0, 0.9))
+    agents = {1: one, 2: two}                            # robot 3 hears nothing
+    for a in agents.values():
+        a.add_tasks([T1, T2], 0.0)
+    first = one.on_tick(0.0)
+    (start,) = sent(first, RoundStart)
+    exchange(agents, first, 0.0)
+    again = [m for t in (0.5, 1.0) for m in one.on_tick(t)]
+    assert [(m.dest, m.round) for m in sent(again, RoundStart)] == [(3, start.round)]
+    assert start.round in agents[2].rounds
+
+
+def test_a_robot_left_without_a_task_stays_while_a_peer_of_the_round_says_it_is_allocating():
+    a = agent(rid=3, peers=(1, 2, 3), at=(9.0, 9.0))
+    a.add_tasks([T1], 0.0)
+    a.on_message(RoundStart(1, 0, ROUND, (T1.id,), (1, 2, 3)), 0.0)
+    r = a.rounds[ROUND]
+    r.solver._touch(0.0)                                  # a round that has gone quiet for me, holding nothing
+    a.on_message(RobotState(2, 0, ALLOCATING, (T1.id,), 0.0, 0.0, 1, 0), 0.1)
+    for t in (2.0, 4.0, 6.0):
+        a.on_tick(t)
+    assert ROUND in a.rounds                              # robot 2 may yet resell it to me
+    a.on_message(RobotState(2, 0, EXECUTING, (T1.id,), 0.0, 0.0, 1, 0), 6.5)
+    a.on_tick(9.0)
+    assert ROUND not in a.rounds

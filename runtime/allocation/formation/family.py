@@ -13,13 +13,15 @@ get lost and are disarmed.  :class:`FormationAgent` runs the solver in **rounds*
   on the way; the state digests bring it within a second or two) waits for it, quiet and starting no round of
   its own, up to a bid timeout, then joins, or answers ``RoundLeave``: leaving at once would have it start a
   round for the tasks it knows and split the problem, each robot taking its own best instead of the fleet's.
+  For the same reason the starter sends its ``RoundStart`` again, while the round negotiates, to the robots
+  that have not spoken in it (:meth:`FormationAgent._restart_silent`).
   If the lowest free robot has not started a round within ``start_wait`` seconds, the next one does.  Inside
   a round, task ids are indices into the ``RoundStart``'s list and every message carries the round id, so
   rounds never mix.
 * A robot's commitment is its solver's current assignment (it follows re-auctions inside the round).
   It keeps its solver, and so keeps answering as the holder, while it works on the task; when the task
   is done or withdrawn it drops the solver and is free again.  A robot the round left without a task
-  drops out once the round has been quiet for ``linger`` seconds.
+  drops out once the round has been quiet for ``linger`` seconds and no robot of it says it is still allocating.
 * Robots tell each other what they hold (``RobotState``, every second and on each change).  Tasks a
   live robot holds are not offered again; a lost robot's tasks are.  A lossy link makes a live robot look
   lost now and then; BS and RTMA re-auction its task then, and are told what the live robots hold by their
@@ -56,7 +58,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence
 
 from runtime.allocation.agent import AWARDED, DONE, RELEASED, AgentContext, Method, TaskEvent
@@ -67,7 +69,7 @@ from runtime.allocation.formation.messages import (AGENT_MESSAGES, BROADCAST, MA
                                                    Award, Price, RoundLeave, RoundStart, Status, TaskInfo)
 from runtime.allocation.formation.options import AuctionOptions, BSOptions, RTMAOptions
 from runtime.allocation.formation.rtma import RTMAAgent
-from runtime.fleet.messages import EXECUTING, IDLE, RobotState
+from runtime.fleet.messages import ALLOCATING, EXECUTING, IDLE, RobotState
 from runtime.log import get_logger
 from runtime.tasks import DONE as P_DONE, FAILED as P_FAILED, Commitment, Progress, Task
 
@@ -85,6 +87,8 @@ class Round:
     last_heard: float = 0.0            # last message of this round in or out
     last_in: float = 0.0               # last message of this round from a peer (or when I joined it)
     busy_since: float | None = None    # when its solver last went from converged to not (None: converged)
+    heard: set = field(default_factory=set)    # robots that have spoken in it (a RoundLeave is not speaking)
+    start_sent: float = 0.0            # when I (its starter) last sent its RoundStart
 
 
 @dataclass
@@ -239,6 +243,7 @@ class FormationAgent:
             self.log.debug("dropped %s from robot %s: %s", type(msg).__name__, msg.sender, why)
             return []
         r.last_heard = r.last_in = now
+        r.heard.add(msg.sender)
         return self._from(r, r.solver.on_message(msg, now), now) + self._settle(now)
 
     def _not_in(self, rid: int, msg, now: float) -> list:
@@ -285,7 +290,7 @@ class FormationAgent:
 
     def on_tick(self, now: float) -> list:
         self._now = now
-        out = self._answer_invitations(now)
+        out = self._answer_invitations(now) + self._restart_silent(now)
         for r in list(self.rounds.values()):
             out += self._from(r, r.solver.on_tick(now), now)
         out += self._settle(now)
@@ -326,6 +331,21 @@ class FormationAgent:
             self._invited.setdefault(m.round, (m, now))
             return []
         return self._join(m, now)
+
+    def _restart_silent(self, now: float) -> list:
+        """My rounds still negotiating: their ``RoundStart`` again, each bid timeout, to the robots named in them that
+        have not spoken in them.  One lost ``RoundStart`` keeps a robot out (ten robots at 10 % loss: one of nine
+        misses it more often than not); it answers the round's questions "not in it", starts a round of its own
+        after ``start_wait``, and the two split the problem.  Still free, it joins on a later one (its peers hear
+        it again).  Robots that are busy answer ``RoundLeave`` again, at most once a bid timeout."""
+        out = []
+        for r in self.rounds.values():
+            if r.id >> 16 != self.robot_id or r.solver.converged or now - r.start_sent < self.options.bid_timeout:
+                continue
+            r.start_sent = now
+            out += [RoundStart(self.robot_id, p, r.id, r.tasks, r.robots)
+                    for p in r.robots if p != self.robot_id and p not in r.heard]
+        return out
 
     def _answer_invitations(self, now: float) -> list:
         """Join the rounds I was invited to once my table has their tasks; leave them after a bid timeout."""
@@ -389,7 +409,8 @@ class FormationAgent:
         if key == self._backoff.key and now < self._backoff.until:
             return []
         self._count = self._count % 0xFFFF + 1
-        r = Round(self.robot_id << 16 | self._count, tuple(tasks), tuple(robots), last_heard=now, last_in=now)
+        r = Round(self.robot_id << 16 | self._count, tuple(tasks), tuple(robots), last_heard=now, last_in=now,
+                  start_sent=now)
         r.solver = self._solver(r)
         self.rounds[r.id] = r
         if key == self._backoff.key:
@@ -410,6 +431,12 @@ class FormationAgent:
             r.last_heard = now
         return [dataclasses.replace(m, round=r.id) for m in msgs]
 
+    def _negotiating(self, r: Round) -> bool:
+        """Some live robot of round ``r`` says it is still allocating (its state): a resale there may yet be offered to
+        me, a robot without a task.  A quiet spell for me is not the round's end: leaving then, I would start a round
+        of my own for its open tasks while it still trades them."""
+        return any(v.state == ALLOCATING for p, v in self.view.items() if p in r.robots and p not in self.lost)
+
     def _leave(self, r: Round, now: float, tell: bool) -> list:
         self.rounds.pop(r.id, None)
         self.log.info("leaving round %s", _rid(r.id))
@@ -422,7 +449,8 @@ class FormationAgent:
             task = self._local(r)
             if task is not None and task not in self.tasks:
                 out += self._leave(r, now, tell=False)          # done or withdrawn: I am free
-            elif task is None and r.solver.converged and now - r.last_heard >= self.options.linger:
+            elif (task is None and r.solver.converged and now - r.last_heard >= self.options.linger
+                  and not self._negotiating(r)):
                 out += self._leave(r, now, tell=False)          # the round left me without a task
             elif r.solver.converged:
                 r.busy_since = None

@@ -411,14 +411,13 @@ def test_what_the_codec_lets_through_never_raises_and_what_an_agent_ignores_is_c
 
 
 # ------------------------------------------------------------------ a peer declared lost that is not
-def awarded(a: BSAgent, to: int) -> int:
-    """Robot 1 auctions task 0 among 2, 3, 4 and awards it to ``to``, which acknowledges; the auction id."""
+def awarded(a: BSAgent, to: int) -> None:
+    """Robot 1 auctions task 0 among 2, 3, 4 (auction 1) and awards it to ``to``, which acknowledges."""
     a.start({0: (0.0, 0.0)}, 0.0)
     for rid in (2, 3, 4):
         a.on_message(Bid(rid, 1, 1, 0, 1.0 if rid == to else 8.0), 0.01)
     a.on_message(Status(to, 1, 1, 0, False), 0.02)
     assert a.awarded_to == {0: to} and not a.auctions
-    return 1
 
 
 def test_a_holder_declared_lost_that_answers_within_the_bid_timeout_keeps_its_task():

@@ -9,6 +9,7 @@ import pytest
 
 from runtime.allocation import registry
 from runtime.allocation.agent import AgentContext
+from runtime.allocation.bus import InMemoryBus
 from runtime.allocation.formation.messages import Announce, RoundLeave, RoundStart
 from runtime.fleet.messages import ALLOCATING, EXECUTING, RobotState
 from runtime.fleet.simulate import StraightLineEstimator
@@ -23,15 +24,6 @@ def agent(method: str = "bs", rid: int = 2, peers=(1, 2, 3), at=(0.0, 0.0)):
     m = registry.method(method)
     est = StraightLineEstimator(Profile(0.25, 0.17), lambda: at)
     return m.make(AgentContext(rid, peers, est, m.options()))
-
-
-def exchange(agents: dict, out: list, now: float) -> None:
-    """Deliver ``out`` and everything it causes, at once."""
-    while out:
-        msg = out.pop(0)
-        for rid, a in agents.items():
-            if rid != msg.sender and msg.dest in (0, rid):
-                out += a.on_message(msg, now)
 
 
 def sent(out, kind):
@@ -77,11 +69,7 @@ def test_a_settled_round_that_reopens_after_a_long_quiet_is_not_left_as_silent()
     agents = {1: agent(rid=1, peers=(1, 2), at=(0.9, 0.0)), 2: agent(rid=2, peers=(1, 2), at=(0.0, 0.9))}
     for a in agents.values():
         a.add_tasks([T1, T2], 0.0)
-    t = 0.0
-    while t < 10.0:
-        for a in agents.values():
-            exchange(agents, a.on_tick(t), t)
-        t = round(t + 0.05, 2)
+    InMemoryBus(agents, delay=0.0).run(10.0)
     assert all(a.converged and a.commitments for a in agents.values())
     one = agents[1]
     (rid,) = one.rounds
@@ -118,7 +106,9 @@ def test_the_starter_sends_its_round_start_again_to_the_robots_that_have_not_spo
         a.add_tasks([T1, T2], 0.0)
     first = one.on_tick(0.0)
     (start,) = sent(first, RoundStart)
-    exchange(agents, first, 0.0)
+    bus = InMemoryBus(agents, delay=0.0)
+    bus.send(first, 0.0)
+    bus.run(0.01)                                        # delivered, and both ticked at 0.00 and 0.05
     again = [m for t in (0.5, 1.0) for m in one.on_tick(t)]
     assert [(m.dest, m.round) for m in sent(again, RoundStart)] == [(3, start.round)]
     assert start.round in agents[2].rounds

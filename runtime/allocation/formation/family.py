@@ -107,14 +107,13 @@ class _Backoff:
 class FormationAgent:
     """One robot's formation-family agent (see the module docstring)."""
 
-    def __init__(self, ctx: AgentContext, solver: type, solver_options: dict, holders: bool = False):
+    def __init__(self, ctx: AgentContext, solver: type, solver_options: dict):
         self.robot_id = int(ctx.robot_id)
         self.peers = tuple(sorted(set(ctx.peers) - {self.robot_id}))
         self.estimator = ctx.estimator
         self.options = ctx.options
         self.solver_cls = solver
         self.solver_options = solver_options
-        self.holders = holders                        # the solver takes held_elsewhere (who holds what, by state)
         self.tasks: dict[int, Task] = {}              # open fleet tasks I know of
         self.lost: set[int] = set()
         self.view: dict[int, PeerView] = {p: PeerView() for p in self.peers}
@@ -377,8 +376,10 @@ class FormationAgent:
             return task == self._assigned() or any(task in v.tasks for p, v in self.view.items() if p not in self.lost)
 
         peers = [p for p in r.robots if p != self.robot_id]
-        extra = {"held_elsewhere": held_elsewhere} if self.holders else {}
-        return self.solver_cls(self.robot_id, peers, cost, **self.solver_options, **extra)
+        solver = self.solver_cls(self.robot_id, peers, cost, **self.solver_options)
+        if hasattr(solver, "held_elsewhere"):    # a solver that re-auctions a lost robot's task (BS, RTMA)
+            solver.held_elsewhere = held_elsewhere
+        return solver
 
     def _candidates(self) -> tuple[list[int], list[int]]:
         """(open tasks no live robot holds, free robots I know of with me first), lowest ids first."""
@@ -477,11 +478,11 @@ def _rid(round_id: int) -> str:
     return f"{round_id >> 16}.{round_id & 0xFFFF}"
 
 
-def _make(solver: type, extra: tuple[str, ...], holders: bool = False):
+def _make(solver: type, extra: tuple[str, ...]):
     def make(ctx: AgentContext) -> FormationAgent:
         o = ctx.options
         opts = {"bid_timeout": o.bid_timeout, **{k: getattr(o, k) for k in extra}}
-        return FormationAgent(ctx, solver, opts, holders)
+        return FormationAgent(ctx, solver, opts)
     return make
 
 
@@ -489,8 +490,8 @@ _XML = str(__import__("pathlib").Path(__file__).with_name("formation.xml"))
 _MSGS = AGENT_MESSAGES + ROUND_MESSAGES
 
 BS = Method("bs", "paper 002 basic market algorithm: auction, resell the dearer of two tasks", BSOptions,
-            _make(BSAgent, ("max_retries",), holders=True), ("goto",), _MSGS, _XML, BSAgent)
+            _make(BSAgent, ("max_retries",)), ("goto",), _MSGS, _XML, BSAgent)
 RTMA = Method("rtma", "paper 002 RTMA: BS with bids relative to each robot's mean cost", RTMAOptions,
-              _make(RTMAAgent, ("max_retries",), holders=True), ("goto",), _MSGS, _XML, RTMAAgent)
+              _make(RTMAAgent, ("max_retries",)), ("goto",), _MSGS, _XML, RTMAAgent)
 AUCTION = Method("auction", "epsilon-scaling auction (Bertsekas): optimal assignment, the default", AuctionOptions,
                  _make(EpsAuctionAgent, ("cost_unit", "theta")), ("goto",), _MSGS, _XML, EpsAuctionAgent)

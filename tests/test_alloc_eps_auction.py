@@ -1,14 +1,12 @@
 """Distributed epsilon-scaling auction: exact on integer costs, converges on a lossy, reordering bus."""
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from runtime.allocation.formation.assignment import NO_TASK, hungarian, is_permutation, straight_line_costs
-from runtime.allocation.formation.eps_auction import EpsAuctionAgent
+from runtime.allocation.formation.eps_auction import LOST_PROBES, EpsAuctionAgent
 from runtime.allocation.formation.messages import Price, Status, TaskInfo
 from runtime.allocation.formation.simulate import BusParams, run, solve
 
@@ -77,6 +75,10 @@ def test_lost_robot_frees_its_task_and_the_rest_stay_on_distinct_tasks():
     agents = make_agents("auction", c)
     held, bus, _, converged = run(agents, {j: (float(j), 0.0) for j in range(n)}, failures={3: 20.0}, until=200)
     assert converged
+    bus.run(bus.now + (LOST_PROBES + 1) * 1.0, tick=0.05)      # robot 3 is asked LOST_PROBES times, then lost
+    live = {rid: a for rid, a in agents.items() if rid != 3}
+    assert all(a.converged for a in live.values())
+    held = {rid: a.assignment for rid, a in live.items()}
     assert 3 not in held and len(held) == n - 1
     assert None not in held.values() and len(set(held.values())) == n - 1
     for rid, a in agents.items():
@@ -327,3 +329,40 @@ def test_robot_lost_while_bidding_leaves_the_rest_converged_on_distinct_tasks(se
                                 until=600)
     assert converged
     assert 2 not in held and None not in held.values() and len(set(held.values())) == n - 1
+
+
+def _held_by_two(a):
+    """Agent ``a`` (robot 1) with robot 2 holding task 0 in its table."""
+    informed(a)
+    a.on_message(Price(2, 0, 0, 2, 50.0, 0), 0.1)
+    assert a.holder[0] == 2
+    return a
+
+
+@pytest.mark.parametrize("how", ["its answer", "its daemon"])
+def test_a_holder_declared_lost_is_asked_and_keeps_its_task_when_heard(how):
+    """A lossy link makes a live robot look lost: its task is not freed at once (a robot holding nothing would bid
+    for it and the holder bid its way back); it is asked, LOST_PROBES times, until it is heard: its answer (its
+    entry) or any word of it reaching the daemon (``heard``, its state most often)."""
+    a = _held_by_two(agent())
+    out = a.on_peer_lost(2, 1.0)
+    assert [(m.dest, type(m)) for m in out] == [(2, Status)]             # asked directly
+    assert a.holder[0] == 2 and 2 in a.alive
+    assert [m.dest for m in a.on_tick(2.0) if isinstance(m, Status) and m.dest == 2] == [2]   # asked again
+    if how == "its answer":
+        a.on_message(Price(2, 0, 0, 2, 50.0, 0), 2.1)
+    else:
+        a.heard(2, 2.1)
+    for t in (3.0, 4.0, 5.0, 6.0):
+        a.on_tick(t)
+    assert a.holder[0] == 2 and 2 in a.alive
+
+
+def test_a_holder_that_never_answers_is_lost_after_the_probes():
+    a = _held_by_two(agent())
+    a.on_peer_lost(2, 1.0)
+    for t in (2.0, 3.0, 3.9):
+        a.on_tick(t)
+    assert a.holder[0] == 2                            # still asking
+    a.on_tick(1.0 + LOST_PROBES * 1.0)                 # asked at 1, 2 and 3: lost at 4
+    assert a.holder[0] == 0 and 2 not in a.alive       # freed at its price

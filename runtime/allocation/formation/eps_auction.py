@@ -42,7 +42,8 @@ from ``TaskInfo`` broadcast by ``start()``.
 
 More robots than tasks: each robot adds one zero-cost "no task" slot per surplus robot (the standard
 reduction to a square problem); a robot on such a slot reports ``assignment`` None.  A lost robot's
-task is freed at its price and stays open unless a robot now prefers it: the survivors keep a valid
+task is freed at its price (once the robot has not answered ``LOST_PROBES`` direct questions, see
+:meth:`EpsAuctionAgent.on_peer_lost`) and stays open unless a robot now prefers it: the survivors keep a valid
 assignment, but with fewer robots than tasks it is not guaranteed optimal for the smaller fleet.
 """
 from __future__ import annotations
@@ -57,6 +58,7 @@ from runtime.log import get_logger
 
 INF = math.inf
 NO_RUNG = 0xFFFF          # Price.phase before the sender knows the task set
+LOST_PROBES = 3           # bid timeouts a peer declared lost while holding a task is asked before its task is freed
 
 
 class EpsAuctionAgent:
@@ -99,6 +101,7 @@ class EpsAuctionAgent:
         self._notices: dict[int, list] = {}        # displaced robot -> [task, deadline, tries]
         self._dummies: set[int] = set()            # "no task" slots when robots outnumber tasks
         self._peer_rung: dict[int, int] = {}       # robot -> lowest rung it has reported
+        self._suspects: dict[int, list] = {}       # peer declared lost, holding a task -> [last asked, times asked]
         self.log = get_logger("alloc.auction", self.robot_id)
 
     @staticmethod
@@ -156,6 +159,7 @@ class EpsAuctionAgent:
         if handler is None:
             self.dropped["unexpected type"] += 1
             return []
+        self._suspects.pop(sender, None)                 # heard: not lost after all
         if sender in self.peers and sender not in self.alive:
             self.alive.add(sender)
             self._sync_dummies(now)
@@ -189,6 +193,7 @@ class EpsAuctionAgent:
         if self.held is not None and now - self._last_own >= self.keepalive:
             out.append(self._entry(self.held, BROADCAST))
         out += self._resend_notices(now)
+        out += self._check_suspects(now)
         return self._out(out)
 
     def _resend_notices(self, now: float) -> list:
@@ -206,8 +211,43 @@ class EpsAuctionAgent:
         return out
 
     def on_peer_lost(self, robot_id: int, now: float) -> list:
-        """The lost robot's task becomes free at its price; whoever now prefers it bids for it."""
+        """A peer declared lost (no heartbeat for a while) that holds a task in my table is asked directly first: a
+        lossy link makes live robots look lost now and then, and freeing their tasks at once had robots with
+        nothing bid for them and the holders, alive, bid their way back, for good in a round of ten robots in
+        loss spells.  It stays among the live robots for ``LOST_PROBES`` bid timeouts, asked once each (a
+        ``Status`` to it, which a holder answers with its entry); heard in that time (any of its messages, or
+        :meth:`heard`), it was not lost after all.  A peer holding nothing in my table is lost at once.  A suspect
+        does not keep me from having converged: my own assignment stands."""
         self._now = now
+        if robot_id not in self.alive or robot_id in self._suspects:
+            return []
+        if any(h == robot_id for h in self.holder.values()):
+            self._suspects[robot_id] = [now, 1]
+            return self._out([self._probe(robot_id)])
+        return self._lose(robot_id, now)
+
+    def heard(self, robot_id: int, now: float) -> None:
+        """Robot ``robot_id`` was heard (any message reaching my daemon, its state most often): not lost after all."""
+        self._suspects.pop(robot_id, None)
+
+    def _probe(self, robot_id: int) -> Status:
+        return Status(self.robot_id, robot_id, 0, NO_TASK if self.held is None else self.held, False)
+
+    def _check_suspects(self, now: float) -> list:
+        out = []
+        for robot, probe in list(self._suspects.items()):
+            if now - probe[0] < self.bid_timeout:
+                continue
+            if probe[1] >= LOST_PROBES:
+                del self._suspects[robot]
+                out += self._lose(robot, now)
+            else:
+                probe[0], probe[1] = now, probe[1] + 1
+                out.append(self._probe(robot))
+        return out
+
+    def _lose(self, robot_id: int, now: float) -> list:
+        """The lost robot's task becomes free at its price; whoever now prefers it bids for it."""
         self.alive.discard(robot_id)
         for task, h in list(self.holder.items()):
             if h == robot_id:
@@ -215,8 +255,7 @@ class EpsAuctionAgent:
                 self._last_change = now
                 self.log.info("robot %d lost: task %d is free again", robot_id, task)
         self._sync_dummies(now)
-        out = self._bid(now) if self.held is None and self.schedule else []
-        return self._out(out)
+        return self._bid(now) if self.held is None and self.schedule else []
 
     # ------------------------------------------------------------------ bidding
     def _ready(self, now: float) -> list:

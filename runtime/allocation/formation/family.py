@@ -15,7 +15,8 @@ get lost and are disarmed.  :class:`FormationAgent` runs the solver in **rounds*
   round for the tasks it knows and split the problem, each robot taking its own best instead of the fleet's.
   For the same reason the starter sends its ``RoundStart`` again, while the round negotiates, to the robots
   that have not spoken in it (:meth:`FormationAgent._restart_silent`).
-  If the lowest free robot has not started a round within ``start_wait`` seconds, the next one does.  Inside
+  If the lowest free robot has not started a round within ``start_wait`` seconds, the next one does, unless a
+  lower robot may have a round going that it never heard of (:meth:`FormationAgent._held_off`).  Inside
   a round, task ids are indices into the ``RoundStart``'s list and every message carries the round id, so
   rounds never mix.
 * A robot's commitment is its solver's current assignment (it follows re-auctions inside the round).
@@ -73,6 +74,7 @@ from runtime.fleet.messages import ALLOCATING, EXECUTING, IDLE, RobotState
 from runtime.log import get_logger
 from runtime.tasks import DONE as P_DONE, FAILED as P_FAILED, Commitment, Progress, Task
 
+HOLD_OFF = 3                # start waits a free robot holds off for a lower robot silent or allocating
 MAX_BACKOFF = 30.0
 SILENT_ROUNDS = 10          # bid timeouts an unconverged round may go without a message from a peer
 SAME_POSITION = 1e-3        # m: a task position on the wire (float32) and in the table agree within this
@@ -95,6 +97,7 @@ class Round:
 class PeerView:
     state: int = IDLE                  # never heard: taken to be free, so a fleet's first round has everyone
     tasks: tuple[int, ...] = ()
+    at: float | None = None            # when its last state came (None: never)
 
 
 @dataclass
@@ -220,6 +223,9 @@ class FormationAgent:
         if sender in self.lost:
             self.lost.discard(sender)             # heard again
             self.view.setdefault(sender, PeerView())
+        for r in self.rounds.values():
+            if sender in r.robots and hasattr(r.solver, "heard"):
+                r.solver.heard(sender, now)       # a solver that waits to be sure a peer is lost (the auction)
         if isinstance(msg, RobotState):
             return self._on_state(msg, now)
         if isinstance(msg, RoundStart):
@@ -303,7 +309,7 @@ class FormationAgent:
         states in a row say so, since one may lag a resale there (two robots settled on one task in one round
         is no outcome of the protocol: a lost or forged message)."""
         v = self.view.setdefault(m.sender, PeerView())
-        v.state, v.tasks = m.state, tuple(m.tasks)
+        v.state, v.tasks, v.at = m.state, tuple(m.tasks), now
         mine = self._assigned()
         twice, self._clash[m.sender] = self._clash.get(m.sender) == mine, None
         if mine is None or mine not in v.tasks or m.sender > self.robot_id or self.allocating or m.state != EXECUTING:
@@ -389,6 +395,21 @@ class FormationAgent:
         robots = [self.robot_id] + [p for p in self.peers if p not in self.lost and self._peer_free(p)]
         return tasks, sorted(robots)[:MAX_ROUND]
 
+    def _held_off(self, lower: list[int], now: float) -> bool:
+        """A lower robot may have a round going that names me though its ``RoundStart`` never reached me (a loss
+        spell): one that I take to be free but have not heard a state from within ``start_wait`` (never, or its
+        states stopped coming), or one whose last state, that recent, says it is allocating.  I wait for it (the
+        starter sends its ``RoundStart`` again to a robot not heard in its round), up to ``HOLD_OFF`` start waits
+        from when I was free, or until it is declared lost, instead of starting a round of my own and splitting
+        the problem: each robot would take its own best, not the fleet's."""
+        for p, v in self.view.items():
+            if p >= self.robot_id or p in self.lost:
+                continue
+            recent = v.at is not None and now - v.at <= self.options.start_wait
+            if (p in lower and not recent) or (recent and v.state == ALLOCATING):
+                return True
+        return False
+
     def _peer_free(self, p: int) -> bool:
         v = self.view.get(p)
         return v is not None and v.state == IDLE and not v.tasks
@@ -405,6 +426,8 @@ class FormationAgent:
             self._free_since = now
         lower = [p for p in robots if p < self.robot_id]
         if lower and now - self._free_since < self.options.start_wait:
+            return []
+        if now - self._free_since < HOLD_OFF * self.options.start_wait and self._held_off(lower, now):
             return []
         key = (tuple(tasks), tuple(robots))
         if key == self._backoff.key and now < self._backoff.until:

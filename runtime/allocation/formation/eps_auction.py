@@ -224,7 +224,7 @@ class EpsAuctionAgent:
         if any(h == robot_id for h in self.holder.values()):
             self._suspects[robot_id] = [now, 1]
             return self._out([self._probe(robot_id)])
-        return self._lose(robot_id, now)
+        return self._out(self._lose(robot_id, now))
 
     def heard(self, robot_id: int, now: float) -> None:
         """Robot ``robot_id`` was heard (any message reaching my daemon, its state most often): not lost after all."""

@@ -15,6 +15,7 @@ from scipy.optimize import linear_sum_assignment
 
 NO_TASK = 0xFFFF          # Status.task when a robot holds nothing
 MAX_TASKS = 0xFFFF        # task ids are 0 .. MAX_TASKS - 1
+LOST_PROBES = 3           # bid timeouts a solver asks a peer declared lost holding a task before it takes it for lost
 
 
 def straight_line_costs(robots: Sequence[Sequence[float]], tasks: Sequence[Sequence[float]]) -> np.ndarray:

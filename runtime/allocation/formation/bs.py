@@ -50,13 +50,12 @@ from collections import Counter
 from dataclasses import dataclass, field, replace
 from typing import Callable, Mapping, Sequence
 
-from runtime.allocation.formation.assignment import TaskBook
+from runtime.allocation.formation.assignment import LOST_PROBES, TaskBook
 from runtime.allocation.formation.messages import (BROADCAST, Announce, Award, Bid, Status, TaskInfo, addressed_to,
                                          wire_float)
 from runtime.log import get_logger
 
 INF = math.inf
-LOST_PROBES = 3         # bid timeouts a lost holder's task waits for the holder to say it still holds it
 
 
 @dataclass

@@ -52,13 +52,12 @@ import math
 from collections import Counter
 from typing import Callable, Mapping, Sequence
 
-from runtime.allocation.formation.assignment import MAX_TASKS, NO_TASK, TaskBook
+from runtime.allocation.formation.assignment import LOST_PROBES, MAX_TASKS, NO_TASK, TaskBook
 from runtime.allocation.formation.messages import BROADCAST, Price, Status, TaskInfo, addressed_to
 from runtime.log import get_logger
 
 INF = math.inf
 NO_RUNG = 0xFFFF          # Price.phase before the sender knows the task set
-LOST_PROBES = 3           # bid timeouts a peer declared lost while holding a task is asked before its task is freed
 
 
 class EpsAuctionAgent:

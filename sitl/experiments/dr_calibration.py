@@ -328,6 +328,7 @@ def run(args: argparse.Namespace) -> int:
     written.append(report.write_csv(args.samples, samples))
     model, model_text = fit_model(samples, out, args)
     written += model
+    from sitl.experiments.dr_common import commit     # scikit-learn: loaded when the command runs
     cmd = (f"mrta experiment dr-calibration --robots {','.join(map(str, robots))} --distances {','.join(map(str, distances))} "
            f"--duration {args.duration:g} --seed {args.seed} --dt {args.dt:g} --check-dt {args.check_dt:g} "
            f"--jobs {args.jobs}" + (f" --background {args.background}" if args.background else ""))
@@ -338,8 +339,7 @@ def run(args: argparse.Namespace) -> int:
              f"radius), for {args.duration:g} s; physics step {args.dt * 1000:g} ms, control "
              f"period {sample.control_period:g} s; robots start at seeded random places (seed {args.seed}). "
              f"I = n workCapacity(d) - moved / duration (wu/s; x 0.12 for wu/tu). " + _background_text(args.background)
-             + f"Command: `{cmd}`. "
-             f"Wall time {wall:.0f} s for the cases run now.")
+             + f"Command: `{cmd}` on commit {commit()}: wall time {wall:.0f} s for the cases run now.")
     sections = [("Setup", setup),
                 ("Paper's statements (section 4.2.1, Fig. 2) beside ours", _claims_table(claims(main))),
                 ("Fraction of the ideal capacity (eq. 4) reached", fraction_table(main)),

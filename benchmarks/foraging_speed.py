@@ -101,8 +101,6 @@ def method_of(name: str):
 
 
 ENGINE_CALLS = ("stepSimulation", "setJointMotorControlArray", "getJointStates")
-
-
 NODE_CALLS = ("on_message", "on_peer_lost", "on_progress", "begin", "tick")
 
 

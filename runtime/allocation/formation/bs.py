@@ -194,6 +194,10 @@ class BSAgent:
     def _tick_extra(self, now: float) -> list:
         return []
 
+    def heard(self, robot_id: int, now: float) -> None:
+        """Robot ``robot_id`` was heard by my daemon outside my messages.  Nothing to do: a lost holder's task waits
+        for the holder's own answer (``LOST_PROBES``), which only a message to me gives."""
+
     def on_peer_lost(self, robot_id: int, now: float) -> list:
         self._now = now
         self.alive.discard(robot_id)

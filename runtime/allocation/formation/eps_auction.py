@@ -158,7 +158,7 @@ class EpsAuctionAgent:
         if handler is None:
             self.dropped["unexpected type"] += 1
             return []
-        self._suspects.pop(sender, None)                 # heard: not lost after all
+        self.heard(sender, now)
         if sender in self.peers and sender not in self.alive:
             self.alive.add(sender)
             self._sync_dummies(now)

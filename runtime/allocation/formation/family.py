@@ -224,8 +224,8 @@ class FormationAgent:
             self.lost.discard(sender)             # heard again
             self.view.setdefault(sender, PeerView())
         for r in self.rounds.values():
-            if sender in r.robots and hasattr(r.solver, "heard"):
-                r.solver.heard(sender, now)       # a solver that waits to be sure a peer is lost (the auction)
+            if sender in r.robots:
+                r.solver.heard(sender, now)       # a solver may wait to be sure a peer is lost (the auction does)
         if isinstance(msg, RobotState):
             return self._on_state(msg, now)
         if isinstance(msg, RoundStart):

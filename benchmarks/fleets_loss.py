@@ -36,7 +36,7 @@ def one(job: tuple[str, int, float, float]) -> dict:
 
     def read(f) -> tuple[int, int]:
         daemons = [r.daemon for r in f.robots.values() if r.daemon is not None]
-        return sum(d.ekf.stats.relocalised for d in daemons), sum(d.executive.made_way for d in daemons)
+        return sum(d.core.ekf.stats.relocalised for d in daemons), sum(d.core.executive.made_way for d in daemons)
 
     with tempfile.TemporaryDirectory(prefix="fleets-loss-") as tmp:
         res, (reloc, made_way) = lockstep_run(worker_fleet(Path(tmp), f"{name}.yaml", seed, peer_loss=loss,

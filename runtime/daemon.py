@@ -1,67 +1,44 @@
-"""The robot daemon: wiring only.  sense -> allocate -> execute -> command -> report.
+"""The robot daemon: the I/O shell around one robot core.  poll -> core -> send.
 
-One :class:`Daemon` per robot.  It is a polled object: :meth:`Daemon.step` does one control cycle at time
-``now`` and never blocks, so the same object runs in its own process against real devices (:func:`run`,
-wall or scaled clock) or lock-stepped inside the SITL process (tests, experiments).
-
-Cycle:
-1. sense: the base (odometry, bumpers, ranges) and GPS -> EKF pose;
-2. allocate: MAVLink from peers -> the fleet node (task table + allocation agent), lost peers, requests
-   from ground stations (missions, parameters, commands) -> the agent's messages out;
-3. execute: the executive matches executors to the agent's commitments; they and the robot-wide
-   behaviours vote in the arbiter -> the command to the base; progress (arrived, done) back to the agent;
-4. report: telemetry, the robot's state, and what happened to tasks, to the ground stations.
-
-Every part it wires is chosen by the config through a registry: the base driver (``base.type``), the
-allocation method (``allocation.method``), the executor (task kind).
+One :class:`Daemon` per robot.  It opens the base (chosen by ``base.type``), the GPS and the MAVLink link, and
+each control cycle (:meth:`Daemon.step`, never blocking) polls them, hands what it read to the robot's
+:class:`~runtime.robot.core.RobotCore` (the robot's logic, sans-IO: allocation, execution, pose estimate, ground
+services), then gives the base the core's command and sends the core's frames on the link.  The same object runs
+in its own process against real devices (:func:`run`, wall or scaled clock) or lock-stepped inside the SITL
+process.
 """
 from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import signal
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from runtime import config as C
 from runtime.clock import Clock, ClockStalled, ScaledClock, SharedClock, WallClock
-from runtime.execution import peer_readings
 from runtime.log import get_logger
+from runtime.robot.core import GCS, PEERS, Inbox, RobotCore, Sensed
+from runtime.robot.ports import BaseFacts
 
 
 @dataclass
-class DaemonStats:
+class ShellStats:
     cycles: int = 0
     missed_deadlines: int = 0      # cycles that started after the next cycle was due
     worst_lateness: float = 0.0    # s (clock time)
-    agent_sent: int = 0
-    agent_received: int = 0
-    peers_lost: list = field(default_factory=list)
     cpu_seconds: float = 0.0
     wall_seconds: float = 0.0
 
 
 class Daemon:
     def __init__(self, cfg: C.RobotConfig, *, base=None, gps=None, link=None):
-        from runtime.allocation import registry
-        from runtime.allocation.agent import AgentContext
-        from runtime.comms.ground import GroundServices
-        from runtime.comms.telemetry import GcsTelemetry
-        from runtime.execution.executive import ExecContext, Executive, Tunables
-        from runtime.fleet.node import FleetNode
-        from runtime.localization.ekf import PoseEKF
-        from runtime.localization.enu import geodetic_to_enu
-        from runtime.planning.robot_planner import RobotPlanner, TravelEstimator
-        from runtime.tasks import Profile
-
         self.cfg = cfg
         self.id = cfg.robot.id
         self.log = get_logger("daemon", self.id)
-        self.stats = DaemonStats()
-        self._geodetic_to_enu = geodetic_to_enu
+        self.stats = ShellStats()
         if base is None:
             from runtime.drivers.registry import open_base
             base = open_base(cfg.base, self.id)
@@ -78,36 +55,12 @@ class Daemon:
                                heartbeat_timeout=cfg.comms.heartbeat_timeout, peer_loss=cfg.comms.peer_loss,
                                loss_burst=cfg.comms.loss_burst, loss_seed=cfg.comms.loss_seed)
         self.link = link
-        self.telemetry = GcsTelemetry(link, self.id, cfg.datum, armed=cfg.robot.armed)
-        self.ekf = PoseEKF(cfg.localization, robot_id=self.id)
-        if cfg.localization.initial_pose is not None:
-            self.ekf.initialise(*cfg.localization.initial_pose)
-        radius = float(base.footprint.radius)       # obstacle inflation and avoidance
-        c = cfg.control
-        self.planner = RobotPlanner.from_config(cfg, radius)
-        self.estimator = TravelEstimator(self.planner, Profile(speed=c.cruise_speed, radius=radius), self.pose)
-        self.method = registry.method(cfg.allocation.method)
-        self.agent = self.method.make(AgentContext(self.id, tuple(p.id for p in cfg.comms.peers), self.estimator,
-                                                   cfg.allocation, cfg.base))
-        self.node = FleetNode(self.id, self.agent, armed=cfg.robot.armed, peers=[p.id for p in cfg.comms.peers])
-        self.executive = Executive(ExecContext(self.planner, Tunables(c.cruise_speed, c.lookahead, c.max_turn_rate,
-                                                                      c.goal_tolerance), self.log, radius,
-                                               seed=self.id, agent=self.agent, robot_id=self.id))
-        self._perceive = getattr(self.agent, "perceive", None)    # agents that read the robot's pose and ranges
-        self.ground = GroundServices(self)
-        self.period = 1.0 / c.rate
-        self._last_step: float | None = None
-        self._first_cycle: float | None = None
-        self._heard: set[int] = set()            # peers heard at least once
-        self._never_heard_reported = False
-
-    # ------------------------------------------------------------------ pose
-    def pose(self) -> tuple[float, float, float] | None:
-        return self.ekf.pose() if self.ekf.initialised else None
-
-    @property
-    def map(self):
-        return self.planner.world
+        fp = base.footprint
+        facts = BaseFacts(float(fp.radius), float(getattr(fp, "max_speed", 0.5)), bool(base.ranging),
+                          bool(base.latches_faults))
+        self.core = RobotCore(cfg, facts, mavlink=(link.mav, link.module, link.counters))
+        self.period = self.core.period
+        self._mode()
 
     # ------------------------------------------------------------------ lifecycle
     def open(self, now: float) -> None:
@@ -115,8 +68,8 @@ class Daemon:
         if self.gps is not None and hasattr(self.gps, "open"):
             self.gps.open(now)
         self.log.info("open: base %s, gps %s, listening %s, allocation %s%s", self.cfg.base.type,
-                      self.cfg.gps.port if self.gps else "off", self.cfg.comms.listen, self.method.name,
-                      "" if self.node.armed else " (disarmed)")
+                      self.cfg.gps.port if self.gps else "off", self.cfg.comms.listen, self.core.method.name,
+                      "" if self.core.node.armed else " (disarmed)")
 
     def close(self) -> None:
         try:
@@ -129,152 +82,61 @@ class Daemon:
     # ------------------------------------------------------------------ one cycle
     def step(self, now: float) -> None:
         self.stats.cycles += 1
-        dt = 0.0 if self._last_step is None else now - self._last_step
-        self._last_step = now
-        self._sense(now, dt)
-        self._allocate(now)
-        self._execute(now)
-        self._report(now)
+        base, link = self.base, self.link
+        odometry = (base.odometry.v, base.odometry.w) if base.poll(now) else None
+        fixes = self.gps.poll(now) if self.gps is not None else ()
+        peers = link.poll(now)
+        lost = link.peers_lost(now)
+        out = self.core.step(now, Sensed(odometry, fixes, base.sensors), self._inbox(peers, lost))
+        if out.reset_faults:
+            base.reset_faults(now)
+        base.set_velocity(*out.command, now)
+        self._send(out, now)
 
     def service(self, now: float) -> None:
         """Messages only, no control cycle: peers' task tables and ground-station requests (a SITL operator
         hands tasks in before the first cycle this way).  Peer messages for the agent wait for the next step."""
-        self._send(self._comms(now, tick=False), now)
+        self._send(self.core.service(now, self._inbox(self.link.poll(now), ())), now)
 
-    def _sense(self, now: float, dt: float) -> None:
-        if dt > 0 and self.ekf.initialised:
-            self.ekf.predict(dt)
-        if self.base.poll(now):
-            odo = self.base.odometry
-            if self.ekf.initialised:
-                self.ekf.update_odometry(odo.v, odo.w)
-        if self.gps is not None:
-            for fix in self.gps.poll(now):
-                if not fix.valid:
-                    continue
-                e, n, _ = self._geodetic_to_enu(fix.lat, fix.lon, fix.alt, self.cfg.datum)
-                if not self.ekf.initialised:
-                    self.ekf.initialise(e, n, None)
-                else:
-                    self.ekf.update_gps(e, n, self.cfg.localization.gps_sigma)
+    def _inbox(self, peers: list, lost: list) -> Inbox:
+        link = self.link
+        ground, link.gcs_inbox = link.gcs_inbox, []
+        return Inbox(peers, ground, lost, getattr(link, "peers_alive", ()), bool(link.gcs_addresses()))
 
-    def _velocity(self) -> tuple[float, float]:
-        if not self.ekf.initialised:
-            return (0.0, 0.0)
-        x, y, th = self.ekf.pose()
-        v = self.ekf.x[3]
-        return (float(v * math.cos(th)), float(v * math.sin(th)))
-
-    def _comms(self, now: float, tick: bool = True) -> list:
-        pose = self.pose()
-        node = self.node
-        node.begin(None if pose is None else (pose[0], pose[1]))
-        out = []
-        held = getattr(self, "_held_back", [])
-        self._held_back = []
-        for msg in held + self.link.poll(now):
-            if not tick and _for_agent(msg):
-                self._held_back.append(msg)           # service(): the agent hears it at the next step
+    def _send(self, out, now: float) -> None:
+        """The core's frames on the link, in the order it made them."""
+        link, batch = self.link, []
+        for frame in out.frames:
+            if frame[0] == PEERS:
+                batch.append(frame[1])
                 continue
-            self.stats.agent_received += 1
-            out += node.on_message(msg, now)
-        if tick:
-            for lost in self.link.peers_lost(now):
-                self.stats.peers_lost.append(lost)
-                self.log.warning("peer %d lost (no heartbeat for %.1f s): re-auctioning its work",
-                                 lost, self.cfg.comms.heartbeat_timeout)
-                out += node.on_peer_lost(lost, now)
-            for lost in self._never_heard(now):
-                self.stats.peers_lost.append(lost)
-                self.log.warning("peer %d never heard in %.1f s (comms.startup_grace): treating it as lost",
-                                 lost, self.cfg.comms.startup_grace)
-                out += node.on_peer_lost(lost, now)
-        out += self.ground.serve(now)
-        if tick:
-            out += node.tick(now)
-        return out
+            if batch:
+                link.send_agent(batch, now)
+                batch = []
+            if frame[0] == GCS:
+                link.send_gcs(frame[1])
+            else:
+                link.send_to(frame[1], frame[2])
+        if batch:
+            link.send_agent(batch, now)
+        self._mode()
 
-    def _allocate(self, now: float) -> None:
-        if self._perceive is not None:
-            self._perceive(self.pose(), getattr(self.base.sensors, "ranges", ()), now)
-        self._send(self._comms(now), now)
-
-    def _send(self, out: list, now: float) -> None:
-        if out:
-            self.stats.agent_sent += len(out)
-            self.link.send_agent(out, now)
-
-    def _never_heard(self, now: float) -> list[int]:
-        """Configured peers not heard once within ``comms.startup_grace`` of the first cycle, reported once:
-        the link only times out peers it has heard, and a robot that never came up must not hold the
-        allocation back (the epsilon auction waits for every live peer's rung).  If it turns up later, its
-        first message makes it live again."""
-        if self._never_heard_reported:
-            return []
-        if self._first_cycle is None:
-            self._first_cycle = now
-        self._heard.update(getattr(self.link, "peers_alive", ()))
-        if now - self._first_cycle < self.cfg.comms.startup_grace:
-            return []
-        self._never_heard_reported = True
-        return sorted(p.id for p in self.cfg.comms.peers if p.id not in self._heard)
-
-    def _execute(self, now: float) -> None:
-        """Executors for the agent's commitments vote in the arbiter; the command goes to the base (zero when
-        disarmed); their progress goes back to the agent."""
-        ex = self.executive
-        ex.sync(self.agent.commitments if self.node.armed else (), now)
-        ex.make_way = self.node.armed
-        pose, sensors = self.pose(), self.base.sensors
-        ex.peers = () if pose is None or self.base.ranging or not ex.idle else \
-            peer_readings.readings(pose, self.node.positions, now, ex.ctx.radius)    # idle, no range sensors
-        (v, w), progress = ex.step(pose, sensors, now)
-        self.base.set_velocity(v, w, now)
-        out = []
-        for p in progress:
-            out += self.node.on_progress(p, now)
-        self._send(out, now)
-
-    def _report(self, now: float) -> None:
-        commitments = self.agent.commitments
-        self.telemetry.armed = self.node.armed
-        self.telemetry.tick(now, self.pose(), self._velocity(), self.base.sensors,
-                            commitments[0].task_id if commitments else None)
-        self.ground.report(now)
+    def _mode(self) -> None:
+        """The HEARTBEAT fields the core's telemetry chose, onto the link (it heartbeats the peers too)."""
+        r = self.core.radio
+        self.link.base_mode, self.link.custom_mode, self.link.system_status = r.base_mode, r.custom_mode, \
+            r.system_status
 
     def snapshot(self) -> dict:
-        pose = self.pose()
         s = self.stats
-        p = self.planner.stats
-        return {
-            "robot": self.id, "pose": pose, "state": self.node.state,
-            "tasks": [c.task_id for c in self.agent.commitments],
-            "converged": bool(self.agent.converged), "arrived": self.executive.arrived,
-            "cycles": s.cycles, "missed_deadlines": s.missed_deadlines,
-            "worst_lateness": s.worst_lateness, "agent_sent": s.agent_sent,
-            "agent_received": s.agent_received, "peers_lost": s.peers_lost,
+        snap = self.core.snapshot()
+        snap.update({
+            "missed_deadlines": s.missed_deadlines, "worst_lateness": s.worst_lateness,
             "cpu_seconds": s.cpu_seconds, "wall_seconds": s.wall_seconds,
             "base": vars(self.base.stats) if hasattr(self.base, "stats") else {},
             "link": self.link.counters.as_dict() if hasattr(self.link, "counters") else {},
-            "gps_rejected": getattr(self.ekf, "gps_rejected", 0),
-            "relocalised": self.ekf.stats.relocalised,     # the pose filter gave up its position and heading
-            "made_way": self.executive.made_way,           # idle cycles spent moving off for another robot
-            "plan_fallbacks": p.plan_fallbacks, "plan_failures": p.plan_failures, "bid_fallbacks": p.bid_fallbacks,
-            "table": len(self.node.table.entries),
-            "fleet_dropped": dict(self.node.dropped),
-            "agent_dropped": _drops(self.agent),
-        }
-
-
-def _drops(agent) -> dict:
-    """What the allocation agent dropped, by reason (a family without reasons: its total)."""
-    d = getattr(agent, "dropped", {})
-    return dict(d) if isinstance(d, dict) else {"dropped": d}
-
-
-def _for_agent(msg) -> bool:
-    from runtime.fleet.messages import FLEET_MESSAGES
-    return not isinstance(msg, FLEET_MESSAGES)
+        })
+        return snap
 
 
 # ---------------------------------------------------------------------- process main loop

@@ -111,7 +111,7 @@ class DaemonsWatch(Watch):
         super().__init__(None, slack)
 
     def __call__(self, f) -> None:
-        robots = {rid: SimpleNamespace(agent=r.daemon.node.agent) for rid, r in f.robots.items()}
+        robots = {rid: SimpleNamespace(agent=r.daemon.core.node.agent) for rid, r in f.robots.items()}
         if self.o is None:
             self.o = next(iter(robots.values())).agent.o
         super().__call__(SimpleNamespace(now=f.world.t, robots=robots,

@@ -158,7 +158,7 @@ def test_the_ground_station_sees_a_drive_fault_and_resets_it(tmp_path):
         assert texts[-1].severity == MAV.MAV_SEVERITY_CRITICAL and f.world.t - t_cut < 0.6
         status = gcs.wait(lambda m: m.get_type() == "SYS_STATUS" and not _health_ok(m), 5.0, run.step)
         assert status and not _health_ok(status[-1])
-        assert not daemon.node.armed and not daemon.agent.commitments           # disarmed: its task went back
+        assert not daemon.core.node.armed and not daemon.core.agent.commitments           # disarmed: its task went back
         right = f.robots[1].base_dev.drives["right"]
         assert right.motor == 0.0 and right.state == P.QUICK_STOP
         gcs.heartbeat()
@@ -172,7 +172,7 @@ def test_the_ground_station_sees_a_drive_fault_and_resets_it(tmp_path):
         cleared = gcs.wait(lambda m: m.get_type() == "STATUSTEXT" and m.text == "base faults cleared", 10.0, run.step)
         assert cleared, [m.text for m in gcs.got if m.get_type() == "STATUSTEXT"]
         assert any(m.get_type() == "STATUSTEXT" and m.text == "base fault reset requested" for m in gcs.got)
-        assert daemon.node.armed and daemon.base.sensors.faults == ()
+        assert daemon.core.node.armed and daemon.base.sensors.faults == ()
         gcs.heartbeat()
         ok = gcs.wait(lambda m: m.get_type() == "SYS_STATUS" and m.get_srcSystem() == 1 and _health_ok(m), 5.0,
                       run.step)
@@ -181,7 +181,7 @@ def test_the_ground_station_sees_a_drive_fault_and_resets_it(tmp_path):
         while f.world.t < 60 and not f.scenario.goal(RunView(run.op)):          # and the formation completes
             run.step()
         assert f.scenario.goal(RunView(run.op))
-        assert math.hypot(*daemon._velocity()) < 0.05
+        assert math.hypot(*daemon.core.velocity()) < 0.05
     finally:
         gcs.close()
         run.close()

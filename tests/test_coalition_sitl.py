@@ -42,10 +42,10 @@ class Watch:
         ds = {rid: d for rid, d in run.daemons.items() if rid not in run.stopped}
         jobs: dict[int, dict[int, tuple]] = {}
         for rid, d in ds.items():
-            job = d.agent.member.job
+            job = d.core.agent.member.job
             if job is not None:
                 jobs.setdefault(job.task, {})[rid] = (job.round, job.robots)
-            for ev in d.node.events:
+            for ev in d.core.node.events:
                 if ev.what == DONE and ev.task not in self.done_at:
                     self.done_at[ev.task] = f.world.t
         table = ds[min(ds)].node.table.entries
@@ -100,7 +100,7 @@ def test_coalitions_meet_leftover_after_the_first_finish_and_round_one_is_optima
     assert res["goal_met"] and res["valid"], res
     ids = [row["task"] for row in res["tasks"]]
     assert sorted(watch.done_at) == sorted(ids)
-    auct = daemons[1].agent
+    auct = daemons[1].core.agent
     first = auct.rounds[0]
     assert first.robots == (1, 2, 3, 4, 5, 6) and first.tasks == tuple(sorted(ids))
     assert math.isclose(first.value, brute_force(first.tasks, first.bids))

@@ -162,7 +162,7 @@ def test_a_signed_fleet_under_live_fuzz_meets_its_goal_and_counts_every_datagram
         assert sent - unread - kernel <= got <= sent, (who, sent, got, kernel)   # each fuzz datagram: hostile
     assert any(counted[rid].replayed_dropped for rid in (1, 3, 4))      # robot 2's ground-station frames, replayed
     assert counted["gcs"].bad_signature_dropped > 0                     # ... and replayed to the operator
-    assert all(not d.node.dropped for d in run.daemons.values())        # nothing forged got past the link
+    assert all(not d.core.node.dropped for d in run.daemons.values())        # nothing forged got past the link
     snap = run.daemons[1].snapshot()                                     # what a daemon's --stats file shows
     assert snap["link"] == counted[1].as_dict() and {"kernel_dropped", "replayed_dropped"} <= set(snap["link"])
     assert snap["fleet_dropped"] == {} and "agent_dropped" in snap

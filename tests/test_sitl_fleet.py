@@ -105,11 +105,11 @@ def test_a_robot_that_never_comes_up_is_treated_as_lost_and_the_rest_converge(tm
             op.poll(f.world.t)
             for d in daemons.values():
                 d.step(f.world.t)
-            if f.world.t > grace and all(d.agent.converged for d in daemons.values()):
+            if f.world.t > grace and all(d.core.agent.converged for d in daemons.values()):
                 break
-        assert all(d.agent.converged for d in daemons.values())
-        assert all(d.stats.peers_lost == [4] for d in daemons.values())
-        held = [c.task_id for d in daemons.values() for c in d.agent.commitments]
+        assert all(d.core.agent.converged for d in daemons.values())
+        assert all(d.core.stats.peers_lost == [4] for d in daemons.values())
+        held = [c.task_id for d in daemons.values() for c in d.core.agent.commitments]
         assert len(held) == 3 and len(set(held)) == 3
     finally:
         op.close()

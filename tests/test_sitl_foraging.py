@@ -295,7 +295,7 @@ def test_with_a_tenth_of_the_datagrams_between_robots_lost_the_shipped_fleet_kee
 
     def read(run, res):
         links = [d.link.counters for d in run.daemons.values()]
-        fins = {t: fin for d in run.daemons.values() for t, fin in d.node.agent.finished.items()}
+        fins = {t: fin for d in run.daemons.values() for t, fin in d.core.node.agent.finished.items()}
         return sum(c.loss_injected for c in links), sum(c.peer_sent for c in links), fins
 
     goal, why, res, (lost, sent, fins) = _lockstep(tmp_path, FLEET, 600.0, read, watch, peer_loss=0.1)

@@ -69,8 +69,8 @@ def test_fused_pose_beats_gps_and_odometry(tmp_path):
             for rid, d in daemons.items():
                 d.step(clock.now())
                 x, y, _ = f.true_pose(rid)
-                if d.pose() is not None:
-                    px, py, _ = d.pose()
+                if d.core.pose() is not None:
+                    px, py, _ = d.core.pose()
                     err["fused"].append((px - x) ** 2 + (py - y) ** 2)
                 sx, sy, syaw = starts[rid]
                 o = d.base.odometry

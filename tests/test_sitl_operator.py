@@ -85,7 +85,7 @@ def test_bad_uploads_are_refused_and_the_tasks_stay_as_they_were(tmp_path):
         assert requests and set(requests) == {0} and len(requests) >= 5       # item 0 asked for again and again
         for _ in range(5):
             run.step()
-        assert _table(run) == before and all(len(d.node.table.entries) == 2 for d in run.daemons.values())
+        assert _table(run) == before and all(len(d.core.node.table.entries) == 2 for d in run.daemons.values())
     finally:
         gcs.close()
         run.close()
@@ -106,10 +106,10 @@ def test_disarm_stops_the_robot_within_a_cycle_and_its_task_is_done_by_another(t
         holder = None
         while f.world.t < 30 and holder is None:
             run.step()
-            holder = next((rid for rid, d in run.daemons.items() if d.agent.commitments and
-                           math.hypot(*d._velocity()) > 0.1), None)
+            holder = next((rid for rid, d in run.daemons.items() if d.core.agent.commitments and
+                           math.hypot(*d.core.velocity()) > 0.1), None)
         assert holder is not None, "nobody took the task"
-        task = run.daemons[holder].agent.commitments[0].task_id
+        task = run.daemons[holder].core.agent.commitments[0].task_id
         gcs = StockGcs(f.robots[holder].udp_port, holder, f.key)
         gcs.mav.command_long_send(holder, 1, MAV.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 0, 0, 0, 0, 0, 0)
         sent_at = f.world.t
@@ -118,7 +118,7 @@ def test_disarm_stops_the_robot_within_a_cycle_and_its_task_is_done_by_another(t
         # the first cycle after the command: zero velocity to the base (one control period)
         after = [c for c in commands[holder] if c[0] > sent_at]
         assert after[0][1:] == (0.0, 0.0), after[:3]
-        assert not run.daemons[holder].agent.commitments and not run.daemons[holder].node.armed
+        assert not run.daemons[holder].core.agent.commitments and not run.daemons[holder].core.node.armed
         # someone else does the task (the operator sees it done)
         while f.world.t < 120 and not f.scenario.goal(RunView(run.op)):
             run.step()
@@ -357,17 +357,17 @@ def test_any_robot_gives_the_fleet_mission_and_an_empty_upload_withdraws_what_is
             (ENU, WAYPOINT, -2.0, -1.5), (ENU, WAYPOINT, 3.5, 3.5), (ENU, WAYPOINT, -3.5, 3.5)]
         # the nearest one gets done; then an empty upload withdraws the two still open, everywhere
         first = run.op.handovers[0].task_ids[0]
-        while f.world.t < 60 and run.daemons[4].node.table.state(first) != 1:
+        while f.world.t < 60 and run.daemons[4].core.node.table.state(first) != 1:
             run.step()
         ack = stock_upload(g, [], run.step)
         assert ack is not None and ack.type == MAV.MAV_MISSION_ACCEPTED
         for _ in range(10):
             run.step()
         for d in run.daemons.values():
-            states = sorted(e.state for e in d.node.table.entries.values())
+            states = sorted(e.state for e in d.core.node.table.entries.values())
             assert states == [2, 2, 3], states             # withdrawn, withdrawn, and the done one cleared
-            assert not d.agent.commitments                 # nobody drives to a withdrawn task
-            assert d.node.table.listing() == []            # the next download is empty
+            assert not d.core.agent.commitments                 # nobody drives to a withdrawn task
+            assert d.core.node.table.listing() == []            # the next download is empty
         texts = [m.text for m in g.got if m.get_type() == "STATUSTEXT"]
         assert any("2 task(s) withdrawn" in t for t in texts), texts
     finally:
@@ -417,7 +417,7 @@ def test_a_fleet_config_hands_tasks_in_at_their_times(tmp_path):
         seen_at = {}
         while f.world.t < 90:
             run.step()
-            for tid in run.daemons[2].node.table.entries:
+            for tid in run.daemons[2].core.node.table.entries:
                 seen_at.setdefault(tid, f.world.t)
             if f.scenario.goal(RunView(run.op)):
                 break

@@ -41,7 +41,7 @@ from runtime.fleet.messages import OPEN, TableRequest
 from runtime.log import get_logger
 
 if TYPE_CHECKING:
-    from runtime.daemon import Daemon
+    from runtime.robot.ports import RobotPort
 
 FRAME_LOCAL_NED, FRAME_LOCAL_ENU = 1, 4
 MAV_CMD_COMPONENT_ARM_DISARM = 400
@@ -52,17 +52,21 @@ STATUSTEXT_LEN = 50
 
 
 class GroundServices:
-    def __init__(self, daemon: "Daemon"):
-        self.d = daemon
-        link = daemon.link
-        self.mav = link.mav
-        self.m = link.module
-        self.log = get_logger("comms.ground", daemon.id)
-        self.mission = M.MissionServer(self.mav, daemon.id, on_upload=self._on_upload, on_clear=self._on_clear,
+    """``port``: the robot as a ground station may see and ask it (:class:`~runtime.robot.ports.RobotPort`).
+    ``radio``: where replies and reports go (``send_to(msg, addr)``, ``send_gcs(msg)``), with the MAVLink
+    encoder ``mav`` and dialect ``module``."""
+
+    def __init__(self, port: "RobotPort", radio):
+        self.port = port
+        self.radio = radio
+        self.mav = radio.mav
+        self.m = radio.module
+        self.log = get_logger("comms.ground", port.robot_id)
+        self.mission = M.MissionServer(self.mav, port.robot_id, on_upload=self._on_upload, on_clear=self._on_clear,
                                        items=self._items, plan_id=lambda mission_type: self._plan_id(),
                                        validate=self._validate)
-        self.params = ParamTable(_params(daemon))
-        self.gcs = GcsServices(self.mav, daemon.id, 1, self.params)
+        self.params = ParamTable(_params(port, self._out_extend))
+        self.gcs = GcsServices(self.mav, port.robot_id, 1, self.params)
         self.gcs.register_command(MAV_CMD_COMPONENT_ARM_DISARM, self._arm_disarm)
         self.gcs.register_message(self.m.MAVLINK_MSG_ID_HOME_POSITION, self._home)
         self._out: list = []                   # messages to peers produced while serving (new tasks ...)
@@ -73,14 +77,16 @@ class GroundServices:
         self._arm_after_reset = False
 
     # ------------------------------------------------------------------ requests
-    def serve(self, now: float) -> list:
-        """Answer what ground stations sent since the last cycle; returns messages for the peers."""
-        link = self.d.link
-        inbox, link.gcs_inbox = link.gcs_inbox, []
+    def _out_extend(self, msgs: list) -> None:
+        self._out.extend(msgs)
+
+    def serve(self, now: float, inbox) -> list:
+        """Answer what ground stations sent since the last cycle (``(message, source address)`` pairs); returns
+        messages for the peers."""
         replies = []
         for msg, addr in inbox:
             if isinstance(msg, TableRequest):
-                replies += [(r, addr) for r in self.d.node.answer_table(msg.sender)]
+                replies += [(r, addr) for r in self.port.answer_table(msg.sender)]
             elif msg.get_type().startswith("MISSION_"):
                 replies += self.mission.handle(msg, now, addr)
             else:
@@ -88,7 +94,7 @@ class GroundServices:
         replies += self.mission.tick(now)
         replies += self.gcs.tick(now)
         for msg, addr in replies:
-            link.send_to(msg, addr)
+            self.radio.send_to(msg, addr)
         for ev in self.mission.pop_events():
             if ev.kind == "refused":
                 self._text(4, ev.reason)                # MAV_SEVERITY_WARNING
@@ -98,15 +104,15 @@ class GroundServices:
         return out
 
     def _validate(self, items: list[M.MissionItem]) -> tuple[int, str] | None:
-        kinds = self.d.method.task_kinds
-        pose = self.d.pose()
+        kinds = self.port.task_kinds
+        pose = self.port.pose()
         for it in items:
             what = f"item {it.seq}"
             kind = T.kind_of_command(it.command)
             if kind is None or kind.KIND not in kinds:
                 takes = sorted(c for k in kinds for c in T.kind(k).COMMANDS)
                 return M.UNSUPPORTED, (f"{what}: command {it.command} is not a task for allocation "
-                                       f"'{self.d.method.name}' (takes commands {takes})")
+                                       f"'{self.port.method_name}' (takes commands {takes})")
             xy = self._to_fleet(it)
             if xy is None:
                 return 2, f"{what}: frame {it.frame} not supported (global, LOCAL_NED or LOCAL_ENU)"
@@ -114,13 +120,13 @@ class GroundServices:
                 kind.from_item(it.command, (it.param1, it.param2, it.param3, it.param4), *xy)
             except ValueError as e:
                 return 6, f"{what}: {e}"                # MAV_MISSION_INVALID_PARAM1
-            why = self.d.planner.refuse(pose, *xy)
+            why = self.port.refuse(pose, *xy)
             if why:
                 return 10, f"{what} refused: {why}"     # MAV_MISSION_INVALID_PARAM5_X
         return None
 
     def _on_upload(self, items: list[M.MissionItem]) -> int:
-        listing = self.d.node.table.listing()
+        listing = self.port.listing()
         new = []
         for it in items:
             x, y = self._to_fleet(it)
@@ -128,30 +134,30 @@ class GroundServices:
             same = it.seq < len(listing) and _same(listing[it.seq], it.command, params, x, y)
             if not same:
                 new.append((it.command, it.frame, params, x, y))
-        now = self.d._last_step or 0.0
+        now = self.port.now
         if new:
-            self._out += self.d.node.add_items(new, now)
+            self._out += self.port.hand_in(new, now)
         self._text(6, f"mission: {len(new)} task(s) added, {len(items) - len(new)} already known")
         return self._plan_id()
 
     def _on_clear(self, mission_type: int) -> None:
-        self._out += self.d.node.clear(self.d._last_step or 0.0)
+        self._out += self.port.clear(self.port.now)
 
     def _items(self, mission_type: int) -> list[M.MissionItem]:
         if mission_type != M.MISSION:
             return []
         out = []
-        for seq, e in enumerate(self.d.node.table.listing()):
+        for seq, e in enumerate(self.port.listing()):
             x, y = self._from_fleet(e.frame, e.x, e.y)
             out.append(M.MissionItem(seq, e.frame, e.command, *e.params, x, y, 0.0, True, M.MISSION))
         return out
 
     def _plan_id(self) -> int:
-        return self.d.node.table.digest
+        return self.port.digest
 
     def _to_fleet(self, it: M.MissionItem) -> tuple[float, float] | None:
         if it.frame in M.GLOBAL_FRAMES:
-            d = self.d.cfg.datum
+            d = self.port.datum
             e, n, _ = pymap3d.geodetic2enu(it.x, it.y, d.alt, d.lat, d.lon, d.alt)
             return float(e), float(n)
         if it.frame == FRAME_LOCAL_ENU:
@@ -162,7 +168,7 @@ class GroundServices:
 
     def _from_fleet(self, frame: int, x: float, y: float) -> tuple[float, float]:
         if frame in M.GLOBAL_FRAMES:
-            d = self.d.cfg.datum
+            d = self.port.datum
             lat, lon, _ = pymap3d.enu2geodetic(x, y, 0.0, d.lat, d.lon, d.alt)
             return float(lat), float(lon)
         if frame == FRAME_LOCAL_NED:
@@ -171,7 +177,7 @@ class GroundServices:
 
     def _home(self):
         """HOME_POSITION: the fleet frame's origin (the datum), where a ground station centres its map."""
-        d = self.d.cfg.datum
+        d = self.port.datum
         return self.mav.home_position_encode(int(round(d.lat * 1e7)), int(round(d.lon * 1e7)), int(round(d.alt * 1000)),
                                              0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0)
 
@@ -179,45 +185,44 @@ class GroundServices:
         p1 = float(msg.param1)
         if p1 not in (0.0, 1.0):
             return MAV_RESULT_DENIED
-        reset = getattr(self.d.base, "reset_faults", None)
-        self._arm_after_reset = p1 == 1.0 and reset is not None and reset(now)    # arms once the faults clear
+        self._arm_after_reset = p1 == 1.0 and self.port.reset_faults(now)    # arms once the faults clear
         if self._arm_after_reset:
             self._text(4, "base fault reset requested")
         else:
-            self._out += self.d.node.set_armed(p1 == 1.0, now)
+            self._out += self.port.set_armed(p1 == 1.0, now)
         return MAV_RESULT_ACCEPTED
 
     def _base_faults(self, now: float) -> None:
-        faults = tuple(getattr(self.d.base.sensors, "faults", ()))
+        faults = self.port.faults()
         if faults == self._faults:
             return
         new = [f for f in faults if f not in self._faults]
         self._faults = faults
         if new:
             self._text(2, "base fault: " + ", ".join(new))                          # MAV_SEVERITY_CRITICAL
-            if getattr(self.d.base, "latches_faults", False):      # it stands until reset: its tasks go back
-                self._out += self.d.node.set_armed(False, now)
+            if self.port.base.latches_faults:         # it stands until reset: its tasks go back
+                self._out += self.port.set_armed(False, now)
         elif not faults:
             self._text(5, "base faults cleared")
             if self._arm_after_reset:
                 self._arm_after_reset = False
-                self._out += self.d.node.set_armed(True, now)
+                self._out += self.port.set_armed(True, now)
 
     # ------------------------------------------------------------------ reports
     def report(self, now: float) -> None:
-        link, node = self.d.link, self.d.node
+        radio, port = self.radio, self.port
         self._base_faults(now)
-        for n in node.pop_notices():
+        for n in port.pop_notices():
             if n.reached_seq is not None:
                 self.reached.append(n.reached_seq)
-                link.send_gcs(self.mav.mission_item_reached_encode(n.reached_seq))
+                radio.send_gcs(self.mav.mission_item_reached_encode(n.reached_seq))
             self._text(n.severity, n.text)
         if now < self._next_report:
             return
         self._next_report = now + REPORT_PERIOD
-        link.send_gcs(node.robot_state())
-        listing = node.table.listing()
-        held = node.held()
+        radio.send_gcs(port.robot_state())
+        listing = port.listing()
+        held = port.held()
         seq = next((i for i, e in enumerate(listing) if held and e.id == held[0]), len(listing))
         total = len(listing)
         m = self.m
@@ -229,21 +234,21 @@ class GroundServices:
             state = m.MISSION_STATE_NOT_STARTED
         else:
             state = m.MISSION_STATE_NO_MISSION
-        link.send_gcs(self.mav.mission_current_encode(seq, total, state, 0))
+        radio.send_gcs(self.mav.mission_current_encode(seq, total, state, 0))
 
     def _text(self, severity: int, text: str) -> None:
         """One STATUSTEXT, or several chunks of 50 characters with a common ``id`` and their ``chunk_seq``
         (MAVLink 2's way of sending a longer line; a last chunk shorter than 50, or empty, ends it)."""
         data = text.encode()
         if len(data) <= STATUSTEXT_LEN:
-            self.d.link.send_gcs(self.mav.statustext_encode(severity, data))
+            self.radio.send_gcs(self.mav.statustext_encode(severity, data))
         else:
             self._text_id = self._text_id % 0xFFFF + 1
             chunks = [data[i:i + STATUSTEXT_LEN] for i in range(0, len(data), STATUSTEXT_LEN)]
             if len(chunks[-1]) == STATUSTEXT_LEN:
                 chunks.append(b"")
             for k, chunk in enumerate(chunks):
-                self.d.link.send_gcs(self.mav.statustext_encode(severity, chunk, self._text_id, k))
+                self.radio.send_gcs(self.mav.statustext_encode(severity, chunk, self._text_id, k))
         self.log.info("%s", text)
 
 
@@ -256,21 +261,17 @@ def _eq(a: float, b: float) -> bool:
     return (math.isnan(a) and math.isnan(b)) or abs(a - b) <= 1e-6 * max(1.0, abs(a))
 
 
-def _params(d: "Daemon") -> list[Param]:
-    """The robot's tunables a ground station may read and set; each takes effect at once."""
-    ex = d.executive
-    t = ex.ctx.tunables
-    vmax = getattr(getattr(d.base, "footprint", None), "max_speed", 0.5)
+def _params(port: "RobotPort", out) -> list[Param]:
+    """The robot's tunables a ground station may read and set; each takes effect at once.  ``out`` takes the
+    messages for the peers that arming or disarming makes."""
+    t = port.tunables
+    vmax = port.base.max_speed
 
     def tune(name):
-        return lambda v: ex.tune(**{name: float(v)})
-
-    def set_speed(v):
-        ex.tune(cruise_speed=float(v))
-        d.estimator.profile = T.Profile(speed=float(v), radius=d.estimator.profile.radius)
+        return lambda v: port.tune(**{name: float(v)})
 
     return [
-        Param("CTL_CRUISE_SPD", float, 0.01, vmax, "cruise speed (m/s)", lambda: t.cruise_speed, set_speed),
+        Param("CTL_CRUISE_SPD", float, 0.01, vmax, "cruise speed (m/s)", lambda: t.cruise_speed, tune("cruise_speed")),
         Param("CTL_GOAL_TOL", float, 0.005, 5.0, "a goal is reached within this distance (m)",
               lambda: t.goal_tolerance, tune("goal_tolerance")),
         Param("CTL_LOOKAHEAD", float, 0.05, 10.0, "pure pursuit lookahead (m)", lambda: t.lookahead,
@@ -278,16 +279,15 @@ def _params(d: "Daemon") -> list[Param]:
         Param("CTL_MAX_TURN", float, 0.1, 10.0, "turn rate limit (rad/s)", lambda: t.max_turn_rate,
               tune("max_turn_rate")),
         Param("SYS_ARMED", int, 0, 1, "1: may drive and take tasks (MAV_CMD_COMPONENT_ARM_DISARM does the same)",
-              lambda: int(d.node.armed), lambda v: d.ground._out.extend(d.node.set_armed(bool(v), d._last_step or 0.0))),
-    ] + _option_params(d)
+              lambda: int(port.armed), lambda v: out(port.set_armed(bool(v), port.now))),
+    ] + _option_params(port.allocation_options)
 
 
-def _option_params(d: "Daemon") -> list[Param]:
+def _option_params(opts) -> list[Param]:
     """The allocation method's numeric options, read-only here: the agent is built with them (ALLOC_*)."""
     import dataclasses
 
     out = []
-    opts = d.cfg.allocation
     for f in dataclasses.fields(opts):
         v = getattr(opts, f.name)
         if isinstance(v, bool) or not isinstance(v, (int, float)):

@@ -285,9 +285,9 @@ def drive_mission(fleet_path: Path, run_dir: Path, method: str, timeout: float) 
         bids = {}
         events = list(res["events"])
         for rid, r in f.robots.items():
-            bid, offers = _held_bid(r.daemon.agent)
+            bid, offers = _held_bid(r.daemon.core.agent)
             bids[rid] = bid
-            s = r.daemon.planner.stats
+            s = r.daemon.core.planner.stats
             if s.plan_fallbacks or s.plan_failures or s.bid_fallbacks:
                 events.append(f"robot {rid}: {s.bid_fallbacks} bid cost(s) the first RRT tree missed, "
                               f"{s.plan_fallbacks} path(s) from A* after RRT missed, {s.plan_failures} without any path")

@@ -1,0 +1,307 @@
+"""The robot core (sans-IO): the fleet node (task table + allocation agent), the executive, the pose estimate,
+the planner and the robot's ground-station services, advanced by one call.
+
+:meth:`RobotCore.step` takes the time, what the robot sensed (:class:`Sensed`: odometry, fixes, the base's
+sensors) and what arrived (:class:`Inbox`: peers' messages, ground-station requests, peers the link lost) and
+returns an :class:`Output`: the wheel command, the frames to send in order, and whether the base is asked to reset
+its faults.  It opens no socket or device, never sleeps and never reads a clock, so the same object runs in the
+daemon (:mod:`runtime.daemon`, an I/O shell), in the lock-step SITL and in the in-process fleets.  Anchors: h11's
+``Connection`` (the protocol state is one object, I/O outside); ArduPilot's vehicle code, the same on hardware
+and in SITL.
+
+One cycle, in order:
+1. sense: odometry and fixes into the pose filter;
+2. allocate: peers' messages to the fleet node, lost peers, ground-station requests, the agent's tick;
+3. execute: executors for the agent's commitments vote in the arbiter -> the command (zero when disarmed);
+   their progress back to the agent;
+4. report: telemetry, the robot's state and its task events to the ground stations.
+"""
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+
+from runtime.execution import peer_readings
+from runtime.log import get_logger
+from runtime.robot.ports import BaseFacts, RobotPort
+from runtime.robot.sensing import PoseEstimate
+
+PEERS, GCS, TO = "peers", "gcs", "to"          # Output.frames: ("peers", msg) | ("gcs", msg) | ("to", msg, addr)
+
+
+@dataclass
+class Sensed:
+    """What the robot sensed since the last cycle."""
+    odometry: tuple[float, float] | None = None    # (v m/s, w rad/s) when the base gave a new reading
+    fixes: Sequence = ()                           # GPS fixes (``valid``, ``lat``, ``lon``, ``alt``)
+    sensors: object = None                         # the base's BaseSensors: bumpers, ranges, battery, faults
+
+
+@dataclass
+class Inbox:
+    """What arrived since the last cycle."""
+    peers: Sequence = ()                 # decoded peer messages, in arrival order
+    ground: Sequence = ()                # (pymavlink message, source address) from ground stations
+    lost: Sequence[int] = ()             # peers whose heartbeat timed out now
+    alive: Iterable[int] = ()            # peers heard so far (a peer never heard is lost after the start-up grace)
+    ground_present: bool = False         # a ground station is listening (telemetry counts what it sends)
+
+
+@dataclass
+class Output:
+    command: tuple[float, float] = (0.0, 0.0)      # (v, w) for the base
+    frames: list = field(default_factory=list)     # what to send, in order
+    reset_faults: bool = False                     # ask the base to reset its latched faults
+
+    def peer_messages(self) -> list:
+        return [f[1] for f in self.frames if f[0] == PEERS]
+
+
+@dataclass
+class CoreStats:
+    cycles: int = 0
+    agent_sent: int = 0
+    agent_received: int = 0
+    peers_lost: list = field(default_factory=list)
+
+
+class Radio:
+    """Where the core's ground services and telemetry put what they send this cycle (in order), with the link's
+    HEARTBEAT fields, which the host copies onto its link.  Messages are encoded with the MAVLink ``mav``
+    (pymavlink's encoder for the fleet's dialect ``module``); nothing is packed or sent here."""
+
+    def __init__(self, mav, module, counters):
+        self.mav = mav
+        self.module = module
+        self.counters = counters          # the link's receive counters (SYS_STATUS reads them)
+        self.frames: list = []
+        self.present = False
+        self.base_mode = 0
+        self.custom_mode = 0
+        self.system_status = 0
+
+    def send_gcs(self, mavmsg) -> bool:
+        self.frames.append((GCS, mavmsg))
+        return self.present
+
+    def send_to(self, mavmsg, addr) -> bool:
+        self.frames.append((TO, mavmsg, addr))
+        return True
+
+    def heartbeat(self):
+        m = self.module
+        return self.mav.heartbeat_encode(m.MAV_TYPE_GROUND_ROVER, m.MAV_AUTOPILOT_GENERIC,
+                                         self.base_mode, self.custom_mode, self.system_status)
+
+
+class RobotCore:
+    """One robot's logic.  ``base``: what the core knows of the base (:class:`BaseFacts`).  ``mavlink``:
+    ``(mav, module, counters)`` to serve ground stations over MAVLink (None: no ground services, as in
+    the in-process fleets, whose operator hands tasks in through :attr:`port`)."""
+
+    def __init__(self, cfg, base: BaseFacts, *, mavlink=None):
+        from runtime.allocation import registry
+        from runtime.allocation.agent import AgentContext
+        from runtime.execution.executive import ExecContext, Executive, Tunables
+        from runtime.fleet.node import FleetNode
+        from runtime.planning.robot_planner import RobotPlanner, TravelEstimator
+        from runtime.tasks import Profile
+
+        self.cfg = cfg
+        self.id = cfg.robot.id
+        self.base = base
+        self.log = get_logger("daemon", self.id)
+        self.stats = CoreStats()
+        self.sensing = PoseEstimate(cfg, self.id)
+        self.ekf = self.sensing.ekf
+        c = cfg.control
+        radius = float(base.radius)
+        self.planner = RobotPlanner.from_config(cfg, radius)
+        self.estimator = TravelEstimator(self.planner, Profile(speed=c.cruise_speed, radius=radius), self.pose)
+        self.method = registry.method(cfg.allocation.method)
+        peers = tuple(p.id for p in cfg.comms.peers)
+        self.agent = self.method.make(AgentContext(self.id, peers, self.estimator, cfg.allocation, cfg.base))
+        self.node = FleetNode(self.id, self.agent, armed=cfg.robot.armed, peers=list(peers))
+        self.executive = Executive(ExecContext(self.planner, Tunables(c.cruise_speed, c.lookahead, c.max_turn_rate,
+                                                                      c.goal_tolerance), self.log, radius,
+                                               seed=self.id, agent=self.agent, robot_id=self.id))
+        self._perceive = getattr(self.agent, "perceive", None)    # agents that read the robot's pose and ranges
+        self.port = RobotPort(self)
+        self.radio = self.ground = self.telemetry = None
+        if mavlink is not None:
+            from runtime.comms.ground import GroundServices
+            from runtime.comms.telemetry import GcsTelemetry
+            self.radio = Radio(*mavlink)
+            self.telemetry = GcsTelemetry(self.radio, self.id, cfg.datum, armed=cfg.robot.armed)
+            self.ground = GroundServices(self.port, self.radio)
+        self.period = 1.0 / c.rate
+        self.sensors = None                      # the base's sensors as last sensed
+        self.last_step: float | None = None
+        self._first_cycle: float | None = None
+        self._heard: set[int] = set()            # peers heard at least once
+        self._never_heard_reported = False
+        self._held_back: list = []               # peer messages for the agent that came in service()
+        self._frames: list = []
+        self._reset = False
+
+    # ------------------------------------------------------------------ views
+    def pose(self) -> tuple[float, float, float] | None:
+        return self.sensing.pose()
+
+    def velocity(self) -> tuple[float, float]:
+        return self.sensing.velocity()
+
+    @property
+    def map(self):
+        return self.planner.world
+
+    # ------------------------------------------------------------------ one cycle
+    def step(self, now: float, sensed: Sensed, inbox: Inbox) -> Output:
+        self.stats.cycles += 1
+        dt = 0.0 if self.last_step is None else now - self.last_step
+        self.last_step = now
+        self.sensors = sensed.sensors
+        self.sensing.update(dt, sensed.odometry, sensed.fixes)
+        if self._perceive is not None:
+            self._perceive(self.pose(), getattr(self.sensors, "ranges", ()), now)
+        self._peers(self._comms(now, inbox, tick=True))
+        command = self._execute(now)
+        self._report(now, inbox)
+        return self._output(command)
+
+    def service(self, now: float, inbox: Inbox) -> Output:
+        """Messages only, no control cycle: peers' task tables and ground-station requests (a SITL operator hands
+        tasks in before the first cycle this way).  Peer messages for the agent wait for the next step."""
+        self._peers(self._comms(now, inbox, tick=False))
+        return self._output((0.0, 0.0))
+
+    def _output(self, command) -> Output:
+        frames, self._frames = self._frames, []
+        if self.radio is not None:
+            frames += self.radio.frames       # ground frames were merged in order by _peers; the rest now
+            self.radio.frames = []
+        reset, self._reset = self._reset, False
+        return Output(command, frames, reset)
+
+    def _peers(self, msgs: list) -> None:
+        """Queue ``msgs`` for the peers, after whatever the ground services said before them."""
+        if self.radio is not None:
+            self._frames += self.radio.frames
+            self.radio.frames = []
+        if msgs:
+            self.stats.agent_sent += len(msgs)
+            self._frames += [(PEERS, m) for m in msgs]
+
+    def _comms(self, now: float, inbox: Inbox, tick: bool) -> list:
+        pose = self.pose()
+        node = self.node
+        node.begin(None if pose is None else (pose[0], pose[1]))
+        out = []
+        held, self._held_back = self._held_back, []
+        for msg in held + list(inbox.peers):
+            if not tick and _for_agent(msg):
+                self._held_back.append(msg)           # service(): the agent hears it at the next step
+                continue
+            self.stats.agent_received += 1
+            out += node.on_message(msg, now)
+        if tick:
+            for lost in inbox.lost:
+                self.stats.peers_lost.append(lost)
+                self.log.warning("peer %d lost (no heartbeat for %.1f s): re-auctioning its work",
+                                 lost, self.cfg.comms.heartbeat_timeout)
+                out += node.on_peer_lost(lost, now)
+            for lost in self._never_heard(now, inbox.alive):
+                self.stats.peers_lost.append(lost)
+                self.log.warning("peer %d never heard in %.1f s (comms.startup_grace): treating it as lost",
+                                 lost, self.cfg.comms.startup_grace)
+                out += node.on_peer_lost(lost, now)
+        if self.ground is not None:
+            self.radio.present = inbox.ground_present
+            out += self.ground.serve(now, inbox.ground)
+        if tick:
+            out += node.tick(now)
+        return out
+
+    def _never_heard(self, now: float, alive: Iterable[int]) -> list[int]:
+        """Configured peers not heard once within ``comms.startup_grace`` of the first cycle, reported once:
+        the link only times out peers it has heard, and a robot that never came up must not hold the
+        allocation back (the epsilon auction waits for every live peer's rung).  If it turns up later, its
+        first message makes it live again."""
+        if self._never_heard_reported:
+            return []
+        if self._first_cycle is None:
+            self._first_cycle = now
+        self._heard.update(alive)
+        if now - self._first_cycle < self.cfg.comms.startup_grace:
+            return []
+        self._never_heard_reported = True
+        return sorted(p.id for p in self.cfg.comms.peers if p.id not in self._heard)
+
+    def _execute(self, now: float) -> tuple[float, float]:
+        """Executors for the agent's commitments vote in the arbiter; the command (zero when disarmed) goes to the
+        base; their progress goes back to the agent."""
+        ex = self.executive
+        ex.sync(self.agent.commitments if self.node.armed else (), now)
+        ex.make_way = self.node.armed
+        pose, sensors = self.pose(), self.sensors
+        ex.peers = () if pose is None or self.base.ranging or not ex.idle else \
+            peer_readings.readings(pose, self.node.positions, now, ex.ctx.radius)    # idle, no range sensors
+        (v, w), progress = ex.step(pose, sensors, now)
+        out = []
+        for p in progress:
+            out += self.node.on_progress(p, now)
+        self._peers(out)
+        return (v, w)
+
+    def _report(self, now: float, inbox: Inbox) -> None:
+        if self.ground is None:
+            return
+        self.radio.present = inbox.ground_present
+        commitments = self.agent.commitments
+        self.telemetry.armed = self.node.armed
+        self.telemetry.tick(now, self.pose(), self.velocity(), self.sensors,
+                            commitments[0].task_id if commitments else None)
+        self.ground.report(now)
+
+    # ------------------------------------------------------------------ requests from the ground services
+    def request_fault_reset(self, now: float) -> bool:
+        if not (self.base.latches_faults and getattr(self.sensors, "faults", ())):
+            return False
+        self._reset = True
+        return True
+
+    def tune(self, **changes: float) -> None:
+        from runtime.tasks import Profile
+        self.executive.tune(**changes)
+        if "cruise_speed" in changes:
+            self.estimator.profile = Profile(speed=float(changes["cruise_speed"]), radius=self.estimator.profile.radius)
+
+    # ------------------------------------------------------------------ status
+    def snapshot(self) -> dict:
+        """The core's part of a status snapshot (the host adds its devices' and links' counters)."""
+        s, p = self.stats, self.planner.stats
+        return {
+            "robot": self.id, "pose": self.pose(), "state": self.node.state,
+            "tasks": [c.task_id for c in self.agent.commitments],
+            "converged": bool(self.agent.converged), "arrived": self.executive.arrived,
+            "cycles": s.cycles, "agent_sent": s.agent_sent, "agent_received": s.agent_received,
+            "peers_lost": s.peers_lost,
+            "gps_rejected": getattr(self.ekf, "gps_rejected", 0),
+            "relocalised": self.ekf.stats.relocalised,     # the pose filter gave up its position and heading
+            "made_way": self.executive.made_way,           # idle cycles spent moving off for another robot
+            "plan_fallbacks": p.plan_fallbacks, "plan_failures": p.plan_failures, "bid_fallbacks": p.bid_fallbacks,
+            "table": len(self.node.table.entries),
+            "fleet_dropped": dict(self.node.dropped),
+            "agent_dropped": _drops(self.agent),
+        }
+
+
+def _drops(agent) -> dict:
+    """What the allocation agent dropped, by reason (a family without reasons: its total)."""
+    d = getattr(agent, "dropped", {})
+    return dict(d) if isinstance(d, dict) else {"dropped": d}
+
+
+def _for_agent(msg) -> bool:
+    from runtime.fleet.messages import FLEET_MESSAGES
+    return not isinstance(msg, FLEET_MESSAGES)

@@ -23,6 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT)) if str(ROOT) not in sys.path else None
 
 from runtime import config as C  # noqa: E402
+from sitl import fleet_config as FC  # noqa: E402
 from sitl import launcher  # noqa: E402
 from sitl.ports import free_udp_base  # noqa: E402
 from sitl.world import World  # noqa: E402
@@ -45,7 +46,7 @@ def fleet_file(tmp: Path, n: int, idle: bool = False) -> Path:
 
 
 def world_rate(n: int, seconds: float = 20.0) -> dict:
-    fleet = C.load_fleet(FLEETS[n])
+    fleet = FC.load_fleet(FLEETS[n])
     world = World(C.load_world(fleet.world), seed=1)
     try:
         for r in fleet.robots:

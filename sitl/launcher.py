@@ -30,6 +30,7 @@ from pathlib import Path
 import yaml
 
 from runtime import config as C
+from sitl import fleet_config as FC
 from runtime.clock import ClockPublisher, ScaledClock, SimClock
 from runtime.log import get_logger
 
@@ -60,7 +61,7 @@ class SimRobot:
 @dataclass
 class Fleet:
     """World, devices and (optionally) daemons of one SITL run."""
-    fleet: C.FleetConfig
+    fleet: FC.FleetConfig
     world_cfg: C.WorldConfig
     robots: dict[int, SimRobot]
     world: object
@@ -125,7 +126,7 @@ class Fleet:
 INSTANCE_STRIDE = 100      # ports an --instance moves a fleet by (as ArduPilot's SITL does, by 10 per vehicle)
 
 
-def check_instance(fleet: C.FleetConfig, instance: int) -> None:
+def check_instance(fleet: FC.FleetConfig, instance: int) -> None:
     """InputError naming ``--instance`` unless every port of ``fleet`` moved to ``instance`` stays <= 65535."""
     _, gcs_port = C.parse_hostport(fleet.gcs, fleet.source, "gcs")
     top = max(fleet.base_port + max(r.id for r in fleet.robots), gcs_port) + INSTANCE_STRIDE * instance
@@ -134,7 +135,7 @@ def check_instance(fleet: C.FleetConfig, instance: int) -> None:
                             f"--instance {instance})", instance)
 
 
-def claim_ports(fleet: C.FleetConfig, instance: int = 0) -> C.FleetConfig:
+def claim_ports(fleet: FC.FleetConfig, instance: int = 0) -> FC.FleetConfig:
     """The fleet moved to instance ``instance`` (its ground-station and robot ports + INSTANCE_STRIDE x N), once
     every robot's MAVLink port is checked free: a busy one is an InputError naming it (another fleet runs)."""
     import dataclasses
@@ -167,7 +168,7 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
     ``comms.loss_burst``."""
     from sitl import scenarios
 
-    fleet = claim_ports(C.load_fleet(fleet_path), instance)
+    fleet = claim_ports(FC.load_fleet(fleet_path), instance)
     world_cfg = C.load_world(fleet.world)
     templates = {}
     for r in fleet.robots:

@@ -9,14 +9,14 @@ from __future__ import annotations
 import dataclasses
 
 from runtime import argcheck
-from runtime import config as C
+from sitl import fleet_config as FC
 
 MAX_INSTANCE = 400
 
 
 def fleet_range(name: str) -> tuple[float | None, float | None]:
     """The ``[lo, hi]`` range of FleetConfig field ``name``."""
-    meta = next(f.metadata for f in dataclasses.fields(C.FleetConfig) if f.name == name)
+    meta = next(f.metadata for f in dataclasses.fields(FC.FleetConfig) if f.name == name)
     return meta.get("lo"), meta.get("hi")
 
 
@@ -31,4 +31,4 @@ def check(args) -> None:
     argcheck.output_file(args.json, "--json")
     if args.instance:
         from sitl.launcher import check_instance
-        check_instance(C.load_fleet(args.fleet), args.instance)
+        check_instance(FC.load_fleet(args.fleet), args.instance)

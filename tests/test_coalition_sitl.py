@@ -48,7 +48,7 @@ class Watch:
             for ev in d.core.node.events:
                 if ev.what == DONE and ev.task not in self.done_at:
                     self.done_at[ev.task] = f.world.t
-        table = ds[min(ds)].node.table.entries
+        table = ds[min(ds)].core.node.table.entries
         for task, who in jobs.items():
             coalitions = set(who.values())
             assert len(coalitions) == 1, f"t={f.world.t:.2f}: task {task} held by two coalitions {who}"
@@ -61,7 +61,7 @@ class Watch:
                 self.closest[task], self.coalition[task] = spread, robots
         if self.kill_at is not None and self.victim is None and f.world.t >= self.kill_at:
             for rid in sorted(ds, reverse=True):
-                job = ds[rid].agent.member.job
+                job = ds[rid].core.agent.member.job
                 if rid != min(ds) and job is not None and not job.arrived:
                     self.victim = (rid, job.task)
                     run.kill(rid)
@@ -127,10 +127,10 @@ def test_a_member_killed_mid_drive_has_its_task_offered_again_and_done(tmp_path)
     victim, task = watch.victim
     assert res["goal_met"] and res["valid"], res
     auctioneer = daemons[min(daemons)]
-    auct = auctioneer.agent
+    auct = auctioneer.core.agent
     assert victim in auctioneer.stats.peers_lost                           # by heartbeat timeout
     assert any(ev.what == RELEASED and ev.task == task and f"robot {victim} lost" in ev.detail
-               for ev in auctioneer.node.events)
+               for ev in auctioneer.core.node.events)
     assert sum(1 for r in auct.rounds if task in r.winners) >= 2            # won again in a later round
     assert victim not in watch.coalition[task]
     print("killed", victim, "task", task, "done at", round(watch.done_at[task], 1), "by", watch.coalition[task])

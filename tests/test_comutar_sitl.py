@@ -9,6 +9,7 @@ import pytest
 import yaml
 
 from runtime import config as C
+from sitl import fleet_config as FC
 from runtime.config.build import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -22,7 +23,7 @@ def _load(tmp_path, **changes):
     data = yaml.safe_load(path.read_text())
     data["scenario"].update(changes)
     path.write_text(yaml.safe_dump(data))
-    return C.load_fleet(path)
+    return FC.load_fleet(path)
 
 
 @pytest.mark.parametrize("changes, key", [({"borrower": 9}, "scenario.borrower"), ({"avoid": [1, 7]}, "scenario.avoid[1]"),

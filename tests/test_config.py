@@ -11,6 +11,7 @@ import yaml
 from hypothesis import given, settings, strategies as st
 
 from runtime import config as C
+from sitl import fleet_config as FC
 from runtime.config import ConfigError
 from runtime.drivers.registry import BASES
 
@@ -33,7 +34,7 @@ def test_shipped_world_configs_load(path):
 
 @pytest.mark.parametrize("path", sorted((CONFIGS / "fleets").glob("*.yaml")), ids=lambda p: p.name)
 def test_shipped_fleet_configs_load(path):
-    fleet = C.load_fleet(path)
+    fleet = FC.load_fleet(path)
     C.load_world(fleet.world)
     for r in fleet.robots:
         C.load_robot(fleet.template(r.id))
@@ -98,13 +99,13 @@ def test_fleet_checks_paths_and_ids(tmp_path):
     bad = dict(good, world="../nowhere.yaml")
     path = _write(tmp_path, bad, "fleet.yaml")
     with pytest.raises(ConfigError, match=r"fleet.yaml: world: expected a path"):
-        C.load_fleet(path)
+        FC.load_fleet(path)
     dup = dict(good, world=str(CONFIGS / "worlds" / "arena_10m.yaml"),
                robot=str(CONFIGS / "robots" / "create2.yaml"),
                robots=[{"id": 1}, {"id": 1}])
     path = _write(tmp_path, dup, "fleet.yaml")
     with pytest.raises(ConfigError, match="robots: expected unique robot ids"):
-        C.load_fleet(path)
+        FC.load_fleet(path)
 
 
 def test_cli_exits_2_with_one_line(tmp_path, capsys):
@@ -174,7 +175,7 @@ def test_bad_scenarios_name_the_key(tmp_path, scenario, key, expected):
                 scenario=scenario)
     path = _write(tmp_path, data, "fleet.yaml")
     with pytest.raises(ConfigError) as info:
-        C.load_fleet(path)
+        FC.load_fleet(path)
     assert str(info.value).startswith(f"{path}: {key}: expected") and expected in str(info.value), str(info.value)
 
 
@@ -281,7 +282,7 @@ def _fleet(tmp_path, **change):
 ])
 def test_impossible_fleets_name_the_key(tmp_path, change, key, expected):
     path = _fleet(tmp_path, **change)
-    msg = _one_config_error(path, C.load_fleet)
+    msg = _one_config_error(path, FC.load_fleet)
     assert msg.startswith(f"{path}: {key}: expected") and expected in msg, msg
 
 

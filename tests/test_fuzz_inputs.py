@@ -20,6 +20,7 @@ from hypothesis import HealthCheck, event, given, settings, strategies as st
 
 from runtime import cli
 from runtime import config as C
+from sitl import fleet_config as FC
 from runtime.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -183,7 +184,7 @@ def _load_robot_and_check(path):
 
 
 def _load_fleet_and_templates(path):
-    fleet = C.load_fleet(path)
+    fleet = FC.load_fleet(path)
     for r in fleet.robots:
         C.load_robot(fleet.template(r.id))
 

@@ -9,6 +9,7 @@ import pytest
 import yaml
 
 from runtime import config as C
+from sitl import fleet_config as FC
 from runtime.config.build import ConfigError
 from runtime.fleet.messages import DONE, OPEN
 from sitl.scenarios.base import Handover
@@ -50,7 +51,7 @@ def _scenario(tmp_path, fleet=FLEET, **changes) -> Scenario:
     data["scenario"].update(changes)
     path = tmp_path / "fleet.yaml"
     path.write_text(yaml.safe_dump(data))
-    fleet = C.load_fleet(path)
+    fleet = FC.load_fleet(path)
     return Scenario(fleet, C.load_world(fleet.world))
 
 
@@ -238,7 +239,7 @@ def test_a_killed_member_is_dropped_and_its_leader_auctions_again_and_the_whole_
     the leader's books say all 12 wu came in."""
     def books(run, res):
         mk = res.get("member_kill")
-        leader = run.daemons[mk["leader"]].node.agent if mk else None
+        leader = run.daemons[mk["leader"]].core.node.agent if mk else None
         return leader and (leader.finished.get(mk["task"]), leader.o, run.period)
 
     goal, why, res, got = _lockstep(tmp_path, FLEET_MEMBER, 300.0, books)
@@ -279,7 +280,7 @@ def test_the_fleets_peer_loss_or_the_runs_becomes_every_robots(tmp_path):
         f.close()
     bad = shipped_fleet(tmp_path, FLEET.name, peer_loss=2)
     with pytest.raises(ConfigError, match="peer_loss"):
-        C.load_fleet(bad)
+        FC.load_fleet(bad)
 
 
 @pytest.mark.slow

@@ -47,7 +47,7 @@ def stock_upload(gcs: StockGcs, items, step=None, timeout=10.0, answer=None):
 
 
 def _table(run):
-    return {tid: e.state for tid, e in run.daemons[min(run.daemons)].node.table.entries.items()}
+    return {tid: e.state for tid, e in run.daemons[min(run.daemons)].core.node.table.entries.items()}
 
 
 @pytest.mark.slow

@@ -1,4 +1,5 @@
-"""SITL fleet configs: the world, the robots (each from a robot template) and the scenario.
+"""SITL fleet configs: the world, the robots (each from a robot template) and the scenario.  The simulator's
+own config: a robot reads only its robot config (:mod:`runtime.config`).
 
 A fleet names a default robot template (``robot:``); a robot may name its own (``robots[i].robot``), so
 one fleet can mix bases.  ``scenario:`` is a union chosen by ``scenario.type`` (:mod:`sitl.scenarios`):

@@ -128,7 +128,7 @@ def test_a_member_killed_mid_drive_has_its_task_offered_again_and_done(tmp_path)
     assert res["goal_met"] and res["valid"], res
     auctioneer = daemons[min(daemons)]
     auct = auctioneer.core.agent
-    assert victim in auctioneer.stats.peers_lost                           # by heartbeat timeout
+    assert victim in auctioneer.core.stats.peers_lost                           # by heartbeat timeout
     assert any(ev.what == RELEASED and ev.task == task and f"robot {victim} lost" in ev.detail
                for ev in auctioneer.core.node.events)
     assert sum(1 for r in auct.rounds if task in r.winners) >= 2            # won again in a later round

@@ -15,7 +15,7 @@ from runtime import log
 
 # module that provides register(subparsers), in help order
 COMMANDS = (
-    "runtime.daemon",                    # mrta daemon ROBOT_CONFIG
+    "runtime.daemon_cli",                # mrta daemon ROBOT_CONFIG
     "sitl.launcher",                     # mrta sitl run FLEET_CONFIG
     "runtime.allocation.formation.assign_cli",     # mrta assign PROBLEM.json
     "runtime.allocation.coalition.wdp_cli",        # mrta wdp BIDS.json

@@ -138,7 +138,7 @@ def test_daemon_with_good_options_starts(tmp_path, no_daemon):
 
 def test_the_clock_barrier_names_a_folder_that_vanished(tmp_path):
     from runtime.config import ConfigError
-    from runtime.daemon import _wait_for_clock
+    from runtime.daemon_cli import _wait_for_clock
     with pytest.raises(ConfigError, match=r"clock: expected a folder to write clock.ready.3 in"):
         _wait_for_clock(str(tmp_path / "gone" / "clock"), 3, timeout=0.1)
 

@@ -1,0 +1,75 @@
+"""``mrta daemon ROBOT.yaml``: check the robot config, build the daemon (:mod:`runtime.daemon`) and run it on the
+wall clock, or on the simulator's clock in SITL."""
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from runtime import config as C
+from runtime import daemon as D
+from runtime.clock import Clock, ScaledClock, SharedClock, WallClock
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("daemon", help="run one robot's daemon from its robot config")
+    p.add_argument("config", help="robot config YAML")
+    p.add_argument("--check", action="store_true",
+                   help="run every check start-up runs (addresses, peers, map, signing key, base options) without "
+                        "opening a device or a socket, then exit: 0 ok, 2 with one line saying what is wrong")
+    p.add_argument("--speedup", type=float, default=None,
+                   help="SITL only: run on a scaled clock this many times faster than real time")
+    p.add_argument("--epoch", type=float, default=None,
+                   help="SITL only: monotonic-clock epoch shared with the simulator")
+    p.add_argument("--clock-file", default=None,
+                   help="SITL only: when built, write FILE.ready.ID, wait for FILE, then take the "
+                        "simulator's time from it")
+    p.add_argument("--duration", type=float, default=None, help="stop after this many (clock) seconds")
+    p.add_argument("--stats", default=None, help="write a JSON status snapshot here every second")
+    p.set_defaults(func=_main)
+
+
+def _wait_for_clock(path: str, robot_id: int, timeout: float = 120.0) -> None:
+    """SITL start barrier: say we are built, then wait for the simulator to publish its clock."""
+    try:
+        Path(f"{path}.ready.{robot_id}").touch()
+    except OSError as exc:
+        raise C.ConfigError(path, "clock", f"a folder to write {Path(path).name}.ready.{robot_id} in "
+                            f"({exc.strerror})") from None
+    deadline = time.monotonic() + timeout
+    while not Path(path).exists():
+        if time.monotonic() > deadline:
+            raise C.ConfigError(path, "clock", f"the simulator to start within {timeout:.0f} s")
+        time.sleep(0.01)
+
+
+def _check_args(args) -> None:
+    """The options, before anything starts: numbers in range, output files in folders that exist."""
+    from runtime import argcheck
+
+    argcheck.number(args.speedup, "--speedup", 0.0, lo_open=True)
+    argcheck.number(args.epoch, "--epoch")
+    argcheck.number(args.duration, "--duration", 0.0, lo_open=True)
+    argcheck.output_file(args.stats, "--stats")
+    argcheck.output_file(args.clock_file, "--clock-file")
+
+
+def _main(args) -> int:
+    _check_args(args)
+    cfg = C.load_robot(args.config)
+    C.validate_robot(cfg)             # what start-up needs, checked before any device or socket opens
+    if args.check:
+        print(f"{args.config}: ok (robot {cfg.robot.id}, base {cfg.base.type}, allocation {cfg.allocation.method})")
+        return 0
+    daemon = D.Daemon(cfg)
+    if args.clock_file:
+        _wait_for_clock(args.clock_file, cfg.robot.id)
+        clock: Clock = SharedClock(args.clock_file, args.speedup or 1.0)
+    elif args.speedup is not None or args.epoch is not None:
+        clock = ScaledClock(args.speedup or 1.0, args.epoch)
+    else:
+        clock = WallClock()
+    if cfg.comms.signing_key is None:
+        daemon.log.warning("MAVLink signing is off (comms.signing_key is not set): any host on the network can "
+                           "command this robot")
+    return D.run(daemon, clock, args.duration, args.stats)

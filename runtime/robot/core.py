@@ -35,6 +35,8 @@ class Sensed:
     odometry: tuple[float, float] | None = None    # (v m/s, w rad/s) when the base gave a new reading
     fixes: Sequence = ()                           # GPS fixes (``valid``, ``lat``, ``lon``, ``alt``)
     sensors: object = None                         # the base's BaseSensors: bumpers, ranges, battery, faults
+    pose: tuple[float, float, float] | None = None  # a pose from outside the filter (a motion-capture system, a
+                                                   # simulation's truth): the core takes it as its estimate
 
 
 @dataclass
@@ -52,6 +54,7 @@ class Output:
     command: tuple[float, float] = (0.0, 0.0)      # (v, w) for the base
     frames: list = field(default_factory=list)     # what to send, in order
     reset_faults: bool = False                     # ask the base to reset its latched faults
+    progress: list = field(default_factory=list)   # what the executors reported this cycle (arrived, loaded ...)
 
     def peer_messages(self) -> list:
         return [f[1] for f in self.frames if f[0] == PEERS]
@@ -97,9 +100,11 @@ class Radio:
 class RobotCore:
     """One robot's logic.  ``base``: what the core knows of the base (:class:`BaseFacts`).  ``mavlink``:
     ``(mav, module, counters)`` to serve ground stations over MAVLink (None: no ground services, as in
-    the in-process fleets, whose operator hands tasks in through :attr:`port`)."""
+    the in-process fleets, whose operator hands tasks in through :attr:`port`).  ``seed``: the robot's own random
+    choices (escape turns; default its id).  ``base_config``: what the agent is told the robot is (default the
+    config's ``base``; None: nothing)."""
 
-    def __init__(self, cfg, base: BaseFacts, *, mavlink=None):
+    def __init__(self, cfg, base: BaseFacts, *, mavlink=None, seed: int | None = None, base_config=...):
         from runtime.allocation import registry
         from runtime.allocation.agent import AgentContext
         from runtime.execution.executive import ExecContext, Executive, Tunables
@@ -120,11 +125,13 @@ class RobotCore:
         self.estimator = TravelEstimator(self.planner, Profile(speed=c.cruise_speed, radius=radius), self.pose)
         self.method = registry.method(cfg.allocation.method)
         peers = tuple(p.id for p in cfg.comms.peers)
-        self.agent = self.method.make(AgentContext(self.id, peers, self.estimator, cfg.allocation, cfg.base))
+        self.agent = self.method.make(AgentContext(self.id, peers, self.estimator, cfg.allocation,
+                                                   cfg.base if base_config is ... else base_config))
         self.node = FleetNode(self.id, self.agent, armed=cfg.robot.armed, peers=list(peers))
         self.executive = Executive(ExecContext(self.planner, Tunables(c.cruise_speed, c.lookahead, c.max_turn_rate,
                                                                       c.goal_tolerance), self.log, radius,
-                                               seed=self.id, agent=self.agent, robot_id=self.id))
+                                               seed=self.id if seed is None else seed, agent=self.agent,
+                                               robot_id=self.id))
         self._perceive = getattr(self.agent, "perceive", None)    # agents that read the robot's pose and ranges
         self.port = RobotPort(self)
         self.radio = self.ground = self.telemetry = None
@@ -136,6 +143,7 @@ class RobotCore:
             self.ground = GroundServices(self.port, self.radio)
         self.period = 1.0 / c.rate
         self.sensors = None                      # the base's sensors as last sensed
+        self._truth: tuple[float, float, float] | None = None     # Sensed.pose, when the host gives one
         self.last_step: float | None = None
         self._first_cycle: float | None = None
         self._heard: set[int] = set()            # peers heard at least once
@@ -146,7 +154,7 @@ class RobotCore:
 
     # ------------------------------------------------------------------ views
     def pose(self) -> tuple[float, float, float] | None:
-        return self.sensing.pose()
+        return self._truth if self._truth is not None else self.sensing.pose()
 
     def velocity(self) -> tuple[float, float]:
         return self.sensing.velocity()
@@ -161,13 +169,25 @@ class RobotCore:
         dt = 0.0 if self.last_step is None else now - self.last_step
         self.last_step = now
         self.sensors = sensed.sensors
-        self.sensing.update(dt, sensed.odometry, sensed.fixes)
+        self._truth = sensed.pose
+        if sensed.pose is None:
+            self.sensing.update(dt, sensed.odometry, sensed.fixes)
         if self._perceive is not None:
             self._perceive(self.pose(), getattr(self.sensors, "ranges", ()), now)
         self._peers(self._comms(now, inbox, tick=True))
-        command = self._execute(now)
+        command, progress = self._execute(now)
         self._report(now, inbox)
-        return self._output(command)
+        out = self._output(command)
+        out.progress = progress
+        return out
+
+    def receive(self, msg, now: float) -> list:
+        """One peer message at its own time, for hosts that deliver messages one by one (the in-memory bus);
+        returns the messages to send at that time."""
+        self.stats.agent_received += 1
+        out = self.node.on_message(msg, now)
+        self.stats.agent_sent += len(out)
+        return out
 
     def service(self, now: float, inbox: Inbox) -> Output:
         """Messages only, no control cycle: peers' task tables and ground-station requests (a SITL operator hands
@@ -237,7 +257,7 @@ class RobotCore:
         self._never_heard_reported = True
         return sorted(p.id for p in self.cfg.comms.peers if p.id not in self._heard)
 
-    def _execute(self, now: float) -> tuple[float, float]:
+    def _execute(self, now: float) -> tuple[tuple[float, float], list]:
         """Executors for the agent's commitments vote in the arbiter; the command (zero when disarmed) goes to the
         base; their progress goes back to the agent."""
         ex = self.executive
@@ -251,7 +271,7 @@ class RobotCore:
         for p in progress:
             out += self.node.on_progress(p, now)
         self._peers(out)
-        return (v, w)
+        return (v, w), progress
 
     def _report(self, now: float, inbox: Inbox) -> None:
         if self.ground is None:

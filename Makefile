@@ -15,11 +15,15 @@ $(STAMP): pyproject.toml
 run: $(STAMP)
 	$(VENV)/bin/mrta sitl run configs/fleets/create2_4.yaml --manifest $(VENV)/manifest.json
 
+# one pytest-xdist worker per core, work stealing (the slow SITL runs do not all end up on one worker); the 15
+# slowest tests are printed at the end (docs/benchmarks.md#the-test-suite)
+XDIST := -n auto --dist worksteal --durations=15
+
 test: $(STAMP)
-	$(PY) -m pytest -q $(PYTEST_ARGS)
+	$(PY) -m pytest -q $(XDIST) $(PYTEST_ARGS)
 
 test-fast: $(STAMP)
-	$(PY) -m pytest -q -m 'not slow' $(PYTEST_ARGS)
+	$(PY) -m pytest -q -m 'not slow' $(XDIST) $(PYTEST_ARGS)
 
 bench: $(STAMP)
 	$(PY) benchmarks/sitl_speedup.py

@@ -30,9 +30,9 @@ from pathlib import Path
 import yaml
 
 from runtime import config as C
-from sitl import fleet_config as FC
 from runtime.clock import ClockPublisher, ScaledClock, SimClock
 from runtime.log import get_logger
+from sitl import fleet_config as FC
 
 log = get_logger("sitl")
 MAX_LAG = 0.25      # s of sim time the world may trail the speedup clock before the clock slips

@@ -16,9 +16,17 @@ ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"
 
 
-def shipped_fleet(tmp_path: Path, name: str, ports_from: int = 21000, **changes) -> Path:
+def port_block(start: int = 21000) -> int:
+    """Where this test process looks for free UDP ports: each pytest-xdist worker from its own block.  A block
+    found free is released before the fleet binds it, so two workers searching the same range could both take it."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+    n = int(worker[2:]) if worker.startswith("gw") and worker[2:].isdigit() else 0
+    return start + 2500 * (n % 12)
+
+
+def shipped_fleet(tmp_path: Path, name: str, ports_from: int | None = None, **changes) -> Path:
     """A copy of configs/fleets/NAME with absolute paths and a block of free UDP ports (the first found from
-    ``ports_from``); ``changes`` set fleet keys."""
+    ``ports_from``, default this test process's block); ``changes`` set fleet keys."""
     src = CONFIGS / "fleets" / name
     data = yaml.safe_load(src.read_text())
     for key in ("world", "robot"):
@@ -26,7 +34,7 @@ def shipped_fleet(tmp_path: Path, name: str, ports_from: int = 21000, **changes)
     for r in data["robots"]:
         if r.get("robot"):
             r["robot"] = str((src.parent / r["robot"]).resolve())
-    base = free_udp_base(len(data["robots"]), start=ports_from)
+    base = free_udp_base(len(data["robots"]), start=port_block() if ports_from is None else ports_from)
     data["base_port"], data["gcs"] = base, f"127.0.0.1:{base}"
     data.update(changes)
     path = tmp_path / f"fleet_{name}"

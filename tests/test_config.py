@@ -11,9 +11,9 @@ import yaml
 from hypothesis import given, settings, strategies as st
 
 from runtime import config as C
-from sitl import fleet_config as FC
 from runtime.config import ConfigError
 from runtime.drivers.registry import BASES
+from sitl import fleet_config as FC
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"

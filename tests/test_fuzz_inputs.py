@@ -20,8 +20,8 @@ from hypothesis import HealthCheck, event, given, settings, strategies as st
 
 from runtime import cli
 from runtime import config as C
-from sitl import fleet_config as FC
 from runtime.errors import InputError
+from sitl import fleet_config as FC
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"

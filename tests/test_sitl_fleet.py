@@ -8,6 +8,7 @@ import pytest
 
 from sitl import launcher
 from sitl.ports import free_udp_base
+from tests.sitl_util import port_block
 
 ROOT = Path(__file__).resolve().parents[1]
 FLEET4 = ROOT / "configs" / "fleets" / "create2_4.yaml"
@@ -18,7 +19,7 @@ def _fleet_copy(tmp_path, **changes) -> Path:
     data = yaml.safe_load(FLEET4.read_text())
     data["world"] = str(ROOT / "configs" / "worlds" / "arena_10m.yaml")
     data["robot"] = str(ROOT / "configs" / "robots" / "create2.yaml")
-    base = free_udp_base(len(data["robots"]))
+    base = free_udp_base(len(data["robots"]), start=port_block())
     data["base_port"] = base
     data["gcs"] = f"127.0.0.1:{base}"
     data.update(changes)
@@ -71,7 +72,7 @@ def test_fleet_plans_around_boxes(tmp_path):
     data = yaml.safe_load(src.read_text())
     data["world"] = str(ROOT / "configs" / "worlds" / "boxes_10m.yaml")
     data["robot"] = str(ROOT / "configs" / "robots" / "create2.yaml")
-    base = free_udp_base(len(data["robots"]))
+    base = free_udp_base(len(data["robots"]), start=port_block())
     data["base_port"], data["gcs"] = base, f"127.0.0.1:{base}"
     path = tmp_path / "boxes.yaml"
     path.write_text(yaml.safe_dump(data))

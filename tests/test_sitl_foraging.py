@@ -9,9 +9,9 @@ import pytest
 import yaml
 
 from runtime import config as C
-from sitl import fleet_config as FC
 from runtime.config.build import ConfigError
 from runtime.fleet.messages import DONE, OPEN
+from sitl import fleet_config as FC
 from sitl.scenarios.base import Handover
 from sitl.scenarios.foraging import Scenario
 

@@ -17,11 +17,12 @@ from runtime.localization.enu import geodetic_to_enu
 from sitl import launcher
 from sitl.operator import Operator
 from sitl.ports import free_udp_base
+from tests.sitl_util import port_block
 from tests.test_sitl_fleet import ROOT
 
 
 def _fleet(tmp_path):
-    base = free_udp_base(3)
+    base = free_udp_base(3, start=port_block())
     data = {
         "world": str(ROOT / "configs" / "worlds" / "arena_10m.yaml"),
         "robot": str(ROOT / "configs" / "robots" / "create2.yaml"),

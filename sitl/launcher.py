@@ -33,6 +33,7 @@ from runtime import config as C
 from runtime.clock import ClockPublisher, ScaledClock, SimClock
 from runtime.log import get_logger
 from sitl import fleet_config as FC
+from sitl.ports import INSTANCE_STRIDE, check_instance
 
 log = get_logger("sitl")
 MAX_LAG = 0.25      # s of sim time the world may trail the speedup clock before the clock slips
@@ -121,18 +122,6 @@ class Fleet:
         self.world.close()
         if self.fresh_key is not None and not keep_key:
             self.fresh_key.unlink(missing_ok=True)
-
-
-INSTANCE_STRIDE = 100      # ports an --instance moves a fleet by (as ArduPilot's SITL does, by 10 per vehicle)
-
-
-def check_instance(fleet: FC.FleetConfig, instance: int) -> None:
-    """InputError naming ``--instance`` unless every port of ``fleet`` moved to ``instance`` stays <= 65535."""
-    _, gcs_port = C.parse_hostport(fleet.gcs, fleet.source, "gcs")
-    top = max(fleet.base_port + max(r.id for r in fleet.robots), gcs_port) + INSTANCE_STRIDE * instance
-    if top > 65535:
-        raise C.ConfigError("--instance", "", f"an instance whose ports stay <= 65535 (this fleet's reach {top} at "
-                            f"--instance {instance})", instance)
 
 
 def claim_ports(fleet: FC.FleetConfig, instance: int = 0) -> FC.FleetConfig:

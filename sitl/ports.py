@@ -1,7 +1,10 @@
-"""Pick UDP port blocks on loopback that nothing is bound to (tests and benchmarks run beside a fleet)."""
+"""A fleet's UDP ports: blocks on loopback that nothing is bound to (tests and benchmarks run beside a fleet), and
+how far ``--instance N`` moves a fleet's ports."""
 from __future__ import annotations
 
 import socket
+
+from runtime import config as C
 
 
 def free_udp_base(n: int, start: int = 21000, stride: int = 97) -> int:
@@ -20,3 +23,15 @@ def free_udp_base(n: int, start: int = 21000, stride: int = 97) -> int:
             for s in socks:
                 s.close()
     raise RuntimeError(f"no block of {n + 2} free UDP ports on 127.0.0.1")
+
+
+INSTANCE_STRIDE = 100      # ports an --instance moves a fleet by (as ArduPilot's SITL does, by 10 per vehicle)
+
+
+def check_instance(fleet, instance: int) -> None:
+    """InputError naming ``--instance`` unless every port of ``fleet`` moved to ``instance`` stays <= 65535."""
+    _, gcs_port = C.parse_hostport(fleet.gcs, fleet.source, "gcs")
+    top = max(fleet.base_port + max(r.id for r in fleet.robots), gcs_port) + INSTANCE_STRIDE * instance
+    if top > 65535:
+        raise C.ConfigError("--instance", "", f"an instance whose ports stay <= 65535 (this fleet's reach {top} at "
+                            f"--instance {instance})", instance)

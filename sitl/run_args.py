@@ -10,6 +10,7 @@ import dataclasses
 
 from runtime import argcheck
 from sitl import fleet_config as FC
+from sitl.ports import check_instance
 
 MAX_INSTANCE = 400
 
@@ -30,5 +31,4 @@ def check(args) -> None:
     argcheck.output_file(args.manifest, "--manifest", make_parents=True)
     argcheck.output_file(args.json, "--json")
     if args.instance:
-        from sitl.launcher import check_instance
         check_instance(FC.load_fleet(args.fleet), args.instance)

@@ -123,3 +123,7 @@ def test_ground_services_read_the_core_through_ports():
     edges = graph()
     assert imports_from(edges, "runtime.comms", "runtime.daemon") == []
     assert imports_from(edges, "runtime.robot", "runtime.daemon") == []
+
+
+def test_no_module_imports_one_that_imports_it_back():
+    assert cycles(graph()) == []

@@ -25,7 +25,10 @@ def toy(monkeypatch, tmp_path):
     monkeypatch.setitem(registry.METHODS, "toy", "tests.toy_method:TOY")     # the one line
     monkeypatch.setenv("MRTA_CACHE_DIR", str(tmp_path / "cache"))           # a dialect that includes toy.xml
     monkeypatch.setattr(dialect, "_loaded", {})
-    monkeypatch.setattr(codec, "_fleet_registered", False)                 # as in a new process
+    monkeypatch.setattr(dialect, "_by_file", {})
+    for name in ("_by_class", "_by_name", "_classes"):                     # as in a new process; the rest of
+        monkeypatch.setattr(codec, name, {})                                # the suite never sees the toy
+    monkeypatch.setattr(codec, "_fleet_registered", False)
     yield registry.method("toy")
 
 

@@ -17,7 +17,7 @@ import math
 
 from runtime.comms.gcs import GroundStation
 from runtime.comms.mission import ACCEPTED, result_name
-from runtime.fleet.messages import ALLOCATING, DONE, STATE_NAMES
+from runtime.messages import ALLOCATING, DONE, STATE_NAMES
 from runtime.log import get_logger
 from sitl.run_trace import RobotTrack, RunTrace, TaskMark
 from sitl.scenarios.base import match_tasks

@@ -1,6 +1,8 @@
 """Frames of the fleet dialect for message tests: encode as a robot would, decode as the link does."""
 from __future__ import annotations
 
+import contextlib
+
 from runtime.comms import codec
 
 
@@ -32,3 +34,21 @@ def damage(data: bytes, rnd, flips: int) -> bytes:
         i = rnd.randrange(len(out))
         out[i] ^= 1 << rnd.randrange(8)
     return bytes(out[:rnd.randrange(len(out) + 1)])
+
+
+@contextlib.contextmanager
+def codec_registry_kept():
+    """The codec's class <-> message registry as it was, once the block ends: a test that registers classes of its
+    own (or unregisters the fleet's) must not leave the rest of the suite without them (under pytest-xdist any test
+    may run after it in the same process)."""
+    from runtime.comms import codec
+    codec.register_fleet()                 # kept with the fleet's classes in, as any other test finds it
+    names = ("_by_class", "_by_name", "_classes")
+    saved = {n: dict(getattr(codec, n)) for n in names}, codec._fleet_registered
+    try:
+        yield
+    finally:
+        for n, d in saved[0].items():
+            getattr(codec, n).clear()
+            getattr(codec, n).update(d)
+        codec._fleet_registered = saved[1]

@@ -122,7 +122,7 @@ def forage(f, objects: int, present: int, rnd, weight=(8.0, 16.0), deadline: flo
            observe=None, start: float = 0.5) -> dict[int, float]:
     """Hand objects to the fleet ``present`` at a time, a new one as soon as one is done (paper 000 §6.2), until
     ``objects`` have been handed in and all are done.  Returns {task: weight}."""
-    from runtime.fleet.messages import DONE as T_DONE
+    from runtime.messages import DONE as T_DONE
 
     f.run(start)
     handed: dict[int, float] = {}

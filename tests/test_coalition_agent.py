@@ -10,7 +10,7 @@ from runtime.allocation.coalition.options import CoalitionOptions
 from runtime.fleet.simulate import StraightLineEstimator
 from runtime.allocation.coalition.wdp_messages import (AwardAck, AwardCancel, CoalitionAward, CoalitionBid,
                                                        CoalitionDone, MemberReport, TaskOffer)
-from runtime.fleet.messages import IDLE, RobotState
+from runtime.messages import IDLE, RobotState
 from runtime.tasks import ARRIVED, Profile, Progress, Task
 from runtime.tasks.rendezvous import Rendezvous
 

@@ -10,7 +10,7 @@ from hypothesis import given, settings, strategies as st
 
 from runtime.allocation.coalition.options import CoalitionOptions
 from runtime.fleet.simulate import SimFleet
-from runtime.fleet.messages import DONE as T_DONE
+from runtime.messages import DONE as T_DONE
 from runtime.tasks.rendezvous import Rendezvous
 
 STARTS = {1: (-3.0, -2.0), 2: (-3.0, 0.0), 3: (-3.0, 2.0), 4: (3.0, -2.0), 5: (3.0, 0.0), 6: (3.0, 2.0)}

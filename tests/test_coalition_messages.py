@@ -13,7 +13,7 @@ from runtime.allocation.coalition import wdp_messages as W
 from runtime.fleet.simulate import SimFleet
 from runtime.tasks.rendezvous import Rendezvous
 from runtime.comms import codec, dialect
-from runtime.fleet.messages import RobotState
+from runtime.messages import RobotState, why_invalid
 
 ROOT = Path(__file__).resolve().parents[1]
 XML = ROOT / "runtime" / "allocation" / "coalition" / "coalition.xml"
@@ -153,7 +153,7 @@ def test_nonsense_messages_never_raise_and_are_counted(fields, rid):
     for cls, sender, values in fields:
         names = list(cls.__dataclass_fields__)
         m = cls(**dict(zip(names, [sender] + values)))
-        bad += (cls is not RobotState and W.why_invalid(m) is not None) or m.sender not in (1, 2, 3, 4)
+        bad += (cls is not RobotState and why_invalid(m) is not None) or m.sender not in (1, 2, 3, 4)
         out = agent.on_message(m, 4.0)
         assert isinstance(out, list) and all(hasattr(o, "dest") for o in out)
         assert isinstance(agent.on_tick(4.05), list)

@@ -10,6 +10,13 @@ from hypothesis import given, settings, strategies as st
 
 from runtime.allocation.formation import messages as M
 from runtime.comms import codec, dialect
+from tests.codec_util import codec_registry_kept
+
+
+@pytest.fixture(autouse=True)
+def _registry_kept():
+    with codec_registry_kept():          # tests here register classes of their own
+        yield
 
 
 @pytest.fixture(scope="module")

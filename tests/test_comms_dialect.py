@@ -15,7 +15,7 @@ import pytest
 
 from runtime.allocation.formation.messages import AGENT_MESSAGES, ROUND_MESSAGES
 from runtime.comms import codec, dialect
-from runtime.fleet.messages import FLEET_MESSAGES
+from runtime.messages import FLEET_MESSAGES
 
 ROOT = Path(__file__).resolve().parents[1]
 OUR_BLOCK = range(44000, 44200)

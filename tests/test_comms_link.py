@@ -416,7 +416,7 @@ def test_counters_are_plain_numbers():
 def test_values_the_protocol_does_not_allow_are_dropped_once_at_decode_and_counted(links):
     """Validation happens in the codec: a handler never sees a Price held by robot 0, a NaN bid, a round
     naming a robot twice, or a task record with an infinite position."""
-    from runtime.fleet.messages import TaskRecord
+    from runtime.messages import TaskRecord
     a = links(1)
     b = links(2, peers=[a])
     bad = [M.Price(2, 0, 3, 0, 0.5, 2), M.Bid(2, 0, 11, 3, float("nan")),

@@ -2,7 +2,6 @@
 trip through the codec, and random, truncated and bit-flipped frames never raise and are counted."""
 from __future__ import annotations
 
-import random
 import shutil
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -17,6 +16,7 @@ from runtime.allocation.comutar.protocol import ComutarAgent
 from runtime.allocation.agent import AgentContext
 from runtime.comms import codec, dialect
 from runtime.tasks import Profile, Task
+from tests.codec_util import codec_registry_kept
 
 XML = Path(__file__).resolve().parents[1] / "runtime" / "allocation" / "comutar" / "comutar.xml"
 
@@ -29,11 +29,10 @@ def mod(tmp_path_factory):
     (d / "top.xml").write_text('<?xml version="1.0"?>\n<mavlink><include>common.xml</include>'
                                f'<include>{XML.name}</include><messages/></mavlink>\n')
     module = dialect.load(d / "top.xml")
-    for cls in M.WIRE_MESSAGES:
-        codec.register(cls)
-    yield module
-    for cls in M.WIRE_MESSAGES:
-        codec.unregister(cls)
+    with codec_registry_kept():
+        for cls in M.WIRE_MESSAGES:
+            codec.register(cls)
+        yield module
 
 
 robot = st.integers(1, 250)

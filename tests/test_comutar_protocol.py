@@ -19,6 +19,7 @@ from runtime.allocation.comutar.options import ComutarOptions
 from runtime.allocation.comutar.protocol import COMUTAR, VISITED, ComutarAgent
 from runtime.allocation.comutar.surveillance import Surveillance
 from runtime.tasks import Profile, Progress, Task
+from runtime.messages import why_invalid
 
 
 class Est:
@@ -464,7 +465,7 @@ def test_random_and_invalid_messages_never_raise_and_are_counted(msgs):
         now += 0.05
         a.on_message(m, now)
         a.on_tick(now)
-    taken = sum(1 for m in msgs if M.why_invalid(m) is None and m.sender == 2 and m.dest in (0, 1))
+    taken = sum(1 for m in msgs if why_invalid(m) is None and m.sender == 2 and m.dest in (0, 1))
     assert sum(a.dropped.values()) >= len(msgs) - taken
 
 

@@ -11,7 +11,7 @@ from runtime.allocation.dr.interference import InterferenceModel
 from runtime.allocation.dr.messages import (EXHAUSTED, FINISHED, NOT_MEMBER, YIELD, DrAward, DrBid, DrBidRequest,
                                             DrDeliver, DrExitLeader, DrLeaderAlive, DrLeaderRequest, DrLedger,
                                             DrLoad, DrRefuse, DrRobotAlive, DrSampleRequest, DrSvrSample)
-from runtime.fleet.messages import IDLE, RobotState
+from runtime.messages import IDLE, RobotState
 from runtime.tasks import Progress
 
 from tests.dr_util import agent, transport

@@ -15,7 +15,7 @@ from runtime.allocation.agent import DONE
 from runtime.allocation.dr.interference import InterferenceModel
 from runtime.allocation.dr.options import DrOptions
 from runtime.allocation.dr.sim import TransportFleet
-from runtime.fleet.messages import DONE as T_DONE
+from runtime.messages import DONE as T_DONE
 
 from tests.dr_util import Watch, forage
 

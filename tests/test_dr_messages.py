@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from runtime.allocation.agent import why_invalid
+from runtime.messages import why_invalid
 from runtime.allocation.dr import messages as W
 from runtime.comms import codec, dialect
-from runtime.fleet.messages import RobotState
+from runtime.messages import RobotState
 
 from tests.codec_util import damage, decode, frame
 from tests.dr_util import busy_fleet

@@ -16,7 +16,7 @@ import pytest
 from runtime.allocation.formation import messages as M
 from runtime.comms import codec, dialect
 from runtime.comms.link import GCS_LINK, MavlinkLink, signing_timestamp
-from runtime.fleet.messages import DONE, OPEN, RobotState, TaskRecord
+from runtime.messages import DONE, OPEN, RobotState, TaskRecord
 from runtime.fleet.simulate import SimFleet
 from runtime.tasks.goto import Goto
 

@@ -10,9 +10,10 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings, strategies as st
 
 from runtime.allocation.formation.assignment import NO_TASK, hungarian
-from runtime.allocation.formation.messages import BROADCAST, Price, RoundLeave, Status
+from runtime.allocation.formation.messages import Price, RoundLeave, Status
+from runtime.messages import BROADCAST
 from runtime.allocation.agent import DONE
-from runtime.fleet.messages import DONE as T_DONE
+from runtime.messages import DONE as T_DONE
 from runtime.fleet.simulate import SimFleet
 from runtime.tasks.goto import Goto
 

@@ -15,7 +15,7 @@ import pytest
 from runtime.allocation.formation import messages as M
 from runtime.comms import codec, dialect
 from runtime.comms.link import DROP_REASONS, GCS_LINK, PEER_LINK, signing_timestamp
-from runtime.fleet.messages import RobotState, TaskRecord
+from runtime.messages import RobotState, TaskRecord
 from sitl import launcher
 from tests.sitl_util import shipped_fleet
 

@@ -127,3 +127,30 @@ def test_ground_services_read_the_core_through_ports():
 
 def test_no_module_imports_one_that_imports_it_back():
     assert cycles(graph()) == []
+
+
+FAMILIES = ("formation", "coalition", "dr", "comutar")
+# re-assemblies of a robot's stack for in-process fleets, until the one in-process host replaces them
+HOSTS_STILL_IN_FAMILIES = {"runtime.allocation.dr.sim"}
+
+
+def test_allocation_families_import_the_ground_floor_not_the_fleet_or_each_other():
+    edges = graph()
+    wrong = []
+    for m, targets in edges.items():
+        parts = m.split(".")
+        if parts[:2] != ["runtime", "allocation"] or len(parts) < 3 or parts[2] not in FAMILIES:
+            continue
+        for t in targets:
+            tp = t.split(".")
+            other_family = tp[:2] == ["runtime", "allocation"] and len(tp) > 2 and tp[2] in FAMILIES and tp[2] != parts[2]
+            if other_family or (_under(t, "runtime.fleet") and m not in HOSTS_STILL_IN_FAMILIES):
+                wrong.append(f"{m} -> {t}")
+    assert wrong == []
+
+
+def test_the_broadcast_address_is_defined_once():
+    import re
+    where = [str(p.relative_to(ROOT)) for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")
+             if re.search(r"^BROADCAST\s*=", p.read_text(), re.M)]
+    assert where == ["runtime/messages.py"]

@@ -12,7 +12,7 @@ from runtime.allocation.formation import messages as M
 from runtime.comms import codec, dialect, udp
 from runtime.comms.gcs import GroundStation
 from runtime.comms.link import DROP_REASONS, GCS_LINK, PEER_LINK, MavlinkLink, signing_timestamp
-from runtime.fleet.messages import RobotState, TaskRecord
+from runtime.messages import RobotState, TaskRecord
 
 KEY = bytes(range(32))
 OTHER_KEY = bytes(range(1, 33))

@@ -11,7 +11,7 @@ from hypothesis import given, settings, strategies as st
 from runtime.drivers.base import BaseSensors
 from runtime.execution.executive import ExecContext, Executive, Tunables
 from runtime.execution.peer_readings import readings
-from runtime.fleet.messages import RobotState
+from runtime.messages import RobotState
 from runtime.fleet.node import FleetNode
 from runtime.planning.robot_planner import RobotPlanner
 

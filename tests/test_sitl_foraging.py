@@ -10,7 +10,7 @@ import yaml
 
 from runtime import config as C
 from runtime.config.build import ConfigError
-from runtime.fleet.messages import DONE, OPEN
+from runtime.messages import DONE, OPEN
 from sitl import fleet_config as FC
 from sitl.scenarios.base import Handover
 from sitl.scenarios.foraging import Scenario

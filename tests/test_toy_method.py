@@ -18,6 +18,7 @@ from runtime.robot.core import Inbox, RobotCore, Sensed
 from runtime.robot.ports import BaseFacts
 from runtime.tasks import kind
 from runtime.tasks.goto import Goto
+from tests.codec_util import codec_registry_kept
 
 
 @pytest.fixture
@@ -26,10 +27,9 @@ def toy(monkeypatch, tmp_path):
     monkeypatch.setenv("MRTA_CACHE_DIR", str(tmp_path / "cache"))           # a dialect that includes toy.xml
     monkeypatch.setattr(dialect, "_loaded", {})
     monkeypatch.setattr(dialect, "_by_file", {})
-    for name in ("_by_class", "_by_name", "_classes"):                     # as in a new process; the rest of
-        monkeypatch.setattr(codec, name, {})                                # the suite never sees the toy
-    monkeypatch.setattr(codec, "_fleet_registered", False)
-    yield registry.method("toy")
+    with codec_registry_kept():                                             # the rest of the suite never sees it
+        monkeypatch.setattr(codec, "_fleet_registered", False)             # registered as in a new process
+        yield registry.method("toy")
 
 
 def _cfg(rid: int, peers) -> C.RobotConfig:

@@ -79,15 +79,6 @@ class Method:
     extra: dict = field(default_factory=dict)
 
 
-def why_invalid(msg) -> str | None:
-    """``msg.invalid()`` for a message that did not come through the codec (in-memory tests hand agents objects
-    the codec never made): never raises."""
-    try:
-        return msg.invalid()
-    except Exception as exc:          # values of types the protocol never sends
-        return f"malformed: {type(exc).__name__}"
-
-
 def route(msgs: list, robot_id: int, handle: Callable[[Any], list]) -> list:
     """The messages for the wire among ``msgs``; those addressed to ``robot_id`` are handed to ``handle`` here (a
     broadcast, dest 0, both), and so are the messages that handling returns, until none is left."""

@@ -12,7 +12,7 @@ import random
 from dataclasses import dataclass, field
 from typing import Any, Iterable, Protocol
 
-from runtime.allocation.formation.messages import BROADCAST
+from runtime.messages import BROADCAST
 
 
 class Agent(Protocol):

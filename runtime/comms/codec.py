@@ -8,7 +8,7 @@ MAVLink arrays padded with zeros (ids are never 0), so a list ends at its first 
 
 Validation happens once, here: a dataclass may define ``invalid(self) -> str | None`` (why the message
 cannot be acted on, or None); :func:`from_mavlink` raises :class:`InvalidMessage` for such a message, so
-handlers trust what they get.  The fleet's classes (the runtime's own, :mod:`runtime.fleet.messages`,
+handlers trust what they get.  The fleet's classes (the runtime's own, :mod:`runtime.messages`,
 and each registered allocation method's ``Method.messages``) are registered on first use.
 """
 from __future__ import annotations
@@ -58,7 +58,7 @@ def register_fleet() -> None:
         return
     _fleet_registered = True
     from runtime.allocation.registry import all_methods
-    from runtime.fleet.messages import FLEET_MESSAGES
+    from runtime.messages import FLEET_MESSAGES
 
     for cls in FLEET_MESSAGES:
         register(cls)

@@ -4,7 +4,7 @@ The SITL launcher uses it to be the fleet's operator (it never reads daemon inte
 status`` to ask a robot for the fleet's tasks.  Like QGC or MAVProxy it sends a HEARTBEAT (MAV_TYPE_GCS) to
 the robots it knows once a second, so they stream their telemetry to it wherever it listens; by default
 it listens on a port of its own, leaving the fleet's configured ground-station port to a stock GCS.  It keeps per robot what the robot reports (HEARTBEAT,
-positions, :class:`~runtime.fleet.messages.RobotState`, MISSION_ITEM_REACHED, MISSION_CURRENT, STATUSTEXT)
+positions, :class:`~runtime.messages.RobotState`, MISSION_ITEM_REACHED, MISSION_CURRENT, STATUSTEXT)
 and a copy of the fleet's task table from the robots' answers to its table requests; it runs the mission
 protocol's ground side (:class:`~runtime.comms.mission.MissionClient`) for uploads, one per robot at a
 time.
@@ -36,7 +36,7 @@ from runtime.comms.link import (GCS_LINK, KERNEL_DROPS_PERIOD, MAX_DATAGRAMS_PER
                                 parse_datagram, parse_address, refusal, signing_guard, signing_timestamp)
 from runtime.comms.mission import MissionClient
 from runtime.errors import InputError
-from runtime.fleet.messages import RobotState, TableRequest, TaskRecord
+from runtime.messages import RobotState, TableRequest, TaskRecord
 from runtime.log import get_logger
 
 GCS_SYSTEM, GCS_COMPONENT = 255, 190      # MAVProxy's and QGC's ground-station ids

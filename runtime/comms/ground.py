@@ -16,7 +16,7 @@ item's ``seq`` is its place there), in the frame each was uploaded in.
 Frames: global (lat, lon) through the datum with pymap3d; MAV_FRAME_LOCAL_ENU (x east, y north);
 MAV_FRAME_LOCAL_NED (x north, y east).  Positions are metres in the fleet frame from there on.
 
-Reports: the robot's :class:`~runtime.fleet.messages.RobotState` at 1 Hz (the fleet tasks it holds),
+Reports: the robot's :class:`~runtime.messages.RobotState` at 1 Hz (the fleet tasks it holds),
 MISSION_CURRENT at 1 Hz (the seq of the task it works on, or the task count when idle),
 MISSION_ITEM_REACHED when it arrives at a task, and one STATUSTEXT per task awarded, done or failed.
 
@@ -37,7 +37,7 @@ from runtime import tasks as T
 from runtime.comms import mission as M
 from runtime.comms.gcs_services import GcsServices
 from runtime.comms.params import Param, ParamTable
-from runtime.fleet.messages import OPEN, TableRequest
+from runtime.messages import OPEN, TableRequest
 from runtime.log import get_logger
 
 if TYPE_CHECKING:

@@ -139,7 +139,7 @@ def status(target: str, *, system: int | None = None, timeout: float = 10.0, key
     """The fleet's tasks as the robot at ``target`` knows them: its TaskRecords (with holders), by id.  Waits
     for the robot's RobotState (the size of its table) and asks until every record is in."""
     from runtime.comms import codec
-    from runtime.fleet.messages import RobotState, TableRequest, TaskRecord
+    from runtime.messages import RobotState, TableRequest, TaskRecord
 
     deadline = time.monotonic() + float(timeout)
     link = UdpTarget(target, key)
@@ -261,7 +261,7 @@ def _download_main(args) -> int:
 
 def _status_main(args) -> int:
     from runtime import tasks as T
-    from runtime.fleet.messages import STATE_NAMES
+    from runtime.messages import STATE_NAMES
 
     kw = _common(args)
     try:

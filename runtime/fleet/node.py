@@ -22,7 +22,7 @@ from collections import Counter
 from dataclasses import dataclass, replace
 
 from runtime.allocation.agent import AWARDED, DONE, TaskEvent
-from runtime.fleet.messages import (ALLOCATING, BROADCAST, DISARMED, DONE as T_DONE, EXECUTING, IDLE, LOCALIZING,
+from runtime.messages import (ALLOCATING, BROADCAST, DISARMED, DONE as T_DONE, EXECUTING, IDLE, LOCALIZING,
                                     MAX_HELD, OPEN, RobotState, TableRequest, TaskRecord, task_origin)
 from runtime.fleet.table import TaskTable
 from runtime.log import get_logger

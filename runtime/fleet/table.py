@@ -7,7 +7,7 @@ operator used) and a state: open, done, withdrawn (cleared before it was done), 
 mission was cleared).  States only move forward (a later state wins), so merging two tables in any order
 gives the same table: the replicas converge whatever the loss, duplication or order of messages.
 
-Anti-entropy: each robot's :class:`~runtime.fleet.messages.RobotState` carries the size and a CRC-32 of
+Anti-entropy: each robot's :class:`~runtime.messages.RobotState` carries the size and a CRC-32 of
 its table; a robot that sees a different digest asks that peer for its table (``TableRequest``, at most
 once per ``resync`` seconds per peer) and merges the answer.  Changes are also broadcast at once.
 """
@@ -19,10 +19,9 @@ import zlib
 from dataclasses import dataclass, replace
 
 from runtime import tasks as T
-from runtime.fleet.messages import CLEARED, DONE, OPEN, WITHDRAWN, TaskRecord, task_origin
+from runtime.messages import BROADCAST, CLEARED, DONE, OPEN, WITHDRAWN, TaskRecord, task_origin
 from runtime.log import get_logger
 
-BROADCAST = 0
 MAX_PER_ORIGIN = 0xFFFF
 
 
@@ -149,7 +148,7 @@ class TaskTable:
 
     def compare(self, peer: int, known: int, digest: int, now: float) -> list:
         """A peer's table summary: ask it for its table if ours differ (rate-limited per peer)."""
-        from runtime.fleet.messages import TableRequest
+        from runtime.messages import TableRequest
 
         if digest == self.digest and known == len(self.entries):
             return []

@@ -323,5 +323,5 @@ def _drops(agent) -> dict:
 
 
 def _for_agent(msg) -> bool:
-    from runtime.fleet.messages import FLEET_MESSAGES
+    from runtime.messages import FLEET_MESSAGES
     return not isinstance(msg, FLEET_MESSAGES)

@@ -31,7 +31,7 @@ from typing import Literal, Optional
 
 from runtime.config.build import ConfigError, rng
 from runtime.config.world import check_inside
-from runtime.fleet.messages import DONE, STATE_NAMES
+from runtime.messages import DONE, STATE_NAMES
 from runtime.tasks.transport import Transport, to_item
 from sitl.foraging.scenario import MIN_DISTANCE
 

@@ -13,7 +13,7 @@ from typing import Any, Literal, Optional
 from runtime import tasks as T
 from runtime.config.build import ConfigError, Tagged, rng
 from runtime.config.world import check_inside
-from runtime.fleet.messages import DONE, OPEN, STATE_NAMES
+from runtime.messages import DONE, OPEN, STATE_NAMES
 
 
 @functools.lru_cache(maxsize=None)

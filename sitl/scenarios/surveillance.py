@@ -20,7 +20,7 @@ from runtime.allocation.comutar import avoidance as AV
 from runtime.allocation.comutar import surveillance as SV
 from runtime.config.build import ConfigError, rng
 from runtime.config.world import check_inside
-from runtime.fleet.messages import DONE, STATE_NAMES
+from runtime.messages import DONE, STATE_NAMES
 
 AWARD_TEXT = re.compile(r"task (\d+)\.(\d+) awarded to ((?:R\d+\+?)*)")
 STILL = 0.01                   # m/s: a body slower than this stands still

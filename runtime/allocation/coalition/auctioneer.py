@@ -38,8 +38,8 @@ from runtime.allocation.coalition.proposals import own_pose
 from runtime.allocation.coalition.wdp_messages import (MAX_INVITED, AwardCancel, CoalitionAward, CoalitionDone,
                                                        TaskOffer)
 from runtime.allocation.coalition.wdp_model import TaskBid
+from runtime.messages import BROADCAST
 
-BROADCAST = 0
 MAX_OFFER = 32              # tasks one round offers (lowest ids first; the rest wait for the next)
 MAX_BACKOFF = 30.0
 

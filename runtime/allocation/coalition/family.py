@@ -31,13 +31,11 @@ from runtime.allocation.coalition.member import Member
 from runtime.allocation.coalition.options import CoalitionOptions
 from runtime.allocation.coalition.view import FleetView
 from runtime.allocation.coalition.wdp_messages import (WIRE_MESSAGES, AwardAck, AwardCancel, CoalitionAward,
-                                                       CoalitionBid, CoalitionDone, MemberReport, TaskOffer,
-                                                       why_invalid)
-from runtime.fleet.messages import RobotState, task_origin
+                                                       CoalitionBid, CoalitionDone, MemberReport, TaskOffer)
 from runtime.log import get_logger
+from runtime.messages import BROADCAST, RobotState, task_origin, why_invalid
 from runtime.tasks import Commitment, Progress, Task
 
-BROADCAST = 0
 KINDS = ("rendezvous",)
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from runtime.fleet.messages import IDLE, RobotState
+from runtime.messages import IDLE, RobotState
 from runtime.tasks import Task
 
 

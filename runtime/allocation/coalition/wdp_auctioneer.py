@@ -19,10 +19,10 @@ from dataclasses import dataclass, field
 from typing import Callable, Iterable
 
 from runtime.allocation.coalition.bidbook import BidBook
-from runtime.allocation.formation.messages import BROADCAST
 from runtime.allocation.coalition.wdp_messages import (AwardAck, AwardCancel, CoalitionAward, CoalitionBid, TaskDone,
                                                        TaskOffer)
 from runtime.log import get_logger
+from runtime.messages import BROADCAST
 
 
 @dataclass

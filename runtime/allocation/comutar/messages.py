@@ -3,7 +3,7 @@
 Plain frozen dataclasses named ``Cm*`` (their MAVLink names ``MRTA_CM_*`` stay clear of the other
 families'), ``sender`` and ``dest`` first (dest 0 = every peer), fields bool / int / float /
 ``tuple[int, ...]`` as :mod:`runtime.comms.codec` carries them (``comutar.xml`` is their MAVLink block).
-Each class checks its own values once (``invalid()``); :func:`why_invalid` never raises.
+Each class checks its own values once (``invalid()``); :func:`runtime.messages.why_invalid` never raises.
 
 Names used below:
 
@@ -24,36 +24,17 @@ its consumer).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+from typing import Annotated
+
+from runtime.messages import Amount, Dest, Kind, Message, RobotId, TaskId, is_finite, is_int, is_robot
 
 MAX_SLOTS = 48             # slot references one message can name (uint32[48])
 MAX_VISITED = 200          # waypoints a CmSurvey can name (uint8[200], index + 1)
 
-
-def _int(v) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
-
-
-def _finite(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-
-def _ids(msg) -> str | None:
-    if not (_int(msg.sender) and 1 <= msg.sender <= 250 and _int(msg.dest) and 0 <= msg.dest <= 250):
-        return "sender/dest: expected robot ids"
-    return None
-
-
-def _auction(msg) -> str | None:
-    why = _ids(msg)
-    if why:
-        return why
-    if not (_int(msg.auction) and 1 <= msg.auction >> 16 <= 250 and msg.auction <= 0xFFFFFFFF):
-        return f"auction {msg.auction}: expected an auctioneer id 1..250 in its upper 16 bits"
-    if not (_int(msg.task) and 1 <= msg.task >> 16 <= 250 and msg.task <= 0xFFFFFFFF):
-        return f"task {msg.task}: expected a fleet task id"
-    return None
+# an auction id: the auctioneer's robot id in the upper 16 bits
+AuctionId = Annotated[int, Kind("an auctioneer id 1..250 in its upper 16 bits",
+                                lambda v: is_int(v) and 1 <= v >> 16 <= 250 and v <= 0xFFFFFFFF)]
 
 
 def slot_robot(ref: int) -> int:
@@ -65,7 +46,7 @@ def _slots(slots, need: int | None = None) -> str | None:
         return "slots: expected a non-empty list of slot references"
     if len(slots) > MAX_SLOTS:
         return f"slots: expected at most {MAX_SLOTS}, got {len(slots)}"
-    if not all(_int(s) and 1 <= s >> 16 <= 250 and s & 0xFFFF and s <= 0xFFFFFFFF for s in slots) \
+    if not all(is_int(s) and 1 <= s >> 16 <= 250 and s & 0xFFFF and s <= 0xFFFFFFFF for s in slots) \
             or len(set(slots)) != len(slots):
         return "slots: expected distinct references robot << 16 | n (robot 1..250, n 1..65535)"
     if need is not None and slot_robot(slots[0]) != need:
@@ -73,40 +54,40 @@ def _slots(slots, need: int | None = None) -> str | None:
     return None
 
 
-def _cost(v) -> str | None:
-    return None if _finite(v) and v >= 0 else f"cost {v}: expected a finite number >= 0"
+class _SendersSlots(Message):
+    """A message naming a coalition of slots, the sender's first."""
+
+    def check(self) -> str | None:
+        return _slots(self.slots, self.sender)
 
 
 @dataclass(frozen=True)
-class CmAnnounce:
+class CmAnnounce(Message):
     """The auctioneer opens ``auction`` for ``task``; bids are taken for ``timeout`` seconds from now (a
     duration, so no clocks need agree); ``attempt`` counts its announcements."""
-    sender: int
-    dest: int
-    auction: int
-    task: int
+    sender: RobotId
+    dest: Dest
+    auction: AuctionId
+    task: TaskId
     timeout: float
     attempt: int
 
-    def invalid(self) -> str | None:
-        why = _auction(self)
-        if why:
-            return why
-        if not (_finite(self.timeout) and 0 < self.timeout <= 600):
+    def check(self) -> str | None:
+        if not (is_finite(self.timeout) and 0 < self.timeout <= 600):
             return f"timeout {self.timeout}: expected 0..600 s"
-        return None if _int(self.attempt) and self.attempt >= 1 else "attempt: expected >= 1"
+        return None if is_int(self.attempt) and self.attempt >= 1 else "attempt: expected >= 1"
 
 
 @dataclass(frozen=True)
-class CmQuery:
+class CmQuery(Message):
     """An action pre-allocated for ``auction`` asks who can produce ``info`` for it (query id ``query``, unique
     per sender).  ``depth``: the requester's place in the input chain (1: the task's action); ``budget``: the
     seconds the requester waits for answers; ``expires``: seconds until its pre-allocation lapses.  The
     region (``x``, ``y`` in the fleet frame) is the surroundings of robot ``owner``, the chain's consumer: a
     reader on another robot must keep it in view."""
-    sender: int
-    dest: int
-    auction: int
+    sender: RobotId
+    dest: Dest
+    auction: AuctionId
     query: int
     info: int
     depth: int
@@ -116,84 +97,68 @@ class CmQuery:
     x: float
     y: float
 
-    def invalid(self) -> str | None:
-        why = _ids(self)
-        if why:
-            return why
-        if not (_int(self.auction) and 1 <= self.auction >> 16 <= 250 and self.auction <= 0xFFFFFFFF):
-            return f"auction {self.auction}: expected an auctioneer id in its upper 16 bits"
-        if not (_int(self.query) and self.query >> 16 == self.sender and self.query & 0xFFFF):
+    def check(self) -> str | None:
+        if not (is_int(self.query) and self.query >> 16 == self.sender and self.query & 0xFFFF):
             return f"query {self.query}: expected sender << 16 | n"
-        if not (_int(self.info) and 1 <= self.info <= 255 and _int(self.depth) and 1 <= self.depth <= 8):
+        if not (is_int(self.info) and 1 <= self.info <= 255 and is_int(self.depth) and 1 <= self.depth <= 8):
             return "info/depth: expected 1..255 / 1..8"
-        if not (_finite(self.budget) and 0 <= self.budget <= 600 and _finite(self.expires) and 0 <= self.expires <= 600):
+        if not (is_finite(self.budget) and 0 <= self.budget <= 600 and is_finite(self.expires) and 0 <= self.expires <= 600):
             return "budget/expires: expected 0..600 s"
-        if not (_int(self.owner) and 1 <= self.owner <= 250 and _finite(self.x) and _finite(self.y)):
+        if not (is_robot(self.owner) and is_finite(self.x) and is_finite(self.y)):
             return "region: expected a robot id and a finite position"
         return None
 
 
 @dataclass(frozen=True)
-class CmCost:
+class CmCost(Message):
     """Answer to ``query``: ``slots`` (the provider's slot producing the information first, then the inputs
     it connected, recursively) can produce it for ``cost`` seconds, streaming ``rate`` Mb/s."""
-    sender: int
-    dest: int
+    sender: RobotId
+    dest: Dest
     auction: int
     query: int
-    cost: float
-    rate: float
+    cost: Amount
+    rate: Amount
     slots: tuple[int, ...]
 
-    def invalid(self) -> str | None:
-        why = _ids(self)
-        if why:
-            return why
-        if not (_int(self.auction) and _int(self.query) and 1 <= self.query >> 16 <= 250):
+    def check(self) -> str | None:
+        if not (is_int(self.auction) and is_int(self.query) and 1 <= self.query >> 16 <= 250):
             return "auction/query: expected ids"
-        if not (_finite(self.rate) and self.rate >= 0):
-            return f"rate {self.rate}: expected a finite number >= 0"
-        return _cost(self.cost) or _slots(self.slots, self.sender)
+        return _slots(self.slots, self.sender)
 
 
 @dataclass(frozen=True)
-class CmBid:
+class CmBid(_SendersSlots):
     """The coalition ``slots`` (the sender's action for the task first) bids ``cost`` (s) for ``task``."""
-    sender: int
-    dest: int
-    auction: int
-    task: int
-    cost: float
+    sender: RobotId
+    dest: Dest
+    auction: AuctionId
+    task: TaskId
+    cost: Amount
     slots: tuple[int, ...]
 
-    def invalid(self) -> str | None:
-        return _auction(self) or _cost(self.cost) or _slots(self.slots, self.sender)
-
 
 @dataclass(frozen=True)
-class CmAward:
+class CmAward(Message):
     """``task`` goes to the coalition(s) ``slots``: each slot named allocates its resources; a robot's other
     slots of ``auction`` are released.  Broadcast once, then re-sent to robots that have not acknowledged."""
-    sender: int
-    dest: int
-    auction: int
-    task: int
+    sender: RobotId
+    dest: Dest
+    auction: AuctionId
+    task: TaskId
     slots: tuple[int, ...]
 
-    def invalid(self) -> str | None:
-        return _auction(self) or _slots(self.slots)
+    def check(self) -> str | None:
+        return _slots(self.slots)
 
 
 @dataclass(frozen=True)
-class _TaskNote:
+class _TaskNote(Message):
     """A note about one task under one auction: the fields of CmAck, CmResign, CmCancel and CmDone."""
-    sender: int
-    dest: int
-    auction: int
-    task: int
-
-    def invalid(self) -> str | None:
-        return _auction(self)
+    sender: RobotId
+    dest: Dest
+    auction: AuctionId
+    task: TaskId
 
 
 @dataclass(frozen=True)
@@ -212,17 +177,14 @@ class CmCancel(_TaskNote):
 
 
 @dataclass(frozen=True)
-class CmHold:
+class CmHold(_SendersSlots):
     """A holder's periodic report to the task's auctioneer: it holds ``task`` under ``auction`` with its
     ``slots`` (so a lost cancel is repeated, and an auctioneer that took over rebuilds the award)."""
-    sender: int
-    dest: int
-    auction: int
-    task: int
+    sender: RobotId
+    dest: Dest
+    auction: AuctionId
+    task: TaskId
     slots: tuple[int, ...]
-
-    def invalid(self) -> str | None:
-        return _auction(self) or _slots(self.slots, self.sender)
 
 
 @dataclass(frozen=True)
@@ -231,23 +193,18 @@ class CmDone(_TaskNote):
 
 
 @dataclass(frozen=True)
-class CmSurvey:
+class CmSurvey(Message):
     """A surveillance holder's copy of ``task``: the waypoints it knows visited (index + 1) and the one it
     heads for (``target``, index + 1; 0: none) since ``claimed`` (s, the sender's clock: earlier claims win)."""
-    sender: int
-    dest: int
-    task: int
+    sender: RobotId
+    dest: Dest
+    task: TaskId
     target: int
     claimed: float
     visited: tuple[int, ...] = ()
 
-    def invalid(self) -> str | None:
-        why = _ids(self)
-        if why:
-            return why
-        if not (_int(self.task) and 1 <= self.task >> 16 <= 250):
-            return f"task {self.task}: expected a fleet task id"
-        if not (_int(self.target) and 0 <= self.target <= MAX_VISITED and _finite(self.claimed)):
+    def check(self) -> str | None:
+        if not (is_int(self.target) and 0 <= self.target <= MAX_VISITED and is_finite(self.claimed)):
             return "target/claimed: expected 0..200 and a finite time"
         vis = self.visited
         if not isinstance(vis, tuple) or len(vis) > MAX_VISITED or \
@@ -257,22 +214,17 @@ class CmSurvey:
 
 
 @dataclass(frozen=True)
-class CmRegion:
+class CmRegion(Message):
     """The consumer of ``task``'s chain: keep the disc (``x``, ``y``, ``radius``) around me in view."""
-    sender: int
-    dest: int
-    task: int
+    sender: RobotId
+    dest: Dest
+    task: TaskId
     x: float
     y: float
     radius: float
 
-    def invalid(self) -> str | None:
-        why = _ids(self)
-        if why:
-            return why
-        if not (_int(self.task) and 1 <= self.task >> 16 <= 250):
-            return f"task {self.task}: expected a fleet task id"
-        if not (_finite(self.x) and _finite(self.y) and _finite(self.radius) and 0 <= self.radius <= 100):
+    def check(self) -> str | None:
+        if not (is_finite(self.x) and is_finite(self.y) and is_finite(self.radius) and 0 <= self.radius <= 100):
             return "region: expected a finite position and a radius 0..100 m"
         return None
 
@@ -298,32 +250,27 @@ def unpack_disc(v: int, ox: float, oy: float) -> tuple[float, float, float]:
 
 
 @dataclass(frozen=True)
-class CmStream:
+class CmStream(Message):
     """A provider's output for ``task``'s consumer: ``info`` 1 (range data: one disc per echo) or 2 (an
     obstacle list), sensed at ``stamp`` (the provider's clock), as discs packed relative to (``ox``, ``oy``)
     (:func:`pack_disc`; an empty list is news too: nothing seen).  The origin is where the provider was: the
     point the discs were heard from (its consumer puts their shadows on the far side)."""
-    sender: int
-    dest: int
-    task: int
+    sender: RobotId
+    dest: Dest
+    task: TaskId
     info: int
     stamp: float
     ox: float
     oy: float
     discs: tuple[int, ...] = ()
 
-    def invalid(self) -> str | None:
-        why = _ids(self)
-        if why:
-            return why
-        if not (_int(self.task) and 1 <= self.task >> 16 <= 250 and self.task <= 0xFFFFFFFF):
-            return f"task {self.task}: expected a fleet task id"
+    def check(self) -> str | None:
         if self.info not in (1, 2):
             return f"info {self.info}: expected 1 (range data) or 2 (obstacle list)"
-        if not (_finite(self.stamp) and _finite(self.ox) and _finite(self.oy)):
+        if not (is_finite(self.stamp) and is_finite(self.ox) and is_finite(self.oy)):
             return "stamp/origin: expected finite numbers"
         d = self.discs
-        if not isinstance(d, tuple) or len(d) > MAX_DISCS or not all(_int(v) and 0 < v <= 0xFFFFFFFF and v & 0xFF
+        if not isinstance(d, tuple) or len(d) > MAX_DISCS or not all(is_int(v) and 0 < v <= 0xFFFFFFFF and v & 0xFF
                                                                       for v in d):
             return f"discs: expected at most {MAX_DISCS} packed discs with a radius"
         return None
@@ -334,11 +281,3 @@ class CmStream:
 
 WIRE_MESSAGES = (CmAnnounce, CmQuery, CmCost, CmBid, CmAward, CmAck, CmResign, CmCancel, CmHold, CmDone, CmSurvey,
                  CmRegion, CmStream)
-
-
-def why_invalid(msg) -> str | None:
-    """``msg.invalid()`` for a message that did not come through the codec: never raises."""
-    try:
-        return msg.invalid()
-    except Exception as exc:          # values of types the protocol never sends
-        return f"malformed: {type(exc).__name__}"

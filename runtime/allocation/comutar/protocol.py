@@ -40,14 +40,14 @@ from runtime.allocation.comutar.auctioneer import Auctioneer
 from runtime.allocation.comutar.bidder import Bidder, Slot
 from runtime.allocation.comutar.messages import (WIRE_MESSAGES, CmAck, CmAnnounce, CmAward, CmBid, CmCancel, CmCost,
                                                  CmDone, CmHold, CmQuery, CmRegion, CmResign, CmStream, CmSurvey,
-                                                 MAX_DISCS, pack_disc, why_invalid)
+                                                 MAX_DISCS, pack_disc)
 from runtime.allocation.comutar.options import ComutarOptions
 from runtime.allocation.comutar.resources import CSPACE, Ledger, Resource
 from runtime.allocation.comutar.surveillance import Board
 from runtime.log import get_logger
+from runtime.messages import BROADCAST, why_invalid
 from runtime.tasks import FAILED as P_FAILED, Commitment, Progress, Task
 
-BROADCAST = 0
 KINDS = ("surveillance", "avoid_obstacles")
 VISITED = "visited"                       # Progress event of a surveillance executor: data["waypoint"]
 CHOOSE_PERIOD = 0.25                      # s between re-evaluations of the nearest waypoint (at once on news)

@@ -23,7 +23,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Sequence
 
-from runtime.allocation.agent import FAILED, AgentContext, Method, TaskEvent, route, why_invalid
+from runtime.allocation.agent import FAILED, AgentContext, Method, TaskEvent, route
 from runtime.allocation.dr import model as M
 from runtime.allocation.dr.interference import InterferenceModel
 from runtime.allocation.dr.leader import Finish, Leader, LeaderView
@@ -36,12 +36,11 @@ from runtime.allocation.dr.messages import (FINISHED, NOT_MEMBER, REASONS, WIRE_
 from runtime.allocation.dr.options import DrOptions
 from runtime.allocation.dr.world import TaskInfo, World
 from runtime.errors import InputError
-from runtime.fleet.messages import RobotState, task_origin
+from runtime.messages import BROADCAST, RobotState, task_origin, why_invalid
 from runtime.log import get_logger
 from runtime.tasks import FAILED as P_FAILED, Commitment, Progress, Task
 from runtime.tasks.transport import DELIVERED, LOADED
 
-BROADCAST = 0
 KINDS = ("transport",)
 LEADER, MEMBER, CARRIER, CANDIDATE = "leader", "member", "carrier", "candidate"
 _models: dict[tuple, InterferenceModel] = {}        # (path, mtime, size) -> the file's model, copied per robot

@@ -37,8 +37,8 @@ from runtime.allocation.dr import model as M
 from runtime.allocation.dr.ledger import EPS
 from runtime.allocation.dr.messages import (EXHAUSTED, FINISHED, MAX_MEMBERS, NOT_MEMBER, DrAward,
                                             DrBidRequest, DrExitLeader, DrLeaderAlive)
+from runtime.messages import BROADCAST
 
-BROADCAST = 0
 RESEND_ENTRIES = 2          # ledger entries re-sent with each LEADER_ALIVE
 
 

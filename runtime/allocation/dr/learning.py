@@ -13,9 +13,9 @@ import math
 from collections import OrderedDict
 
 from runtime.allocation.dr.messages import DrSampleRequest, DrSvrSample
+from runtime.messages import BROADCAST
 
 KEEP = 120                 # own samples kept for resending (the model's window)
-BROADCAST = 0
 
 
 class Learning:

@@ -15,265 +15,192 @@ so a resent or duplicated report changes nothing and the replicas merge in any o
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
-from runtime.fleet.messages import task_origin
+from runtime.messages import Amount, Count, Dest, Message, Number, RobotId, RobotIds, TaskId, is_finite
 
 MAX_MEMBERS = 32                  # robots a LEADER_ALIVE can list
-MAX_COUNT = 0xFFFFFFFF            # a uint32 on the wire
 YIELD, NOT_MEMBER, EXHAUSTED, FINISHED = range(4)       # DrExitLeader.reason
 REASONS = {YIELD: "yield", NOT_MEMBER: "not a member", EXHAUSTED: "object exhausted", FINISHED: "task done"}
 
 
-def _int(v) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
-
-
-def _finite(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-
-def _common(msg) -> str | None:
-    """Sender, destination and (where the message has one) task: robot ids and a fleet task id."""
-    if not (_int(msg.sender) and 1 <= msg.sender <= 250 and _int(msg.dest) and 0 <= msg.dest <= 250):
-        return "sender/dest: expected robot ids"
-    task = getattr(msg, "task", None)
-    if task is not None and not (_int(task) and 0 <= task <= MAX_COUNT and 1 <= task_origin(task) <= 250):
-        return f"task {task}: expected a fleet task id"
-    return None
-
-
-def _values(msg, counts=(), amounts=(), numbers=()) -> str | None:
-    """``counts``: integers 0..2^32-1; ``amounts``: finite numbers >= 0; ``numbers``: finite numbers."""
-    for name in counts:
-        v = getattr(msg, name)
-        if not (_int(v) and 0 <= v <= MAX_COUNT):
-            return f"{name} {v!r}: expected an integer 0..{MAX_COUNT}"
-    for name in amounts:
-        v = getattr(msg, name)
-        if not (_finite(v) and v >= 0):
-            return f"{name} {v!r}: expected a finite number >= 0"
-    for name in numbers:
-        if not _finite(getattr(msg, name)):
-            return f"{name} {getattr(msg, name)!r}: expected a finite number"
-    return None
-
-
-def _entry(msg) -> str | None:
-    return _values(msg, counts=("loads", "deliveries"), amounts=("taken", "delivered", "returned"))
-
-
 @dataclass(frozen=True)
-class DrLeaderRequest:
+class DrLeaderRequest(Message):
     """Alg. 1: the sender asks to lead ``task``; ``capacity`` = its eq. 5 work capacity for it (wu/s)."""
-    sender: int
-    dest: int
-    task: int
-    capacity: float
-
-    def invalid(self) -> str | None:
-        return _common(self) or _values(self, amounts=("capacity",))
+    sender: RobotId
+    dest: Dest
+    task: TaskId
+    capacity: Amount
 
 
 @dataclass(frozen=True)
-class DrBidRequest:
+class DrBidRequest(Message):
     """Alg. 2 l.1: the leader of ``task`` opens auction ``round`` (leader id * 65536 + its count)."""
-    sender: int
-    dest: int
-    task: int
-    round: int
-
-    def invalid(self) -> str | None:
-        return _common(self) or _values(self, counts=("round",))
+    sender: RobotId
+    dest: Dest
+    task: TaskId
+    round: Count
 
 
 @dataclass(frozen=True)
-class DrBid:
+class DrBid(Message):
     """A free robot's bid in ``round``: its work capacity for the task (wu/s) and its distance to the object (m,
     the tie-break between equal capacities)."""
-    sender: int
-    dest: int
-    task: int
-    round: int
-    capacity: float
-    distance: float
-
-    def invalid(self) -> str | None:
-        return _common(self) or _values(self, counts=("round",), amounts=("capacity", "distance"))
+    sender: RobotId
+    dest: Dest
+    task: TaskId
+    round: Count
+    capacity: Amount
+    distance: Amount
 
 
 @dataclass(frozen=True)
-class DrAward:
+class DrAward(Message):
     """Alg. 2 l.19: the leader bids ``value`` = U_j(predicted finish) for the robot ``dest``."""
-    sender: int
-    dest: int
-    task: int
-    round: int
-    value: float
-
-    def invalid(self) -> str | None:
-        return _common(self) or _values(self, counts=("round",), amounts=("value",))
+    sender: RobotId
+    dest: Dest
+    task: TaskId
+    round: Count
+    value: Amount
 
 
 @dataclass(frozen=True)
-class DrRobotAlive:
+class DrRobotAlive(Message):
     """Alg. 3 l.10 and §5.5.3: the sender is a member of ``task``'s group (confirmation, then every
     ``member_alive_period``), with its bookkeeping entry for the task."""
-    sender: int
-    dest: int
-    task: int
-    loads: int
-    taken: float
-    deliveries: int
-    delivered: float
-    returned: float
-
-    def invalid(self) -> str | None:
-        return _common(self) or _entry(self)
+    sender: RobotId
+    dest: Dest
+    task: TaskId
+    loads: Count
+    taken: Amount
+    deliveries: Count
+    delivered: Amount
+    returned: Amount
 
 
 @dataclass(frozen=True)
-class DrRefuse:
+class DrRefuse(Message):
     """Alg. 3 l.12: the sender refuses the award of ``round``; round 0: a member leaves the group."""
-    sender: int
-    dest: int
-    task: int
-    round: int
-
-    def invalid(self) -> str | None:
-        return _common(self) or _values(self, counts=("round",))
+    sender: RobotId
+    dest: Dest
+    task: TaskId
+    round: Count
 
 
 @dataclass(frozen=True)
-class DrLeaderAlive:
+class DrLeaderAlive(Message):
     """§5.5.1: the sender leads ``task`` (every ``leader_alive_period``).  ``left`` wu at the object, ``taken``
     and ``delivered`` wu in all; ``members`` the group (the leader among them); ``started_age`` s since the task's
     first leader was elected, ``appeared_age`` s since the task appeared, ``robot_seconds`` the integral of the
     group size over that time: a new leader carries these on."""
-    sender: int
-    dest: int
-    task: int
-    left: float
-    taken: float
-    delivered: float
-    started_age: float
-    appeared_age: float
-    robot_seconds: float
-    members: tuple[int, ...]
+    sender: RobotId
+    dest: Dest
+    task: TaskId
+    left: Amount
+    taken: Amount
+    delivered: Amount
+    started_age: Amount
+    appeared_age: Amount
+    robot_seconds: Amount
+    members: RobotIds
 
-    def invalid(self) -> str | None:
-        why = _common(self) or _values(self, amounts=("left", "taken", "delivered", "started_age",
-                                                      "appeared_age", "robot_seconds"))
-        if why:
-            return why
+    def check(self) -> str | None:
         m = self.members
-        if not isinstance(m, tuple) or not 1 <= len(m) <= MAX_MEMBERS:
+        if not 1 <= len(m) <= MAX_MEMBERS:
             return f"members: expected 1..{MAX_MEMBERS} robot ids"
-        if not all(_int(r) and 1 <= r <= 250 for r in m) or len(set(m)) != len(m) or self.sender not in m:
+        if self.sender not in m:
             return f"members {list(m)}: expected distinct robot ids 1..250 with the sender among them"
         return None
 
 
 @dataclass(frozen=True)
-class DrExitLeader:
+class DrExitLeader(Message):
     """The sender no longer leads ``task`` for the robot ``dest`` (0: its whole group): ``reason`` 0 it yields to
     a leader of higher id (§5.5.1), 1 ``dest`` is not in its group, 2 the object is exhausted, 3 the task is done."""
-    sender: int
-    dest: int
-    task: int
+    sender: RobotId
+    dest: Dest
+    task: TaskId
     reason: int
 
-    def invalid(self) -> str | None:
-        return _common(self) or (None if self.reason in REASONS else f"reason {self.reason!r}: expected 0..3")
+    def check(self) -> str | None:
+        return None if self.reason in REASONS else f"reason {self.reason!r}: expected 0..3"
 
 
 @dataclass(frozen=True)
-class DrSvrSample:
+class DrSvrSample(Message):
     """§5.3 on-line learning: the sender's sample number ``seq`` (1, 2, ...): ``n`` mean group size, ``d`` m from
     the object to the delivery point, ``interference`` I in wu/s."""
-    sender: int
-    dest: int
-    seq: int
+    sender: RobotId
+    dest: Dest
+    seq: Count
     n: float
-    d: float
-    interference: float
+    d: Amount
+    interference: Number
 
-    def invalid(self) -> str | None:
-        why = _common(self) or _values(self, counts=("seq",), amounts=("d",), numbers=("interference",))
-        if why is None and not (self.seq >= 1 and _finite(self.n) and self.n > 0):
-            why = "seq/n: expected seq >= 1 and n > 0"
-        return why
+    def check(self) -> str | None:
+        return None if self.seq >= 1 and is_finite(self.n) and self.n > 0 else "seq/n: expected seq >= 1 and n > 0"
 
 
 @dataclass(frozen=True)
-class DrSampleRequest:
+class DrSampleRequest(Message):
     """A robot that missed sample ``seq`` of robot ``dest`` asks it to send it again."""
-    sender: int
-    dest: int
-    seq: int
-
-    def invalid(self) -> str | None:
-        return _common(self) or _values(self, counts=("seq",))
+    sender: RobotId
+    dest: Dest
+    seq: Count
 
 
 @dataclass(frozen=True)
-class DrLoad:
+class DrLoad(Message):
     """A robot loaded ``wu`` at ``task``'s object: its ``seq``-th load there (1, 2, ...).  The entry is the
     sender's before this load (``loads`` = seq - 1 is implied).  Resent until a ``DrLedger`` grants it."""
-    sender: int
-    dest: int
-    task: int
-    seq: int
-    wu: float
-    taken: float
-    deliveries: int
-    delivered: float
-    returned: float
+    sender: RobotId
+    dest: Dest
+    task: TaskId
+    seq: Count
+    wu: Amount
+    taken: Amount
+    deliveries: Count
+    delivered: Amount
+    returned: Amount
 
-    def invalid(self) -> str | None:
-        why = _common(self) or _values(self, counts=("seq", "deliveries"),
-                                       amounts=("wu", "taken", "delivered", "returned"))
-        return why or (None if self.seq >= 1 else "seq: expected >= 1")
+    def check(self) -> str | None:
+        return None if self.seq >= 1 else "seq: expected >= 1"
 
 
 @dataclass(frozen=True)
-class DrDeliver:
+class DrDeliver(Message):
     """A robot unloaded ``wu`` of ``task`` at the delivery point (or put its load back: ``returned`` grew): its
     ``seq``-th report of the kind; the entry is the sender's after it.  Resent until acknowledged."""
-    sender: int
-    dest: int
-    task: int
-    seq: int
-    wu: float
-    loads: int
-    taken: float
-    delivered: float
-    returned: float
+    sender: RobotId
+    dest: Dest
+    task: TaskId
+    seq: Count
+    wu: Amount
+    loads: Count
+    taken: Amount
+    delivered: Amount
+    returned: Amount
 
-    def invalid(self) -> str | None:
-        why = _common(self) or _values(self, counts=("seq", "loads"), amounts=("wu", "taken", "delivered", "returned"))
-        return why or (None if self.seq >= 1 else "seq: expected >= 1")
+    def check(self) -> str | None:
+        return None if self.seq >= 1 else "seq: expected >= 1"
 
 
 @dataclass(frozen=True)
-class DrLedger:
+class DrLedger(Message):
     """The leader's entry for ``robot`` on ``task`` (to every peer): grants a load, acknowledges a delivery, and
     replicates the bookkeeping so that any robot can take the lead with it; ``left`` wu at the object."""
-    sender: int
-    dest: int
-    task: int
-    robot: int
-    loads: int
-    taken: float
-    deliveries: int
-    delivered: float
-    returned: float
-    left: float
+    sender: RobotId
+    dest: Dest
+    task: TaskId
+    robot: RobotId
+    loads: Count
+    taken: Amount
+    deliveries: Count
+    delivered: Amount
+    returned: Amount
+    left: Amount
 
-    def invalid(self) -> str | None:
-        why = _common(self) or _entry(self) or _values(self, amounts=("left",))
-        return why or (None if _int(self.robot) and 1 <= self.robot <= 250 else "robot: expected a robot id 1..250")
+
 
 
 WIRE_MESSAGES = (DrLeaderRequest, DrBidRequest, DrBid, DrAward, DrRobotAlive, DrRefuse, DrLeaderAlive, DrExitLeader,

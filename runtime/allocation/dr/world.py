@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 from runtime.allocation.dr.ledger import Ledger
 from runtime.allocation.dr.messages import DrLeaderAlive
-from runtime.fleet.messages import IDLE, RobotState
+from runtime.messages import IDLE, RobotState
 from runtime.tasks import Task
 
 MAX_UNKNOWN = 64

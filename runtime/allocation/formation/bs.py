@@ -51,9 +51,10 @@ from dataclasses import dataclass, field, replace
 from typing import Callable, Mapping, Sequence
 
 from runtime.allocation.formation.assignment import LOST_PROBES, TaskBook
-from runtime.allocation.formation.messages import (BROADCAST, Announce, Award, Bid, Status, TaskInfo, addressed_to,
+from runtime.allocation.formation.messages import (Announce, Award, Bid, Status, TaskInfo, addressed_to,
                                          wire_float)
 from runtime.log import get_logger
+from runtime.messages import BROADCAST
 
 INF = math.inf
 

@@ -53,8 +53,9 @@ from collections import Counter
 from typing import Callable, Mapping, Sequence
 
 from runtime.allocation.formation.assignment import LOST_PROBES, MAX_TASKS, NO_TASK, TaskBook
-from runtime.allocation.formation.messages import BROADCAST, Price, Status, TaskInfo, addressed_to
+from runtime.allocation.formation.messages import Price, Status, TaskInfo, addressed_to
 from runtime.log import get_logger
+from runtime.messages import BROADCAST
 
 INF = math.inf
 NO_RUNG = 0xFFFF          # Price.phase before the sender knows the task set

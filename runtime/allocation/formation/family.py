@@ -66,11 +66,11 @@ from runtime.allocation.agent import AWARDED, DONE, RELEASED, AgentContext, Meth
 from runtime.allocation.formation.bs import BSAgent
 from runtime.allocation.formation.eps_auction import EpsAuctionAgent
 from runtime.allocation.formation.assignment import MAX_TASKS, NO_TASK
-from runtime.allocation.formation.messages import (AGENT_MESSAGES, BROADCAST, MAX_ROUND, ROUND_MESSAGES, Announce,
+from runtime.allocation.formation.messages import (AGENT_MESSAGES, MAX_ROUND, ROUND_MESSAGES, Announce,
                                                    Award, Price, RoundLeave, RoundStart, Status, TaskInfo)
 from runtime.allocation.formation.options import AuctionOptions, BSOptions, RTMAOptions
 from runtime.allocation.formation.rtma import RTMAAgent
-from runtime.fleet.messages import ALLOCATING, EXECUTING, IDLE, RobotState
+from runtime.messages import BROADCAST, ALLOCATING, EXECUTING, IDLE, RobotState
 from runtime.log import get_logger
 from runtime.tasks import DONE as P_DONE, FAILED as P_FAILED, Commitment, Progress, Task
 

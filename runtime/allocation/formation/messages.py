@@ -17,101 +17,107 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
 
-BROADCAST = 0
+from runtime.messages import BROADCAST, NUMBER, Kind, Message
+
 MAX_VALUE = 1e6          # s: the largest finite cost, bid or price the protocol carries
 
 
+def _value_reason(name: str, v) -> str:
+    if math.isnan(v):
+        return f"{name}: expected a number, got NaN"
+    if v == -math.inf:
+        return f"{name}: expected a number or +inf (cannot), got -inf"
+    if not math.isfinite(v):
+        return f"{name} {v}: expected a finite number"
+    return f"{name} {v}: expected at most {MAX_VALUE:g} in magnitude"
+
+
+# a task's index in the round (0xFFFF: none), a robot id, and the protocol's values (seconds of travel)
+Index = Annotated[int, Kind("0..65534", lambda v: 0 <= v < 0xFFFF)]
+Robot = Annotated[int, Kind("1..250", lambda v: 1 <= v <= 250, lambda name, v: f"robot {v}: expected 1..250")]
+Reserve = Annotated[float, Kind("", lambda v: not math.isnan(v) and not (math.isfinite(v) and abs(v) > MAX_VALUE),
+                                _value_reason)]            # +inf or -inf: none / cannot
+Cost = Annotated[float, Kind("", lambda v: not math.isnan(v) and v != -math.inf
+                             and not (math.isfinite(v) and abs(v) > MAX_VALUE), _value_reason)]   # +inf: cannot
+Value = Annotated[float, Kind("", lambda v: math.isfinite(v) and abs(v) <= MAX_VALUE, _value_reason)]
+PriceValue = Annotated[float, Kind(f"0..{MAX_VALUE:g}", lambda v: 0.0 <= v <= MAX_VALUE,
+                               lambda name, v: f"price {v}: expected 0..{MAX_VALUE:g}")]
+Position = Annotated[float, NUMBER]
+
+
 @dataclass(frozen=True)
-class TaskInfo:
+class TaskInfo(Message):
     """A task exists at (x, y) in the fleet frame; ``n_tasks`` is the size of the task set
     (RTMA uses it for each robot's mean cost)."""
     sender: int
     dest: int
-    task: int
-    x: float
-    y: float
+    task: Index
+    x: Position
+    y: Position
     n_tasks: int
     round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
 
-    def invalid(self) -> str | None:
-        return _bad_task(self.task) or _not_finite(x=self.x, y=self.y) or (
-            None if 0 < self.n_tasks <= 0xFFFF else f"n_tasks {self.n_tasks}: expected 1..65535")
+    def check(self) -> str | None:
+        return None if 0 < self.n_tasks <= 0xFFFF else f"n_tasks {self.n_tasks}: expected 1..65535"
 
 
 @dataclass(frozen=True)
-class Announce:
+class Announce(Message):
     """Auctioneer offers ``task``.  ``reserve`` is the auctioneer's own cost for it (+inf if it has
     none); BS sells a task back only to a bid worse than that."""
     sender: int
     dest: int
     auction: int
-    task: int
-    x: float
-    y: float
-    reserve: float
+    task: Index
+    x: Position
+    y: Position
+    reserve: Reserve
     round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
-
-    def invalid(self) -> str | None:
-        return (_bad_task(self.task) or _not_finite(x=self.x, y=self.y) or _nan(reserve=self.reserve)
-                or _too_large(reserve=self.reserve))
 
 
 @dataclass(frozen=True)
-class Bid:
+class Bid(Message):
     sender: int
     dest: int
     auction: int
-    task: int
-    cost: float
+    task: Index
+    cost: Cost
     round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
-
-    def invalid(self) -> str | None:
-        if self.cost == -math.inf:
-            return "cost: expected a number or +inf (cannot), got -inf"
-        return _bad_task(self.task) or _nan(cost=self.cost) or _too_large(cost=self.cost)
 
 
 @dataclass(frozen=True)
-class Award:
+class Award(Message):
     """``winner`` gets ``task`` at ``cost``; ``mean`` is the mean of all bids heard (RTMA)."""
     sender: int
     dest: int
     auction: int
-    task: int
-    winner: int
-    cost: float
-    mean: float
+    task: Index
+    winner: Robot
+    cost: Value
+    mean: Value
     round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
-
-    def invalid(self) -> str | None:
-        return (_bad_task(self.task) or _bad_robot(self.winner) or _not_finite(cost=self.cost, mean=self.mean)
-                or _too_large(cost=self.cost, mean=self.mean))
 
 
 @dataclass(frozen=True)
-class Price:
+class Price(Message):
     """Auction-algorithm price update: ``holder`` holds ``task`` at ``price``.  ``phase`` is the
     sender's epsilon-scaling rung: phases it has left above the final epsilon (0 = on it, 0xFFFF =
     it does not know the task set yet)."""
     sender: int
     dest: int
-    task: int
-    holder: int
-    price: float
+    task: Index
+    holder: Robot
+    price: PriceValue
     phase: int
     round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
 
-    def invalid(self) -> str | None:
-        if not 0.0 <= self.price <= MAX_VALUE:           # NaN fails too
-            return f"price {self.price}: expected 0..{MAX_VALUE:g}"
-        return _bad_task(self.task) or _bad_robot(self.holder)
-
 
 @dataclass(frozen=True)
-class Status:
+class Status(Message):
     """A robot's allocation state: the task it holds (or 0xFFFF for none) and whether it believes
     the allocation has converged.  ``auction`` is the id of the auction this status answers (the
     ``Award`` it acknowledges, or the ``Announce`` of a task the sender already holds), so with
@@ -125,7 +131,7 @@ class Status:
 
 
 @dataclass(frozen=True)
-class RoundStart:
+class RoundStart(Message):
     """``sender`` starts round ``round`` over the fleet tasks ``tasks`` (a task's index in the round's other
     messages is its position here) among ``robots`` (itself included)."""
     sender: int
@@ -134,7 +140,7 @@ class RoundStart:
     tasks: tuple[int, ...]
     robots: tuple[int, ...]
 
-    def invalid(self) -> str | None:
+    def check(self) -> str | None:
         if not self.tasks or len(set(self.tasks)) != len(self.tasks):
             return f"tasks {list(self.tasks)}: expected distinct fleet task ids"
         if self.sender not in self.robots or len(set(self.robots)) != len(self.robots):
@@ -143,33 +149,15 @@ class RoundStart:
 
 
 @dataclass(frozen=True)
-class RoundLeave:
+class RoundLeave(Message):
     """``sender`` takes no (further) part in round ``round``."""
     sender: int
     dest: int
     round: int
 
 
-def _bad_task(task: int) -> str | None:
-    return None if 0 <= task < 0xFFFF else f"task {task}: expected 0..65534"
-
-
 def _bad_robot(robot: int) -> str | None:
     return None if 1 <= robot <= 250 else f"robot {robot}: expected 1..250"
-
-
-def _not_finite(**values: float) -> str | None:
-    return next((f"{k} {v}: expected a finite number" for k, v in values.items() if not math.isfinite(v)), None)
-
-
-def _too_large(**values: float) -> str | None:
-    """A finite value beyond MAX_VALUE in magnitude (infinities are judged by each message)."""
-    return next((f"{k} {v}: expected at most {MAX_VALUE:g} in magnitude" for k, v in values.items()
-                 if math.isfinite(v) and abs(v) > MAX_VALUE), None)
-
-
-def _nan(**values: float) -> str | None:
-    return next((f"{k}: expected a number, got NaN" for k, v in values.items() if math.isnan(v)), None)
 
 
 AGENT_MESSAGES = (TaskInfo, Announce, Bid, Award, Price, Status)

@@ -21,7 +21,8 @@ import math
 
 from runtime.allocation.formation.assignment import NO_TASK
 from runtime.allocation.formation.bs import BSAgent
-from runtime.allocation.formation.messages import BROADCAST, Announce, Status, TaskInfo
+from runtime.allocation.formation.messages import Announce, Status, TaskInfo
+from runtime.messages import BROADCAST
 
 
 class RTMAAgent(BSAgent):

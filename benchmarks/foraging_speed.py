@@ -32,7 +32,7 @@ sys.path.insert(0, str(ROOT))
 
 from runtime.config.world import WorldConfig  # noqa: E402
 from runtime.fleet.node import FleetNode  # noqa: E402
-from sitl.foraging import sonar  # noqa: E402
+from sitl.sensing import sonar_ring as sonar  # noqa: E402
 from sitl.foraging.harness import ForagingConfig, ForagingRun  # noqa: E402
 from sitl.world import World  # noqa: E402
 from sitl.bodies import pioneer3dx as p3dx  # noqa: E402

@@ -19,7 +19,7 @@ from runtime.execution.executive import ExecContext, Executive, Tunables
 from runtime.planning.robot_planner import RobotPlanner
 from runtime.tasks import Commitment, Task
 from runtime.tasks.goto import Goto
-from sitl.foraging import sonar
+from sitl.sensing import sonar_ring as sonar
 from sitl.foraging.harness import ForagingConfig, ForagingRun
 from sitl.foraging.world import RADIUS, ForagingWorld
 

@@ -11,7 +11,7 @@ import pytest
 
 from runtime.drivers.arcos_protocol import P3DX_SH
 from runtime.errors import InputError
-from sitl.foraging import sonar
+from sitl.sensing import sonar_ring as sonar
 from sitl.foraging.world import RADIUS, ROT_ACC, ForagingWorld
 
 

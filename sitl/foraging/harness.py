@@ -53,7 +53,8 @@ from runtime.log import get_logger
 from runtime.planning.robot_planner import RobotPlanner, TravelEstimator
 from runtime.tasks import Commitment, Progress, Task
 from runtime.tasks.transport import DELIVERED, LOADED, MAX_WEIGHT, Transport
-from sitl.foraging import scenario, sonar
+from sitl.foraging import scenario
+from sitl.sensing import sonar_ring as sonar
 from sitl.foraging.scenario import Dist
 from sitl.foraging.world import DT, RADIUS, SOLVER_ITERATIONS, ForagingWorld
 

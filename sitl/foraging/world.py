@@ -17,7 +17,7 @@ holds with the same motors, so a driving robot pushes a standing one only slowly
 
 Sensing (ground truth, as the sweeps need): pose, bumpers (contact within 5 mm on the front 135 degrees, split
 left/right as the Pioneer's front bumper segments are; computed from the discs, no contact query), and the
-16-sonar ring in closed form (:mod:`sitl.foraging.sonar`).
+16-sonar ring in closed form (:mod:`sitl.sensing.sonar_ring`).
 
 Time: ``advance(seconds)`` takes whole physics steps of ``dt`` (default :data:`DT`); between calls nothing
 moves.  With the same calls a run is bit-for-bit repeatable.
@@ -33,7 +33,7 @@ import pybullet as p
 from runtime.errors import InputError
 from sitl.bodies import pioneer3dx as p3dx
 from sitl.devices.arcos import ROT_ACCEL, TRANS_ACCEL
-from sitl.foraging import sonar
+from sitl.sensing import sonar_ring as sonar
 
 RADIUS = p3dx.PARAMS.radius_mm / 1000.0          # 0.25 m
 MASS = p3dx.MASS_TOTAL                            # 10 kg
@@ -219,7 +219,7 @@ class ForagingWorld:
         return out
 
     def sonar(self) -> np.ndarray:
-        """(N, 16) sonar ranges (m from each transducer; :data:`sitl.foraging.sonar.MAX_RANGE` for no echo), rows
+        """(N, 16) sonar ranges (m from each transducer; :data:`sitl.sensing.sonar_ring.MAX_RANGE` for no echo), rows
         in ``ids`` order; a removed robot's row is all no-echo.  Computed once per physics step."""
         if self._sonar_at != self._steps:
             live = np.flatnonzero(self.alive)

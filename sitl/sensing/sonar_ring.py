@@ -1,4 +1,4 @@
-"""The Pioneer 3-DX sonar ring in the foraging world, computed in closed form for every robot at once.
+"""The Pioneer 3-DX sonar ring in closed form, for every robot at once (discs and arena walls: the foraging world).
 
 Each of the 16 transducers (positions and headings from AriaCoda ``params/p3dx-sh.p``, in
 :data:`runtime.drivers.arcos_protocol.P3DX_SH`) reports the distance to the nearest surface inside its beam, a

@@ -32,6 +32,7 @@ import pybullet as p
 from runtime.drivers.arcos_protocol import P3DX_SH
 from sitl.bodies.common import clip_wheels, touching, tyre_radii, yaw_of
 from sitl.bodies.diffdrive import GroundTruth
+from sitl.sensing import raycast
 
 PARAMS = P3DX_SH
 WHEEL_RADIUS = PARAMS.wheel_diameter_mm / 2000.0          # m
@@ -80,13 +81,8 @@ def hull_outline() -> list[tuple[float, float]]:
 
 def sonar_rays() -> np.ndarray:
     """(16 * SONAR_RAYS, 4): per ray its origin x, y and direction angle in the robot frame, and its sonar number."""
-    rows = []
-    offsets = np.linspace(-SONAR_BEAM / 2, SONAR_BEAM / 2, SONAR_RAYS)
-    for num, u in enumerate(PARAMS.sonar_units):
-        h = math.radians(u.heading)
-        for d in offsets:
-            rows.append((u.x / 1000.0, u.y / 1000.0, h + d, num))
-    return np.asarray(rows, dtype=float)
+    return raycast.fan([(u.x / 1000.0, u.y / 1000.0, math.radians(u.heading)) for u in PARAMS.sonar_units],
+                       SONAR_BEAM, SONAR_RAYS)
 
 
 _RAYS = sonar_rays()
@@ -234,35 +230,8 @@ class SimPioneer3DX(GroundTruth):
         out = {int(n): SONAR_MAX_RANGE for n in sonars}
         if not len(rays):
             return out
-        x, y, yaw = self.pose()
-        c, s = math.cos(yaw), math.sin(yaw)
-        ox = x + c * rays[:, 0] - s * rays[:, 1]
-        oy = y + s * rays[:, 0] + c * rays[:, 1]
-        ang = yaw + rays[:, 2]
-        dx, dy = np.cos(ang), np.sin(ang)
-        start = np.zeros(len(rays))
-        dist = np.full(len(rays), SONAR_MAX_RANGE)
-        todo = np.arange(len(rays))
-        for _ in range(3):                      # a ray that hits this body starts again just past the hit
-            if not len(todo):
-                break
-            frm = np.stack([ox[todo] + dx[todo] * start[todo], oy[todo] + dy[todo] * start[todo],
-                            np.full(len(todo), SONAR_Z)], axis=1)
-            to = np.stack([ox[todo] + dx[todo] * SONAR_MAX_RANGE, oy[todo] + dy[todo] * SONAR_MAX_RANGE,
-                           np.full(len(todo), SONAR_Z)], axis=1)
-            hits = p.rayTestBatch(frm.tolist(), to.tolist(), **self._kw)
-            self.rays_cast += len(todo)
-            again = []
-            for k, h in zip(todo, hits):
-                if h[0] < 0:
-                    continue
-                d = start[k] + h[2] * (SONAR_MAX_RANGE - start[k])
-                if h[0] == self.body_id:
-                    start[k] = d + 1e-3
-                    again.append(k)
-                else:
-                    dist[k] = d
-            todo = np.asarray(again, dtype=int)
+        dist, n_cast = raycast.cast(rays, self.pose(), SONAR_Z, SONAR_MAX_RANGE, self.body_id, self._kw)
+        self.rays_cast += n_cast
         for k, row in enumerate(rays):
             n = int(row[3])
             out[n] = min(out[n], float(dist[k]))

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from runtime.allocation.comutar import actions as A
-from runtime.allocation.comutar import avoidance, surveillance
+from runtime.tasks import avoid_obstacles as avoidance, surveillance
 from runtime.allocation.comutar.options import ComutarOptions
-from runtime.allocation.comutar.surveillance import Board, Surveillance
+from runtime.tasks.surveillance import Board, Surveillance
 from runtime.config.build import ConfigError, from_dict
 from runtime.drivers.arcos import ArcosConfig
 from runtime.drivers.create_oi import CreateOIConfig

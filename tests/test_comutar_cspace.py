@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from runtime.allocation.comutar import cspace as C
+from runtime.control import cspace as C
 from runtime.control.arbiter import ArcSet
 
 WIN = C.Window()          # 0.25 m/s, 2 rad/s, 21 x 21 cells over +-0.05 m, T_f = 0.2 s

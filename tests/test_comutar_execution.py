@@ -13,12 +13,12 @@ import pytest
 
 from runtime.allocation.agent import AgentContext
 from runtime.allocation.bus import InMemoryBus
-from runtime.allocation.comutar import cspace as C
-from runtime.allocation.comutar.avoidance import AvoidObstacles
+from runtime.control import cspace as C
+from runtime.tasks.avoid_obstacles import AvoidObstacles
 from runtime.allocation.comutar.messages import CmStream, pack_disc, unpack_disc
 from runtime.allocation.comutar.options import ComutarOptions
 from runtime.allocation.comutar.protocol import ComutarAgent, echo_discs
-from runtime.allocation.comutar.surveillance import Surveillance
+from runtime.tasks.surveillance import Surveillance
 from runtime.execution.executive import ExecContext, Executive, Tunables
 from runtime.tasks import Profile, Task
 
@@ -49,8 +49,8 @@ class World:
         self.bus = InMemoryBus(dict(self.agents), delay=0.01, jitter=0.002, seed=3)
         self.poses = {1: np.array([-3.0, -2.5, 0.0]), 2: np.array([-3.5, 0.0, 0.0]), 3: np.array([3.5, 0.5, 3.1])}
         tun = Tunables(cruise_speed=0.25, lookahead=0.4, max_turn_rate=2.0, goal_tolerance=0.1)
-        self.ex = {r: Executive(ExecContext(None, tun, logging.getLogger(f"test.r{r}"), RADIUS[r], seed=r, agent=a))
-                   for r, a in self.agents.items()}
+        self.ex = {r: Executive(ExecContext(None, tun, logging.getLogger(f"test.r{r}"), RADIUS[r], seed=r))
+                   for r in self.agents}
         self.now = 0.0
         self.dead: set[int] = set()
         self.commands: list[tuple[float, float, float]] = []      # robot 1: (t, v, w)
@@ -76,8 +76,9 @@ class World:
         sensors = SimpleNamespace(bump_left=False, bump_right=False, ranges=())
         for r in live:
             a, ex = self.agents[r], self.ex[r]
-            ex.sync(a.commitments, self.now)
-            (v, w), progress = ex.step(tuple(self.poses[r]), sensors, self.now)
+            guidance = a.guidance(self.now)                 # what the agent tells its executors, as data
+            ex.sync(a.commitments, self.now, guidance)
+            (v, w), progress = ex.step(tuple(self.poses[r]), sensors, self.now, guidance)
             for p in progress:
                 self.visited.add(p.data["waypoint"]) if p.event == "visited" else None
                 self.bus.send(a.on_progress(p, self.now), self.now)
@@ -252,20 +253,15 @@ def test_a_reader_left_behind_and_stuck_takes_a_detour_toward_the_region():
     from runtime.execution import detour as D
     from runtime.execution.avoidance import AvoidanceExecutor
     from runtime.tasks import Commitment
+    from runtime.tasks.avoid_obstacles import Guidance
 
-    class Agent:
-        window = C.Window()
-        where = (3.5, 0.0)                                   # the consumer: past 0.8 x 5 m with its 1 m region
+    def guide(where):                                        # what the agent writes: a sonar reader's region
+        return Guidance(C.Window(), None, None, (1, *where, 1.0), A.SONAR.weight, A.SENSORS["sonar"],
+                        np.array([[1.0, 0.2, 0.3]]))         # an obstacle between the two, a little to the left
 
-        def region(self, task_id):
-            return (1, *self.where, 1.0)
-
-        def obstacle_input_any(self, now):
-            return np.array([[1.0, 0.2, 0.3]])               # between the two, a little to the left
-
-    agent = Agent()
-    ctx = SimpleNamespace(agent=agent, log=logging.getLogger("test.reader"), radius=0.25)
+    ctx = SimpleNamespace(log=logging.getLogger("test.reader"), radius=0.25)
     ex = AvoidanceExecutor(Commitment(AVOID, params=(("actions", (A.SONAR.name,)),)), ctx)
+    ex.guide = guide((3.5, 0.0))                             # the consumer: past 0.8 x 5 m with its 1 m region
     here = (0.0, 0.0, 0.0)
     names = []
     for i in range(int(D.STUCK_TIME / DT) + 3):                # held where it is
@@ -273,6 +269,6 @@ def test_a_reader_left_behind_and_stuck_takes_a_detour_toward_the_region():
         names.append(ex.constraints()[0].name)
     assert set(names[:int(D.STUCK_TIME / DT)]) == {"sensor"} and names[-1] == "survey"
     assert ex.detour.count == 1
-    agent.where = (2.5, 0.0)                                 # in view again: Alg. 3 again, no detour
+    ex.guide = guide((2.5, 0.0))                             # in view again: Alg. 3 again, no detour
     ex.update(here, len(names) * DT)
     assert ex.constraints()[0].name == "sensor"

@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from runtime.allocation.comutar.avoidance import AvoidObstacles
+from runtime.tasks.avoid_obstacles import AvoidObstacles
 from runtime.allocation.comutar.kinematic import PIONEER_RADIUS, KinematicFleet
-from runtime.allocation.comutar.surveillance import Surveillance
+from runtime.tasks.surveillance import Surveillance
 from runtime.errors import InputError
 from runtime.tasks import Task
 from sitl.experiments import comutar_surveillance as X

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from runtime.allocation.comutar import messages as M
-from runtime.allocation.comutar.avoidance import AvoidObstacles
+from runtime.tasks.avoid_obstacles import AvoidObstacles
 from runtime.allocation.comutar.options import ComutarOptions
 from runtime.allocation.comutar.protocol import ComutarAgent
 from runtime.allocation.agent import AgentContext

@@ -14,10 +14,10 @@ from runtime.allocation.agent import AWARDED, FAILED, AgentContext
 from runtime.allocation.bus import InMemoryBus
 from runtime.allocation.comutar import messages as M
 from runtime.allocation.comutar.auctioneer import SERVED
-from runtime.allocation.comutar.avoidance import AvoidObstacles
+from runtime.tasks.avoid_obstacles import AvoidObstacles
 from runtime.allocation.comutar.options import ComutarOptions
 from runtime.allocation.comutar.protocol import COMUTAR, VISITED, ComutarAgent
-from runtime.allocation.comutar.surveillance import Surveillance
+from runtime.tasks.surveillance import Surveillance
 from runtime.tasks import Profile, Progress, Task
 from runtime.messages import why_invalid
 

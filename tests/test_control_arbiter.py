@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from runtime.control.arbiter import (Arbiter, ArcSet, AvoidObstacles, Ballot, FollowPath, Stop, peak)
+from runtime.control.arbiter import Arbiter, ArcSet, Ballot
+from runtime.control.behaviours import AvoidObstacles, FollowPath, Stop, peak
 from runtime.control.pure_pursuit import PurePursuit
 from runtime.errors import InputError
 

@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from runtime.control.arbiter import ArcSet, AvoidObstacles
+from runtime.control.arbiter import ArcSet
+from runtime.control.behaviours import AvoidObstacles
 
 
 def brute_force(avoid: AvoidObstacles, arcs: ArcSet, horizon: float, steps: int) -> np.ndarray:

@@ -154,3 +154,23 @@ def test_the_broadcast_address_is_defined_once():
     where = [str(p.relative_to(ROOT)) for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")
              if re.search(r"^BROADCAST\s*=", p.read_text(), re.M)]
     assert where == ["runtime/messages.py"]
+
+
+def test_execution_imports_no_allocation_family():
+    """Executors take data from the families (each task kind's Guidance), never their agents."""
+    assert imports_from(graph(), "runtime.execution", "runtime.allocation") == []
+
+
+def test_the_executive_asks_its_executors_nothing_with_hasattr():
+    """Every member it uses is declared, with a default, on runtime.execution.executor.Executor."""
+    tree = ast.parse((ROOT / "runtime" / "execution" / "executive.py").read_text())
+    asks = [ast.unparse(n) for n in ast.walk(tree) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)
+            and n.func.id in ("hasattr", "getattr")]
+    assert all(a.startswith("getattr(sensors, 'ranges'") for a in asks), asks     # the base's sensors, not executors
+
+
+def test_every_executor_derives_from_the_contract():
+    from runtime import tasks
+    from runtime.execution import executor_class
+    from runtime.execution.executor import Executor
+    assert all(issubclass(executor_class(kind), Executor) for kind in tasks.KINDS)

@@ -1,12 +1,12 @@
 """Carry out an ``avoid_obstacles`` commitment (paper 003, Figs. 6-7): whichever actions of its coalition this
 robot runs, as constraint functions over the next-frame window.
 
-* ``obstacle_avoider`` (Alg. 4, on the robot kept clear): the obstacle list it works from is the agent's
-  :meth:`~runtime.allocation.comutar.protocol.ComutarAgent.obstacle_input` (this robot's own sensor, or the
-  stream of the robot whose sensor it borrows).  When that is stale or missing the constraint allows only
+* ``obstacle_avoider`` (Alg. 4, on the robot kept clear): the obstacle list it works from is the guide's
+  ``obstacles`` (the agent's input for it: this robot's own sensor, or the stream of the robot whose sensor it
+  borrows).  When that is stale or missing the constraint allows only
   standing still: the robot stops at the next control cycle and stays stopped until the task has a provider
   again (the agent resigns the task when the provider is lost, and it is auctioned again).
-* a ``*_reader`` keeping another robot's region in view (Alg. 3): the agent's :meth:`region`.  A reader that has
+* a ``*_reader`` keeping another robot's region in view (Alg. 3): the guide's ``region``.  A reader that has
   fallen behind (the region past ``far`` of its range) and gets no nearer takes a detour
   (:mod:`runtime.execution.detour`): Alg. 3's push toward the region and Alg. 4's from an obstacle between the
   two hold it still, and its consumer, whose region it no longer covers, stands still too.
@@ -16,8 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from runtime.allocation.comutar import actions as A
-from runtime.allocation.comutar import cspace as C
+from runtime.control import cspace as C
 from runtime.execution.cspace_vote import CspaceExecutor, stop_only
 from runtime.execution.detour import Detour
 from runtime.tasks import Commitment, Progress
@@ -32,19 +31,13 @@ class AvoidanceExecutor(CspaceExecutor):
         super().__init__(commitment, ctx)
         self.blind = False
         self.detour = Detour(ctx.log, f"avoid_obstacles {self.task.id} reader")
-        self.recommit(commitment, 0.0)
-
-    def recommit(self, commitment: Commitment, now: float) -> None:
-        self.commitment = commitment
-        self.actions = tuple(commitment.param("actions", ()))
-        self.reader = next((spec for spec in A.READERS.values() if spec.name in self.actions), None)
 
     def update(self, pose, now: float) -> list[Progress]:
-        agent = self.agent
+        g = self.guide
         p = np.asarray([pose], float)
         cons = []
-        if A.AVOIDER.name in self.actions:
-            obstacles = agent.obstacle_input(self.task.id, now)
+        if g.avoider is not None:
+            obstacles = g.obstacles
             blind = obstacles is None
             if blind != self.blind:
                 self.blind = blind
@@ -54,22 +47,22 @@ class AvoidanceExecutor(CspaceExecutor):
                 cons.append(stop_only(self.window, "avoider without obstacle data"))
             else:
                 c = C.avoid(self.window, p, obstacles, self.ctx.radius + MARGIN, near=NEAR, lookahead=LOOKAHEAD)
-                c.weight = A.AVOIDER.weight
+                c.weight = g.avoider
                 cons.append(c)
-        region = agent.region(self.task.id)
-        if region is not None and self.reader is not None:
-            sensor = A.SENSORS[self.reader.sensor]
+        region = g.region
+        if region is not None and g.reader is not None:
+            sensor = g.sensor
             centre = region[1:3]
             goal = centre
             if np.hypot(centre[0] - pose[0], centre[1] - pose[1]) + region[3] > sensor.far * sensor.range:
-                goal = self.detour.goal(pose, centre, now, lambda: agent.obstacle_input_any(now))
+                goal = self.detour.goal(pose, centre, now, lambda: g.obstacles_any)
             else:
                 self._in_view(now)
             if goal != centre:
                 c = C.survey(self.window, p, [goal])          # on a detour: out of view anyway
             else:
                 c = C.sensor_view(self.window, p, [centre], region[3], sensor)
-            c.weight = self.reader.weight
+            c.weight = g.reader
             cons.append(c)
         else:
             self._in_view(now)

@@ -2,10 +2,10 @@
 
 The executors of CoMutaR's task kinds (:mod:`runtime.execution.surveillance`, :mod:`runtime.execution.avoidance`)
 each turn their commitment into constraint functions over the robot's next-frame window
-(:mod:`runtime.allocation.comutar.cspace`: Alg. 2 survey, Alg. 3 sensor reader, Alg. 4 obstacle avoider).
+(:mod:`runtime.control.cspace`: Alg. 2 survey, Alg. 3 sensor reader, Alg. 4 obstacle avoider).
 :class:`CspaceVote` gathers every one of them each cycle, intersects and maximises
-(:func:`~runtime.allocation.comutar.cspace.choose`), and casts the result as votes and vetoes over the
-arbiter's arcs (:func:`~runtime.allocation.comutar.cspace.to_arc_ballot`): arcs outside the intersection are
+(:func:`~runtime.control.cspace.choose`), and casts the result as votes and vetoes over the
+arbiter's arcs (:func:`~runtime.control.cspace.to_arc_ballot`): arcs outside the intersection are
 vetoed, so whatever else votes (bumpers, the robot's own range avoidance) the command stays inside it.  An
 empty intersection vetoes every arc but stop: the robot stops, and the conflict is counted and logged with the
 constraints that caused it.
@@ -16,8 +16,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from runtime.allocation.comutar import cspace as C
+from runtime.control import cspace as C
 from runtime.control.arbiter import ArcSet, Ballot
+from runtime.execution.executor import Executor
 
 
 @dataclass
@@ -55,28 +56,22 @@ def stop_only(win: C.Window, name: str) -> C.Constraint:
     return C.Constraint(allowed, None, name)
 
 
-class CspaceExecutor:
+class CspaceExecutor(Executor):
     """What CoMutaR's executors share: no arbiter behaviours of their own (their constraints go to the
-    executive's :class:`CspaceVote`), the agent and its window, nothing to do on a bump, and this cycle's
-    constraints (set by ``update``)."""
-    behaviours: list = []
+    executive's :class:`CspaceVote`), the c-space window of the family's guide, and this cycle's constraints (set by
+    ``update``)."""
 
     def __init__(self, commitment, ctx):
-        self.commitment = commitment
-        self.task = commitment.task
-        self.ctx = ctx
-        self.agent = ctx.agent
-        self.window: C.Window = self.agent.window
+        super().__init__(commitment, ctx)
         self._cons: list = []
 
-    def recommit(self, commitment, now: float) -> None:
+    @property
+    def window(self) -> C.Window | None:
+        return None if self.guide is None else self.guide.window
+
+    def recommit(self, commitment, now: float) -> bool:
         self.commitment = commitment
-
-    def begin(self, pose, now: float) -> None:
-        pass
-
-    def bump_ended(self, pose, now: float) -> None:
-        pass
+        return True
 
     def constraints(self) -> list:
         return self._cons

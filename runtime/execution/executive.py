@@ -10,10 +10,13 @@ from __future__ import annotations
 import math
 import random
 from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Mapping
 
 import numpy as np
 
-from runtime.control.arbiter import Arbiter, ArcSet, AvoidObstacles, Stop
+from runtime.control.arbiter import Arbiter, ArcSet
+from runtime.control.behaviours import AvoidObstacles, Stop
 from runtime.control.pure_pursuit import PurePursuit
 from runtime.execution import executor_class
 from runtime.tasks import Commitment, Progress
@@ -35,7 +38,6 @@ class ExecContext:
     log: object
     radius: float                     # m, the base's footprint (obstacle avoidance)
     seed: int = 0                     # the robot's own random choices (escape turns): its id on a robot
-    agent: object = None              # the allocation agent, for executors that read it (CoMutaR's)
     robot_id: int | None = None       # the robot's fleet id, for executors that take turns with partners
 
     @property
@@ -47,6 +49,8 @@ class ExecContext:
         return PurePursuit(lookahead=t.lookahead, cruise_speed=t.cruise_speed, max_turn_rate=t.max_turn_rate,
                            goal_tolerance=t.goal_tolerance)
 
+
+NONE: Mapping = MappingProxyType({})      # no guidance from the allocation family
 
 STALL_TIME = 4.0          # s over which a stall is judged
 STALL_MOVE = 0.1          # m the path follower asked for, at least, in that time (turns at the robot's radius) ...
@@ -85,7 +89,7 @@ class Executive:
         lead = self._lead()
         follows = [b for e in self.executors.values() for b in e.behaviours]
         stop = [Stop(lead.follow)] if lead is not None else []
-        cspace = [e for e in self.executors.values() if hasattr(e, "constraints")]
+        cspace = [e for e in self.executors.values() if e.window is not None]
         if cspace:
             if self.cspace is None:
                 from runtime.execution.cspace_vote import CspaceVote
@@ -98,41 +102,41 @@ class Executive:
 
     def _lead(self):
         """The executor whose path follower leads (the first that has one), or None."""
-        return next((e for e in self.executors.values() if hasattr(e, "follow")), None)
+        return next((e for e in self.executors.values() if e.follow is not None), None)
 
     def tune(self, **changes) -> None:
         """Apply changed tunables now: running executors' followers and the arbiter's arcs too."""
         for k, v in changes.items():
             setattr(self.ctx.tunables, k, v)
         for e in self.executors.values():
-            if not hasattr(e, "follow"):
+            if e.follow is None:
                 continue
             p = e.follow.follower
             t = self.ctx.tunables
             p.lookahead, p.cruise_speed, p.max_turn_rate, p.goal_tolerance = (t.lookahead, t.cruise_speed,
                                                                               t.max_turn_rate, t.goal_tolerance)
             p.slow_radius, p.min_speed = 2.0 * t.lookahead, 0.15 * t.cruise_speed
-            if hasattr(e, "retune"):
-                e.retune()                        # the executor's own adjustments to its follower
+            e.retune()                            # the executor's own adjustments to its follower
         self.arbiter.arcs = self._arcs()
 
     # ------------------------------------------------------------------ commitments
-    def sync(self, commitments: tuple[Commitment, ...], now: float) -> None:
+    def sync(self, commitments: tuple[Commitment, ...], now: float, guidance: Mapping = NONE) -> None:
         """Start executors for new commitments, cancel those whose commitment ended.  A commitment that changed
-        but keeps its task goes to its executor's ``recommit`` where it has one (a transport keeps its load when
-        its coalition changes), and restarts the executor where it has none."""
+        but keeps its task goes to its executor's ``recommit``, which carries on with it (a transport keeps its
+        load when its coalition changes) or asks to be restarted.  ``guidance``: what the allocation family wrote
+        for each task this cycle (task id -> data), given to its executor as ``guide``."""
         want = {c.task_id: c for c in commitments}
         changed = False
         for tid in list(self.executors):
             ex = self.executors[tid]
-            if tid in want and want[tid] != ex.commitment and hasattr(ex, "recommit"):
-                ex.recommit(want[tid], now)          # same task, new partners or parameters: carry on
-            elif tid not in want or want[tid] != ex.commitment:
+            c = want.get(tid)
+            if c is None or (c != ex.commitment and not ex.recommit(c, now)):
                 self.executors.pop(tid).cancel(now)
                 changed = True
         for tid, c in want.items():
             if tid not in self.executors:
-                self.executors[tid] = executor_class(c.task.kind)(c, self.ctx)
+                ex = self.executors[tid] = executor_class(c.task.kind)(c, self.ctx)
+                ex.guide = guidance.get(tid)
                 changed = True
         if changed:
             self._rebuild_arbiter()
@@ -142,10 +146,13 @@ class Executive:
         return not self.executors
 
     # ------------------------------------------------------------------ one control cycle
-    def step(self, pose, sensors, now: float) -> tuple[tuple[float, float], list[Progress]]:
-        """The command for this cycle and the progress to report.  ``pose`` None or no executor: stand still."""
+    def step(self, pose, sensors, now: float, guidance: Mapping = NONE) -> tuple[tuple[float, float], list[Progress]]:
+        """The command for this cycle and the progress to report.  ``pose`` None or no executor: stand still.
+        ``guidance``: as for :meth:`sync`."""
         if pose is None or not self.executors:
             return self._make_way(sensors, now), []
+        for tid, e in self.executors.items():
+            e.guide = guidance.get(tid)
         for e in self.executors.values():
             e.begin(pose, now)
         self.avoid.on_bumpers(sensors.bump_left, sensors.bump_right, now)
@@ -155,7 +162,7 @@ class Executive:
         lead = self._lead()
         goal = None
         if lead is not None:
-            goal = getattr(lead, "goal", None) or (lead.follow.path[-1] if lead.follow.path else None)
+            goal = lead.goal or (lead.follow.path[-1] if lead.follow.path else None)
         self.avoid.goal_distance = math.hypot(goal[0] - pose[0], goal[1] - pose[1]) if goal else math.inf
         self._track_speed(pose, now)
         if lead is not None:
@@ -169,7 +176,7 @@ class Executive:
         for e in self.executors.values():
             progress += e.update(pose, now)
         if self.cspace is not None:
-            self.cspace.set([c for e in self.executors.values() if hasattr(e, "constraints") for c in e.constraints()])
+            self.cspace.set([c for e in self.executors.values() for c in e.constraints()])
         d = self.arbiter.decide(now)
         if lead is None:
             c = self.cspace.choice if self.cspace is not None else None

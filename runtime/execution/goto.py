@@ -5,15 +5,14 @@ from __future__ import annotations
 
 import math
 
-from runtime.control.arbiter import FollowPath
+from runtime.control.behaviours import FollowPath
+from runtime.execution.executor import Executor
 from runtime.tasks import ARRIVED, DONE, Commitment, Progress
 
 
-class GotoExecutor:
+class GotoExecutor(Executor):
     def __init__(self, commitment: Commitment, ctx):
-        self.commitment = commitment
-        self.task = commitment.task
-        self.ctx = ctx
+        super().__init__(commitment, ctx)
         self.goal = self.task.position
         self.hold = self.finishes_after(self.task)
         self.follow = FollowPath(follower=ctx.pursuit())

@@ -7,18 +7,19 @@ Alg. 2's pull toward the waypoint and Alg. 4's push from obstacles have local mi
 an obstacle takes a detour (:mod:`runtime.execution.detour`).
 
 A robot that must avoid obstacles and cannot (its ``avoid_obstacles`` task not allocated yet, or the robot
-whose sensor it borrows lost or silent: :meth:`ComutarAgent.protected`) does not survey: its constraint then
-allows only standing still.
+whose sensor it borrows lost or silent) does not survey: its constraint then allows only standing still.  What the
+agent wants (the target, the waypoints known visited, whether the robot is protected, the obstacles it knows) comes
+each cycle as :class:`runtime.tasks.surveillance.Guidance` in ``guide``.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from runtime.allocation.comutar import cspace as C
-from runtime.allocation.comutar.protocol import VISITED
+from runtime.control import cspace as C
 from runtime.execution.cspace_vote import CspaceExecutor, stop_only
 from runtime.execution.detour import Detour
 from runtime.tasks import Commitment, Progress
+from runtime.tasks.surveillance import VISITED
 
 
 class SurveillanceExecutor(CspaceExecutor):
@@ -30,20 +31,19 @@ class SurveillanceExecutor(CspaceExecutor):
         self.detour = Detour(ctx.log, f"surveillance {self.task.id}")
 
     def update(self, pose, now: float) -> list[Progress]:
-        agent = self.agent
+        g = self.guide
         out = []
-        board = agent.boards.get(self.task.id)
-        if board is not None:
+        if g.visited is not None:
             d = np.hypot(self.points[:, 0] - pose[0], self.points[:, 1] - pose[1])
-            for i in np.flatnonzero(d <= agent.options.visit_radius):
-                if int(i) not in board.visited:
+            for i in np.flatnonzero(d <= g.visit_radius):
+                if int(i) not in g.visited:
                     out.append(Progress(self.task.id, VISITED, now, data={"waypoint": int(i)}))
-        waiting = not agent.protected(now)
+        waiting = not g.protected
         if waiting != self.waiting:
             self.waiting = waiting
             self.ctx.log.info("surveillance %d: %s", self.task.id, "no obstacle avoidance: standing still" if waiting
                               else "obstacle avoidance running: surveying")
-        self.target = agent.survey_target(self.task.id)
+        self.target = g.target
         if waiting:
             self._cons = [stop_only(self.window, "survey waits for obstacle avoidance")]
             self.detour.held(now)
@@ -52,6 +52,6 @@ class SurveillanceExecutor(CspaceExecutor):
                 self.detour.cancel()
                 goal = np.full((1, 2), np.nan)
             else:
-                goal = np.asarray([self.detour.goal(pose, self.target, now, lambda: agent.obstacle_input_any(now))])
+                goal = np.asarray([self.detour.goal(pose, self.target, now, lambda: g.obstacles)])
             self._cons = [C.survey(self.window, np.asarray([pose], float), goal)]
         return out

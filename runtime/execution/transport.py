@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import math
 
-from runtime.control.arbiter import FollowPath
+from runtime.control.behaviours import FollowPath
 from runtime.control.pure_pursuit import PurePursuit
+from runtime.execution.executor import Executor
 from runtime.tasks import Commitment, Progress
 from runtime.tasks.transport import DELIVERED, LOADED, mark_reach
 
@@ -147,11 +148,9 @@ def keep_lane(path: list, offset: float) -> list:
     return out
 
 
-class TransportExecutor:
+class TransportExecutor(Executor):
     def __init__(self, commitment: Commitment, ctx):
-        self.ctx = ctx
-        self.commitment = commitment
-        self.task = commitment.task
+        super().__init__(commitment, ctx)
         self.phase = TO_OBJECT
         self.follow = FollowPath(follower=self._pursuit())
         self.carrying = 0.0               # wu on board
@@ -252,13 +251,14 @@ class TransportExecutor:
         return [self.follow]
 
     # ------------------------------------------------------------------ executive interface
-    def recommit(self, commitment: Commitment, now: float) -> None:
+    def recommit(self, commitment: Commitment, now: float) -> bool:
         """Same task, new partners or parameters: carry on from where the trip is."""
         self.commitment = commitment
         self.follow.follower.goal_tolerance = max(self.ctx.goal_tolerance, 0.5 * self.reach)
         turn = self._turn()
         if turn != self.turn and self.phase == TO_OBJECT:     # its turn came, or its place changed: go there
             self.turn, self._routed = turn, False     # (one that carries finishes its trip first)
+        return True
 
     def begin(self, pose, now: float) -> None:
         if not self._routed and self.phase in (TO_OBJECT, TO_DELIVERY):

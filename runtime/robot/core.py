@@ -22,6 +22,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 from runtime.execution import peer_readings
+from runtime.execution.executive import NONE
 from runtime.log import get_logger
 from runtime.robot.ports import BaseFacts, RobotPort
 from runtime.robot.sensing import PoseEstimate
@@ -130,9 +131,9 @@ class RobotCore:
         self.node = FleetNode(self.id, self.agent, armed=cfg.robot.armed, peers=list(peers))
         self.executive = Executive(ExecContext(self.planner, Tunables(c.cruise_speed, c.lookahead, c.max_turn_rate,
                                                                       c.goal_tolerance), self.log, radius,
-                                               seed=self.id if seed is None else seed, agent=self.agent,
-                                               robot_id=self.id))
+                                               seed=self.id if seed is None else seed, robot_id=self.id))
         self._perceive = getattr(self.agent, "perceive", None)    # agents that read the robot's pose and ranges
+        self._guidance = getattr(self.agent, "guidance", None)    # agents that tell their executors what to do
         self.port = RobotPort(self)
         self.radio = self.ground = self.telemetry = None
         if mavlink is not None:
@@ -261,12 +262,13 @@ class RobotCore:
         """Executors for the agent's commitments vote in the arbiter; the command (zero when disarmed) goes to the
         base; their progress goes back to the agent."""
         ex = self.executive
-        ex.sync(self.agent.commitments if self.node.armed else (), now)
+        guidance = self._guidance(now) if self._guidance is not None and self.node.armed else NONE
+        ex.sync(self.agent.commitments if self.node.armed else (), now, guidance)
         ex.make_way = self.node.armed
         pose, sensors = self.pose(), self.sensors
         ex.peers = () if pose is None or self.base.ranging or not ex.idle else \
             peer_readings.readings(pose, self.node.positions, now, ex.ctx.radius)    # idle, no range sensors
-        (v, w), progress = ex.step(pose, sensors, now)
+        (v, w), progress = ex.step(pose, sensors, now, guidance)
         out = []
         for p in progress:
             out += self.node.on_progress(p, now)

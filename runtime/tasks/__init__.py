@@ -17,8 +17,8 @@ KINDS: dict[str, str] = {
     "goto": "runtime.tasks.goto",
     "rendezvous": "runtime.tasks.rendezvous",
     "transport": "runtime.tasks.transport",
-    "surveillance": "runtime.allocation.comutar.surveillance",       # paper 003: visit every waypoint of a region
-    "avoid_obstacles": "runtime.allocation.comutar.avoidance",       # paper 003: keep a robot clear of obstacles
+    "surveillance": "runtime.tasks.surveillance",            # paper 003: visit every waypoint of a region
+    "avoid_obstacles": "runtime.tasks.avoid_obstacles",      # paper 003: keep a robot clear of obstacles
 }
 
 

@@ -33,10 +33,10 @@ from pathlib import Path
 import numpy as np
 
 from runtime.allocation.comutar import actions as A
-from runtime.allocation.comutar.avoidance import AvoidObstacles
+from runtime.tasks.avoid_obstacles import AvoidObstacles
 from runtime.allocation.comutar.kinematic import PIONEER_RADIUS, KinematicFleet
 from runtime.allocation.comutar.options import ComutarOptions
-from runtime.allocation.comutar.surveillance import Surveillance
+from runtime.tasks.surveillance import Surveillance
 from runtime.errors import InputError
 from runtime.log import get_logger
 from runtime.tasks import Task

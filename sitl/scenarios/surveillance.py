@@ -16,8 +16,8 @@ import re
 from dataclasses import dataclass, field
 from typing import Literal, Optional
 
-from runtime.allocation.comutar import avoidance as AV
-from runtime.allocation.comutar import surveillance as SV
+from runtime.tasks import avoid_obstacles as AV
+from runtime.tasks import surveillance as SV
 from runtime.config.build import ConfigError, rng
 from runtime.config.world import check_inside
 from runtime.messages import DONE, STATE_NAMES

@@ -5,7 +5,7 @@ able to say what it needs of the share-restricted resources (its constraint func
   ``outputs`` of the same type, on this robot or another one.
 * Constraint functions: ``processor`` (share of a core, on the robot running the action), ``rates`` (Mb/s
   of each output when it is sent to another robot: charged to the link of both robots), and ``motion``,
-  which c-space constraint of :mod:`~runtime.allocation.comutar.cspace` the action imposes on its robot
+  which c-space constraint of :mod:`~runtime.control.cspace` the action imposes on its robot
   (``survey``: Alg. 2; ``avoid``: Alg. 4; ``sensor``: Alg. 3, only while it serves another robot's region).
 * ``accomplishes``: the task kinds the action can carry out itself (the top of a coalition).
 * ``cost``: the action's own share of a bid (s); motion actions add their estimated travel.
@@ -21,7 +21,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Iterable
 
-from runtime.allocation.comutar.cspace import Sensor
+from runtime.control.cspace import Sensor
 
 # information types and their wire codes (Query.info)
 RANGE_DATA, OBSTACLE_LIST, WAYPOINTS = "range_data", "obstacle_list", "waypoints"

@@ -12,7 +12,7 @@ Each frame (the window's ``T_f``):
    robots and static obstacles; a robot without an avoidance commitment ignores obstacles), and a reader
    serving another robot keeping that robot's region in view (Alg. 3);
 3. the whole fleet's constraints are evaluated in one batch and each robot takes its best command
-   (:func:`~runtime.allocation.comutar.cspace.choose`); a conflict (empty intersection) stops it;
+   (:func:`~runtime.control.cspace.choose`); a conflict (empty intersection) stops it;
 4. robots move on exact arcs.  Robot-robot contact: a robot whose new disc would overlap another robot's
    (at its new position if it already moved this frame, else its old one) or a static obstacle is pushed
    back out along the contact normal, so it slides along the other disc as rigid bodies without friction
@@ -36,7 +36,7 @@ import numpy as np
 from runtime.allocation.agent import AgentContext
 from runtime.allocation.bus import InMemoryBus
 from runtime.allocation.comutar import actions as A
-from runtime.allocation.comutar import cspace as C
+from runtime.control import cspace as C
 from runtime.allocation.comutar.options import ComutarOptions
 from runtime.allocation.comutar.protocol import VISITED, ComutarAgent
 from runtime.tasks import Profile, Progress, Task

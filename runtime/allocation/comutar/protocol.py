@@ -9,7 +9,7 @@ under constraint functions (Alg. 1), and the auctioneer role for the tasks it to
   next-frame configurations);
 * the :class:`~runtime.allocation.comutar.bidder.Bidder` (its actions: announcements, queries, bids,
   awards, holdings) and the :class:`~runtime.allocation.comutar.auctioneer.Auctioneer` (tasks it took in);
-* per surveillance task a :class:`~runtime.allocation.comutar.surveillance.Board` (visits and claims,
+* per surveillance task a :class:`~runtime.tasks.surveillance.Board` (visits and claims,
   spread by ``CmSurvey``), and the regions consumers asked it to watch (``CmRegion``).
 
 It may hold several commitments at once (e.g. a surveillance task and an obstacle-avoidance task); each
@@ -35,7 +35,7 @@ import numpy as np
 
 from runtime.allocation.agent import AgentContext, Method, TaskEvent, route
 from runtime.allocation.comutar import actions as A
-from runtime.allocation.comutar import cspace as C
+from runtime.control import cspace as C
 from runtime.allocation.comutar.auctioneer import Auctioneer
 from runtime.allocation.comutar.bidder import Bidder, Slot
 from runtime.allocation.comutar.messages import (WIRE_MESSAGES, CmAck, CmAnnounce, CmAward, CmBid, CmCancel, CmCost,
@@ -43,13 +43,12 @@ from runtime.allocation.comutar.messages import (WIRE_MESSAGES, CmAck, CmAnnounc
                                                  MAX_DISCS, pack_disc)
 from runtime.allocation.comutar.options import ComutarOptions
 from runtime.allocation.comutar.resources import CSPACE, Ledger, Resource
-from runtime.allocation.comutar.surveillance import Board
+from runtime.tasks.surveillance import VISITED, Board
 from runtime.log import get_logger
 from runtime.messages import BROADCAST, why_invalid
 from runtime.tasks import FAILED as P_FAILED, Commitment, Progress, Task
 
 KINDS = ("surveillance", "avoid_obstacles")
-VISITED = "visited"                       # Progress event of a surveillance executor: data["waypoint"]
 CHOOSE_PERIOD = 0.25                      # s between re-evaluations of the nearest waypoint (at once on news)
 STREAM_PERIOD = {A.RANGE_DATA: 0.1, A.OBSTACLE_LIST: 0.2}   # s: the 10 Hz and 5 Hz of ActionSpec.rates
 SENSE_FRESH = 0.5                         # s: a provider streams only readings newer than this
@@ -146,6 +145,32 @@ class ComutarAgent:
         self.sense(pose, echo_discs(pose, ranges), now)
 
     # ------------------------------------------------------------------ what execution reads
+    def guidance(self, now: float) -> dict:
+        """What each commitment's executor is to do now, as data (task id -> the task kind's ``Guidance``): the
+        host hands it to the executive each cycle; executors never call the agent."""
+        from runtime.tasks import avoid_obstacles as AV, surveillance as SV
+
+        out = {}
+        known = None
+        for c in self.commitments:
+            tid = c.task_id
+            if known is None:
+                known = self.obstacle_input_any(now)
+            if c.task.kind == "surveillance":
+                board = self.boards.get(tid)
+                out[tid] = SV.Guidance(self.window, self.survey_target(tid),
+                                       None if board is None else frozenset(board.visited),
+                                       self.options.visit_radius, self.protected(now), known)
+            elif c.task.kind == "avoid_obstacles":
+                actions = tuple(c.param("actions", ()))
+                reader = next((spec for spec in A.READERS.values() if spec.name in actions), None)
+                avoider = A.AVOIDER.weight if A.AVOIDER.name in actions else None
+                out[tid] = AV.Guidance(self.window, avoider,
+                                       self.obstacle_input(tid, now) if avoider is not None else None,
+                                       self.region(tid), None if reader is None else reader.weight,
+                                       None if reader is None else A.SENSORS[reader.sensor], known)
+        return out
+
     def obstacle_input(self, task_id: int, now: float) -> np.ndarray | None:
         """The obstacle list this robot's avoider in ``task_id`` works from now ((M, 3) discs, fleet frame), or
         None when it has none fresh: its provider's stream (obstacle list, or range data its own detector turns
@@ -280,7 +305,7 @@ class ComutarAgent:
 
     def _sees(self, task_id: int) -> bool:
         """Does my reader in ``task_id`` take in the whole region it keeps in view for the consumer (its sensor's
-        full range and angle, :meth:`~runtime.allocation.comutar.cspace.Sensor.covers`)?  A reader that does not
+        full range and angle, :meth:`~runtime.control.cspace.Sensor.covers`)?  A reader that does not
         (still on its way, or left behind) does not stream: its consumer would take the silence of an unwatched
         place for a clear one, and drive into what the sensor cannot reach.  (Alg. 3 keeps the region within
         ``far`` of the range and off the angle's borders; this looser test keeps a stream from flickering at

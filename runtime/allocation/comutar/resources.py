@@ -11,7 +11,7 @@ codomain with two operators (an :class:`Algebra`):
 A non-running action is the identity of the compound operator (0 for the scalars, the whole space for the
 c-space), so it is simply absent from the :class:`Ledger`.  A demand (the value of a constraint function
 phi(t)) is a value of the codomain or a callable ``phi(now)`` returning one; c-space values are boolean numpy
-masks over one robot's candidate next-frame configurations (:mod:`~runtime.allocation.comutar.cspace`), or
+masks over one robot's candidate next-frame configurations (:mod:`~runtime.control.cspace`), or
 None for "forbids nothing".
 
 The :class:`Ledger` holds what every running (allocated) and pre-allocated action demands of each resource

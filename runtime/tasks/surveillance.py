@@ -1,7 +1,7 @@
 """``surveillance`` (paper 003 Section 3): visit every waypoint of a grid over a region at least once.
 
-Shaped as a task kind module (``KIND``, ``Spec``, ``COMMANDS``, ``EXECUTOR``, ``estimate``, ``from_item``,
-``to_item``) so phase 2 adds it to :data:`runtime.tasks.KINDS` with one line.  The paper's "set of waypoints
+A task kind module (``KIND``, ``Spec``, ``COMMANDS``, ``EXECUTOR``, ``estimate``, ``from_item``, ``to_item``),
+allocated by CoMutaR (:mod:`runtime.allocation.comutar`).  The paper's "set of waypoints
 around a 2 x 2 m region" conflicts with its Fig. 4 (robots over about +-8 m); the digest's reading is a
 grid of waypoints 2 m apart over about 16 x 16 m (9 x 9), which is the default here.
 
@@ -23,9 +23,10 @@ from runtime.config.build import rng
 from runtime.tasks.model import Estimate, Profile, Travel
 
 KIND = "surveillance"
-EXECUTOR = "runtime.execution.surveillance:SurveillanceExecutor"      # phase 2
+EXECUTOR = "runtime.execution.surveillance:SurveillanceExecutor"
 MAV_CMD_SPATIAL_USER_1 = 31005
 COMMANDS = (MAV_CMD_SPATIAL_USER_1,)
+VISITED = "visited"          # Progress event of a surveillance executor: data["waypoint"]
 MAX_WAYPOINTS = 200          # CmSurvey carries visited waypoints as a uint8 array (index + 1)
 MAX_SIDE = 1000.0
 
@@ -179,3 +180,15 @@ class Board:
         if not open_:
             return math.inf
         return float(np.min(np.hypot(*(self.points[open_] - np.asarray(xy, float)).T)))
+
+
+@dataclass(frozen=True)
+class Guidance:
+    """What the allocation family tells a surveillance commitment's executor each cycle (data it writes; the
+    executor never calls the agent)."""
+    window: object                                 # runtime.control.cspace.Window: the robot's c-space
+    target: tuple[float, float] | None             # the waypoint to head for; None: stay
+    visited: frozenset | None                      # waypoints (indices) known visited; None: no board yet
+    visit_radius: float                            # m: a waypoint this close counts as visited
+    protected: bool                                # False: the robot must avoid obstacles and cannot; stand still
+    obstacles: object                              # (M, 3) discs: every obstacle the robot knows (for detours)

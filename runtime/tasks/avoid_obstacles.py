@@ -3,7 +3,7 @@ data from any robot.  A separate task, allocated beside the robot's other tasks:
 obstacle avoider on ``robot`` (Alg. 4) fed by an obstacle detector fed by a range-data reader, on that robot
 or on another one (whose reader then keeps the region around ``robot`` in view, Alg. 3).
 
-Shaped as a task kind module (phase 2 adds it to :data:`runtime.tasks.KINDS`).  Mission item:
+A task kind module, allocated by CoMutaR (:mod:`runtime.allocation.comutar`).  Mission item:
 MAV_CMD_USER_1 (31010), param1 = the robot to protect, param2 = duration (s after the award; 0: until the
 operator withdraws it).
 """
@@ -16,7 +16,7 @@ from runtime.config.build import rng
 from runtime.tasks.model import Estimate, Profile, Travel
 
 KIND = "avoid_obstacles"
-EXECUTOR = "runtime.execution.avoidance:AvoidanceExecutor"          # phase 2
+EXECUTOR = "runtime.execution.avoidance:AvoidanceExecutor"
 MAV_CMD_USER_1 = 31010
 COMMANDS = (MAV_CMD_USER_1,)
 MAX_DURATION = 1e6
@@ -46,3 +46,16 @@ def from_item(command: int, params: tuple[float, float, float, float], x: float,
 
 def to_item(spec: AvoidObstacles) -> tuple[int, tuple[float, float, float, float]]:
     return MAV_CMD_USER_1, (float(spec.robot), float(spec.duration), 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class Guidance:
+    """What the allocation family tells an ``avoid_obstacles`` commitment's executor each cycle (data it writes;
+    the executor never calls the agent)."""
+    window: object                                 # runtime.control.cspace.Window: the robot's c-space
+    avoider: float | None                          # the avoider's weight when this robot runs it, else None
+    obstacles: object                              # the avoider's (M, 3) input discs; None: nothing fresh (stop)
+    region: tuple | None                           # (robot, x, y, radius) a reader keeps in view, or None
+    reader: float | None                           # that reader's weight ...
+    sensor: object                                 # ... and its runtime.control.cspace.Sensor
+    obstacles_any: object                          # (M, 3) discs: every obstacle the robot knows (for detours)

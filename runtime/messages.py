@@ -97,7 +97,7 @@ class Message:
 
     def invalid(self) -> str | None:
         """Why this message cannot be acted on (one line), or None."""
-        for name, kind in _checks.get(type(self)) or declared(type(self)):
+        for name, kind in declared(type(self)):
             v = getattr(self, name)
             if not kind.ok(v):
                 return kind.why(name, v)

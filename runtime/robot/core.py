@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from runtime.execution import peer_readings
 from runtime.execution.executive import NONE
 from runtime.log import get_logger
+from runtime.messages import FLEET_MESSAGES
 from runtime.robot.ports import BaseFacts, RobotPort
 from runtime.robot.sensing import PoseEstimate
 
@@ -159,10 +160,6 @@ class RobotCore:
 
     def velocity(self) -> tuple[float, float]:
         return self.sensing.velocity()
-
-    @property
-    def map(self):
-        return self.planner.world
 
     # ------------------------------------------------------------------ one cycle
     def step(self, now: float, sensed: Sensed, inbox: Inbox) -> Output:
@@ -325,5 +322,4 @@ def _drops(agent) -> dict:
 
 
 def _for_agent(msg) -> bool:
-    from runtime.messages import FLEET_MESSAGES
     return not isinstance(msg, FLEET_MESSAGES)

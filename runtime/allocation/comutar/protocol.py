@@ -43,6 +43,7 @@ from runtime.allocation.comutar.messages import (WIRE_MESSAGES, CmAck, CmAnnounc
                                                  MAX_DISCS, pack_disc)
 from runtime.allocation.comutar.options import ComutarOptions
 from runtime.allocation.comutar.resources import CSPACE, Ledger, Resource
+from runtime.tasks import avoid_obstacles as AV, surveillance as SV
 from runtime.tasks.surveillance import VISITED, Board
 from runtime.log import get_logger
 from runtime.messages import BROADCAST, why_invalid
@@ -148,28 +149,25 @@ class ComutarAgent:
     def guidance(self, now: float) -> dict:
         """What each commitment's executor is to do now, as data (task id -> the task kind's ``Guidance``): the
         host hands it to the executive each cycle; executors never call the agent."""
-        from runtime.tasks import avoid_obstacles as AV, surveillance as SV
+        held = self.commitments
+        known = self.obstacle_input_any(now) if held else None
+        return {c.task_id: self._GUIDES[c.task.kind](self, c, now, known) for c in held}
 
-        out = {}
-        known = None
-        for c in self.commitments:
-            tid = c.task_id
-            if known is None:
-                known = self.obstacle_input_any(now)
-            if c.task.kind == "surveillance":
-                board = self.boards.get(tid)
-                out[tid] = SV.Guidance(self.window, self.survey_target(tid),
-                                       None if board is None else frozenset(board.visited),
-                                       self.options.visit_radius, self.protected(now), known)
-            elif c.task.kind == "avoid_obstacles":
-                actions = tuple(c.param("actions", ()))
-                reader = next((spec for spec in A.READERS.values() if spec.name in actions), None)
-                avoider = A.AVOIDER.weight if A.AVOIDER.name in actions else None
-                out[tid] = AV.Guidance(self.window, avoider,
-                                       self.obstacle_input(tid, now) if avoider is not None else None,
-                                       self.region(tid), None if reader is None else reader.weight,
-                                       None if reader is None else A.SENSORS[reader.sensor], known)
-        return out
+    def _survey_guide(self, c: Commitment, now: float, known: np.ndarray) -> SV.Guidance:
+        board = self.boards.get(c.task_id)
+        return SV.Guidance(self.window, self.survey_target(c.task_id),
+                           None if board is None else frozenset(board.visited), self.options.visit_radius,
+                           self.protected(now), known)
+
+    def _avoid_guide(self, c: Commitment, now: float, known: np.ndarray) -> AV.Guidance:
+        actions = tuple(c.param("actions", ()))
+        reader = next((spec for spec in A.READERS.values() if spec.name in actions), None)
+        avoider = A.AVOIDER.weight if A.AVOIDER.name in actions else None
+        return AV.Guidance(self.window, avoider, self.obstacle_input(c.task_id, now) if avoider is not None else None,
+                           self.region(c.task_id), None if reader is None else reader.weight,
+                           None if reader is None else A.SENSORS[reader.sensor], known)
+
+    _GUIDES = {SV.KIND: _survey_guide, AV.KIND: _avoid_guide}     # the task kinds this family allocates
 
     def obstacle_input(self, task_id: int, now: float) -> np.ndarray | None:
         """The obstacle list this robot's avoider in ``task_id`` works from now ((M, 3) discs, fleet frame), or

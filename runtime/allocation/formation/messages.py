@@ -21,7 +21,7 @@ from typing import Annotated
 
 import numpy as np
 
-from runtime.messages import BROADCAST, NUMBER, Kind, Message
+from runtime.messages import BROADCAST, Kind, Message, Number
 
 MAX_VALUE = 1e6          # s: the largest finite cost, bid or price the protocol carries
 
@@ -38,7 +38,8 @@ def _value_reason(name: str, v) -> str:
 
 # a task's index in the round (0xFFFF: none), a robot id, and the protocol's values (seconds of travel)
 Index = Annotated[int, Kind("0..65534", lambda v: 0 <= v < 0xFFFF)]
-Robot = Annotated[int, Kind("1..250", lambda v: 1 <= v <= 250, lambda name, v: f"robot {v}: expected 1..250")]
+_ROBOT = Kind("1..250", lambda v: 1 <= v <= 250, lambda name, v: f"robot {v}: expected 1..250")
+Robot = Annotated[int, _ROBOT]
 Reserve = Annotated[float, Kind("", lambda v: not math.isnan(v) and not (math.isfinite(v) and abs(v) > MAX_VALUE),
                                 _value_reason)]            # +inf or -inf: none / cannot
 Cost = Annotated[float, Kind("", lambda v: not math.isnan(v) and v != -math.inf
@@ -46,7 +47,6 @@ Cost = Annotated[float, Kind("", lambda v: not math.isnan(v) and v != -math.inf
 Value = Annotated[float, Kind("", lambda v: math.isfinite(v) and abs(v) <= MAX_VALUE, _value_reason)]
 PriceValue = Annotated[float, Kind(f"0..{MAX_VALUE:g}", lambda v: 0.0 <= v <= MAX_VALUE,
                                lambda name, v: f"price {v}: expected 0..{MAX_VALUE:g}")]
-Position = Annotated[float, NUMBER]
 
 
 @dataclass(frozen=True)
@@ -56,8 +56,8 @@ class TaskInfo(Message):
     sender: int
     dest: int
     task: Index
-    x: Position
-    y: Position
+    x: Number
+    y: Number
     n_tasks: int
     round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
 
@@ -73,8 +73,8 @@ class Announce(Message):
     dest: int
     auction: int
     task: Index
-    x: Position
-    y: Position
+    x: Number
+    y: Number
     reserve: Reserve
     round: int = 0          # the daemon's allocation round (0 in sweeps and tests)
 
@@ -157,7 +157,7 @@ class RoundLeave(Message):
 
 
 def _bad_robot(robot: int) -> str | None:
-    return None if 1 <= robot <= 250 else f"robot {robot}: expected 1..250"
+    return None if _ROBOT.ok(robot) else _ROBOT.why("robot", robot)
 
 
 AGENT_MESSAGES = (TaskInfo, Announce, Bid, Award, Price, Status)

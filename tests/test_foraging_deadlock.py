@@ -75,7 +75,7 @@ def test_eight_robots_on_one_object_keep_moving_weight():
     marks = []
 
     def observe(run):
-        if run._steps % 3000 == 0:
+        if run.host.steps % 3000 == 0:
             marks.append(run.objects[next(iter(run.objects))].delivered)
     try:
         fr.run(observe)

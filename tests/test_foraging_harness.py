@@ -10,6 +10,7 @@ import pytest
 
 from runtime.allocation.agent import Method
 from runtime.errors import InputError
+from runtime.inprocess import FixedAgent
 from sitl.foraging import scenario
 from sitl.foraging.harness import ForagingConfig, ForagingRun, run
 from sitl.foraging.scenario import Dist
@@ -99,7 +100,7 @@ def test_a_killed_robot_leaves_the_run():
         assert 2 not in fr.live() and 2 in fr.bus.down
         assert fr.world.pose(2)[0] > 100                                # its body left the arena
         for r in (1, 3):                                                # the others heard it go silent
-            assert 2 in fr.robots[r].lost and 2 in fr.robots[r].node.agent.lost
+            assert 2 in fr.robots[r].liveness.lost and 2 in fr.robots[r].node.agent.lost
         assert len(res.finished) == 4 and all(o.delivered == o.weight for o in res.finished)
         assert all(2 not in o.done_by for o in res.finished if o.finished > 30.0 + cfg.heartbeat_timeout + 1)
     finally:
@@ -113,10 +114,16 @@ def test_lossy_bus_still_finishes_the_objects():
 
 
 def test_calibration_mode_moves_weight_without_agents():
-    res = run(ForagingConfig(robots=2, method=None, time_limit=120.0, fixed_object=(1.4, 0.0), seed=1))
+    fr = ForagingRun(ForagingConfig(robots=2, method=None, time_limit=120.0, fixed_object=(1.4, 0.0), seed=1))
+    try:
+        res = fr.run()
+    finally:
+        fr.close()
     (obj,) = res.objects
     assert obj.delivered == res.moved > 0 and obj.finished is None and res.messages.sent == 0
-    assert res.timing["agents"] == pytest.approx(0.0, abs=0.05)
+    for h in fr.robots.values():          # nothing allocated: each robot kept the one commitment it was given
+        assert isinstance(h.agent, FixedAgent) and [c.task_id for c in h.agent.commitments] == [obj.task]
+        assert h.node.events == []
 
 
 def test_a_method_that_does_not_allocate_transport_is_refused():

@@ -72,13 +72,7 @@ class InMemoryBus:
                 break
             t_msg = self._queue[0][0] if self._queue else float("inf")
             if t_msg <= next_tick:
-                t, _, dest, msg = heapq.heappop(self._queue)
-                self.now = max(self.now, t)
-                if dest in self.down:
-                    self.stats.dropped += 1
-                    continue
-                self.stats.delivered += 1
-                self.send(self.agents[dest].on_message(msg, self.now), self.now)
+                self._deliver_next()
             else:
                 self.now = next_tick
                 for rid, agent in self.agents.items():
@@ -86,6 +80,22 @@ class InMemoryBus:
                         self.send(agent.on_tick(self.now), self.now)
                 next_tick += tick
         return self.now
+
+    def deliver(self, until: float) -> None:
+        """Deliver every message due by ``until`` (in time order, each at its own time), then move the clock to
+        ``until``: for hosts that interleave the bus with their own control cycles."""
+        while self._queue and self._queue[0][0] <= until:
+            self._deliver_next()
+        self.now = max(self.now, until)
+
+    def _deliver_next(self) -> None:
+        t, _, dest, msg = heapq.heappop(self._queue)
+        self.now = max(self.now, t)
+        if dest in self.down:
+            self.stats.dropped += 1
+            return
+        self.stats.delivered += 1
+        self.send(self.agents[dest].on_message(msg, self.now), self.now)
 
     def idle(self) -> bool:
         return not self._queue

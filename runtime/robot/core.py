@@ -104,9 +104,12 @@ class RobotCore:
     ``(mav, module, counters)`` to serve ground stations over MAVLink (None: no ground services, as in
     the in-process fleets, whose operator hands tasks in through :attr:`port`).  ``seed``: the robot's own random
     choices (escape turns; default its id).  ``base_config``: what the agent is told the robot is (default the
-    config's ``base``; None: nothing)."""
+    config's ``base``; None: nothing).  ``method``: the allocation method (default the registry's entry named by
+    ``cfg.allocation.method``; a host may give one that is not registered).  ``state_period``: s between the
+    fleet node's state broadcasts."""
 
-    def __init__(self, cfg, base: BaseFacts, *, mavlink=None, seed: int | None = None, base_config=...):
+    def __init__(self, cfg, base: BaseFacts, *, mavlink=None, seed: int | None = None, base_config=...,
+                 method=None, state_period: float = 1.0):
         from runtime.allocation import registry
         from runtime.allocation.agent import AgentContext
         from runtime.execution.executive import ExecContext, Executive, Tunables
@@ -125,11 +128,11 @@ class RobotCore:
         radius = float(base.radius)
         self.planner = RobotPlanner.from_config(cfg, radius)
         self.estimator = TravelEstimator(self.planner, Profile(speed=c.cruise_speed, radius=radius), self.pose)
-        self.method = registry.method(cfg.allocation.method)
+        self.method = registry.method(cfg.allocation.method) if method is None else method
         peers = tuple(p.id for p in cfg.comms.peers)
         self.agent = self.method.make(AgentContext(self.id, peers, self.estimator, cfg.allocation,
                                                    cfg.base if base_config is ... else base_config))
-        self.node = FleetNode(self.id, self.agent, armed=cfg.robot.armed, peers=list(peers))
+        self.node = FleetNode(self.id, self.agent, armed=cfg.robot.armed, peers=list(peers), state_period=state_period)
         self.executive = Executive(ExecContext(self.planner, Tunables(c.cruise_speed, c.lookahead, c.max_turn_rate,
                                                                       c.goal_tolerance), self.log, radius,
                                                seed=self.id if seed is None else seed, robot_id=self.id))
@@ -155,6 +158,11 @@ class RobotCore:
         self._reset = False
 
     # ------------------------------------------------------------------ views
+    def locate(self, pose: tuple[float, float, float]) -> None:
+        """A pose from outside the filter before the first cycle (a simulation's truth): the agent's first bids
+        use it.  The next :meth:`step` replaces it with what it senses."""
+        self._truth = pose
+
     def pose(self) -> tuple[float, float, float] | None:
         return self._truth if self._truth is not None else self.sensing.pose()
 

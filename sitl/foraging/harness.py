@@ -1,19 +1,16 @@
 """Runs a paper 000 foraging experiment in-process, lock-stepped with :class:`~sitl.foraging.world.ForagingWorld`,
 deterministic for a seed.
 
-Each robot is the daemon's stack without its I/O: a :class:`~runtime.fleet.node.FleetNode` around the agent of
-any registered allocation method that allocates ``transport`` tasks (built as
-:class:`~runtime.fleet.simulate.SimFleet` builds it: ``method.make(AgentContext(id, peers, estimator, options))``,
-the estimator a :class:`~runtime.planning.robot_planner.TravelEstimator` on a straight-line planner), and an
-:class:`~runtime.execution.executive.Executive` running the real
-:class:`~runtime.execution.transport.TransportExecutor` on the world's pose, bumpers and sonar.  Messages go
-over an :class:`~runtime.allocation.bus.InMemoryBus` (delay, jitter, drop, duplication); as on the daemon's
-link, a peer heard and then silent for ``heartbeat_timeout`` is reported lost to the node, and every node
-broadcasts its state each ``state_period``.
+The robots are the in-process host's (:class:`runtime.inprocess.Fleet`): each one the daemon's
+:class:`~runtime.robot.core.RobotCore` (the agent of any registered allocation method that allocates
+``transport`` tasks, a straight-line planner, the executive running the real
+:class:`~runtime.execution.transport.TransportExecutor`) on the world's true pose, bumpers and sonar, talking over
+the in-memory bus (delay, jitter, drop, duplication) with the daemon link's peer timeout and a state broadcast
+each ``state_period``.  This module is the scenario and the world's bookkeeping: objects, piles, cargo, records.
 
-Each control period (``control_period`` s of simulated time): messages due are delivered (each at its own
-time); every live robot senses, its node ticks, its executive steps and the progress goes back to its node; done
-objects are replaced; then the world advances one control period.
+Each control period (``control_period`` s of simulated time): kills due; messages due are delivered (each at its
+own time); every live robot senses and runs one core cycle; what its executors loaded and unloaded is accounted;
+done objects are replaced; then the world advances one control period.
 
 Scenario: ``objects`` transport tasks present at once, each handed as a mission item (31001, param1 weight,
 param2 deadline, param3 maximum utility) to the lowest-id live robot's node, as an operator's upload is; when
@@ -26,13 +23,12 @@ robot that fails or drops its commitment while carrying puts its load back on th
 what was not delivered is still to be moved).  So ``delivered`` is the weight that really reached the
 delivery point, whatever the agents believe.
 
-``method=None`` is the calibration mode: no agents, no bus; every robot holds a fixed commitment to one object
+``method=None`` is the calibration mode: no allocation, no bus (:func:`runtime.inprocess.fixed_method`); every robot holds a fixed commitment to one object
 of unlimited weight (``fixed_object``) from the start, or, the last robots, to ``background`` objects worked at the
 same time.
 """
 from __future__ import annotations
 
-import heapq
 import math
 import time
 from dataclasses import dataclass, field
@@ -42,15 +38,15 @@ import numpy as np
 
 from runtime import tasks as T
 from runtime.allocation import registry
-from runtime.allocation.agent import DONE, AgentContext, Method
-from runtime.allocation.bus import BusStats, InMemoryBus
+from runtime.allocation.agent import DONE, Method
+from runtime.allocation.bus import BusStats
 from runtime.drivers.base import BaseSensors
 from runtime.errors import InputError
-from runtime.execution.executive import ExecContext, Executive, Tunables
 from runtime.execution.transport import TO_DELIVERY, TO_OBJECT
-from runtime.fleet.node import FleetNode
+from runtime.inprocess import Fleet, Hosted, fixed_method, robot_config
 from runtime.log import get_logger
-from runtime.planning.robot_planner import RobotPlanner, TravelEstimator
+from runtime.robot.core import RobotCore
+from runtime.robot.ports import BaseFacts
 from runtime.tasks import Commitment, Progress, Task
 from runtime.tasks.transport import DELIVERED, LOADED, MAX_WEIGHT, Transport
 from sitl.foraging import scenario
@@ -196,66 +192,34 @@ class ForagingResult:
         return sum(o.elapsed <= factor * o.deadline for o in done) / len(done) if done else math.nan
 
 
-class _Bus(InMemoryBus):
-    """The in-memory bus, delivered up to a time (the harness interleaves it with the world's steps)."""
+class _WorldMotion:
+    """The foraging world as the in-process host's motion: true poses, bumpers and (``sonar``) the sonar ring."""
 
-    def deliver(self, until: float) -> None:
-        q = self._queue
-        while q and q[0][0] <= until:
-            t, _, dest, msg = heapq.heappop(q)
-            self.now = max(self.now, t)
-            if dest in self.down:
-                self.stats.dropped += 1
-                continue
-            self.stats.delivered += 1
-            self.send(self.agents[dest].on_message(msg, self.now), self.now)
-        self.now = max(self.now, until)
+    def __init__(self, world: ForagingWorld, sonar_on: bool):
+        self.world = world
+        self.sonar_on = sonar_on
 
+    def sense(self, robots):
+        world = self.world
+        ranges = world.sonar()
+        bumps = world.bumpers()
+        poses = world.poses
+        out = {}
+        for r in robots:
+            k = world.index[r]
+            out[r] = ((float(poses[k, 0]), float(poses[k, 1]), float(poses[k, 2])),
+                      BaseSensors(bump_left=bool(bumps[k, 0]), bump_right=bool(bumps[k, 1]),
+                                  ranges=sonar.readings(ranges[k]) if self.sonar_on else ()))
+        return out
 
-class _Robot:
-    """One robot's stack: node + agent (none in calibration mode), executive, liveness."""
+    def command(self, robot, v, w):
+        self.world.command(robot, v, w)
 
-    def __init__(self, rid: int, ids: tuple[int, ...], cfg: ForagingConfig, method: Method | None, options):
-        self.id = rid
-        self.peers = tuple(r for r in ids if r != rid)
-        self.pose: tuple[float, float, float] | None = None
-        self.log = get_logger("foraging.robot", rid)
-        planner = RobotPlanner(None, "euclid", RADIUS, 0, rid, rid)
-        tunables = Tunables(cfg.speed, cfg.lookahead, cfg.max_turn_rate, cfg.goal_tolerance)
-        self.executive = Executive(ExecContext(planner, tunables, self.log, RADIUS, seed=cfg.seed * 1000 + rid,
-                                               robot_id=rid))
-        self.node: FleetNode | None = None
-        self._fixed: tuple[Commitment, ...] = ()          # calibration mode's commitment
-        self.timeout = cfg.heartbeat_timeout
-        self.heard: dict[int, float] = {}
-        self.lost: set[int] = set()
-        if method is not None:
-            estimator = TravelEstimator(planner, T.Profile(cfg.speed, RADIUS), lambda: self.pose)
-            agent = method.make(AgentContext(rid, self.peers, estimator, options))
-            self.node = FleetNode(rid, agent, state_period=cfg.state_period, peers=self.peers)
+    def advance(self, dt):
+        self.world.advance(dt)
 
-    def on_message(self, msg, now: float) -> list:
-        if msg.sender in self.peers:
-            self.heard[msg.sender] = now
-            self.lost.discard(msg.sender)
-        return self.node.on_message(msg, now)
-
-    def allocate(self, now: float) -> list:
-        """Lost peers, the pose, the node's tick: the messages to send."""
-        node = self.node
-        out = []
-        for peer, t in self.heard.items():
-            if peer not in self.lost and now - t > self.timeout:
-                self.lost.add(peer)
-                out += node.on_peer_lost(peer, now)
-        node.begin(self.pose[:2])
-        return out + node.tick(now)
-
-    @property
-    def commitments(self) -> tuple[Commitment, ...]:
-        if self.node is None:
-            return self._fixed
-        return self.node.agent.commitments if self.node.armed else ()
+    def remove(self, robot):
+        self.world.remove(robot)
 
 
 class ForagingRun:
@@ -276,24 +240,42 @@ class ForagingRun:
             options = self.method.options()
         starts = self._starts(ids)
         self.world = (world or _fast_world)(starts, cfg)
-        self.robots = {r: _Robot(r, ids, cfg, self.method, options) for r in ids}
+        self.host = Fleet(self._cores(ids, options), _WorldMotion(self.world, cfg.sonar), period=cfg.control_period,
+                          delay=cfg.delay, jitter=cfg.jitter, drop=cfg.drop, duplicate=cfg.duplicate, seed=cfg.seed,
+                          heartbeat_timeout=cfg.heartbeat_timeout, bus=self.method is not None,
+                          on_output=self._output, after_cycle=self._after_cycle, after_advance=self._after_advance)
+        self.robots = self.host.robots
+        self.bus = self.host.bus
         self.records = {r: RobotRecord(r) for r in ids}
-        self.bus = _Bus({r: rb for r, rb in self.robots.items()}, delay=cfg.delay, jitter=cfg.jitter, drop=cfg.drop,
-                        duplicate=cfg.duplicate, seed=cfg.seed)
         self._rng = np.random.default_rng([cfg.seed, 1])
         self.objects: dict[int, ObjectRecord] = {}      # task id -> record, present and past, in order
         self.present: list[int] = []
         self.cargo: dict[int, tuple[int, float]] = {}   # robot -> (task, wu on board)
         self._events_seen = {r: 0 for r in ids}
         self._kills = sorted(cfg.kills)
-        self._steps = 0
-        self.timing = dict.fromkeys(("physics", "sonar", "executive", "agents", "harness"), 0.0)
-        self._read_poses()
+        self._before: np.ndarray | None = None
+        self._harness_time = 0.0                        # wall s in this module's bookkeeping ...
+        self._account_time = 0.0                        # ... of which inside the robots' cycles (accounting)
+        for r, h in self.robots.items():
+            h.core.locate(self._pose(r))
         if self.method is None:
             self._fixed_object()
         else:
             for _ in range(cfg.objects):
                 self._spawn(0.0)
+
+    def _cores(self, ids, options) -> dict[int, RobotCore]:
+        """Each robot's core: the method's agent (calibration mode: fixed commitments), a straight-line planner,
+        the executive with the run's tunables and its own seed."""
+        cfg = self.cfg
+        method = self.method if self.method is not None else fixed_method(("transport",))
+        facts = BaseFacts(radius=RADIUS, max_speed=cfg.speed, ranging=True)    # the sonar ring (off: bumpers only)
+        return {r: RobotCore(robot_config(r, ids, options, speed=cfg.speed, lookahead=cfg.lookahead,
+                                          max_turn_rate=cfg.max_turn_rate, goal_tolerance=cfg.goal_tolerance,
+                                          period=cfg.control_period, heartbeat_timeout=cfg.heartbeat_timeout),
+                             facts, method=method, seed=cfg.seed * 1000 + r, base_config=None,
+                             state_period=cfg.state_period)
+                for r in ids}
 
     # ------------------------------------------------------------------ building
     @staticmethod
@@ -334,7 +316,8 @@ class ForagingRun:
             group, ids = ids[:n], ids[n:]
             for r in group:
                 partners = tuple(q for q in group if q != r)
-                self.robots[r]._fixed = (Commitment(task, partners=partners, role="member", params=cfg.params()),)
+                self.robots[r].agent.commitments = (Commitment(task, partners=partners, role="member",
+                                                               params=cfg.params()),)
 
     def _spawn(self, now: float) -> None:
         """A new object, handed to the lowest-id live robot as an operator's one-item upload."""
@@ -347,28 +330,23 @@ class ForagingRun:
         weight, deadline, u_max = (d.draw(self._rng) for d in (cfg.weight, cfg.deadline, cfg.u_max))
         spec = Transport(x, y, weight, deadline, u_max)
         command, params = T.kind("transport").to_item(spec)
-        node = self.robots[live[0]].node
-        before = set(node.table.entries)
-        out = node.add_items([(command, MAV_FRAME_LOCAL_ENU, params, x, y)], now)
-        self.bus.send(out, now)
-        (tid,) = set(node.table.entries) - before
+        (tid,) = self.host.hand_in(live[0], [(command, MAV_FRAME_LOCAL_ENU, params, x, y)], now)
         self.objects[tid] = ObjectRecord(tid, x, y, weight, deadline, u_max, now, pile=weight, coalition=[(now, 0)])
         self.present.append(tid)
 
     # ------------------------------------------------------------------ running
     @property
     def now(self) -> float:
-        return self._steps * self.cfg.control_period
+        return self.host.now
 
     def live(self) -> list[int]:
-        return [r for r in self.robots if r not in self.bus.down]
+        return self.host.live()
 
     def kill(self, robot: int) -> None:
         """``robot`` fails now: it leaves the bus and the world; whatever it carried goes back to its pile."""
-        if robot in self.bus.down:
+        if robot in self.host.bus.down:
             return
-        self.bus.down.add(robot)
-        self.world.remove(robot)
+        self.host.kill(robot)
         self.records[robot].killed_at = self.now
         self._drop_cargo(robot)
         log.info("robot %d killed at %.1f s", robot, self.now)
@@ -388,80 +366,55 @@ class ForagingRun:
         return self.result()
 
     def step(self) -> None:
-        """One control period: kills due, messages due, every live robot's cycle, replacements, the world."""
-        cfg, now = self.cfg, self.now
+        """One control period: kills due, then the host's step (messages due, every live robot's cycle, done
+        objects replaced, the world advanced)."""
+        now = self.now
         while self._kills and self._kills[0][0] <= now + 1e-9:
             self.kill(self._kills.pop(0)[1])
-        clock = time.perf_counter
-        t0 = clock()
-        if self.method is not None:
-            self.bus.deliver(now)
-        t1 = clock()
-        ranges = self.world.sonar()
-        bumps = self.world.bumpers()
-        live = self.live()
-        sensors = {}
-        for r in live:
-            k = self.world.index[r]
-            sensors[r] = BaseSensors(bump_left=bool(bumps[k, 0]), bump_right=bool(bumps[k, 1]),
-                                     ranges=sonar.readings(ranges[k]) if cfg.sonar else ())
-        t2 = clock()
-        t_agents, t_exec = t1 - t0, 0.0
-        for r in live:
-            rb = self.robots[r]
-            a = clock()
-            out = rb.allocate(now) if rb.node is not None else []
-            b = clock()
-            ex = rb.executive
-            ex.sync(rb.commitments, now)
-            ex.make_way = rb.node is not None and rb.node.armed
-            (v, w), progress = ex.step(rb.pose, sensors[r], now)
-            c = clock()
-            self.world.command(r, v, w)
-            for pr in progress:
-                self._account(r, pr)
-                if rb.node is not None:
-                    out += rb.node.on_progress(pr, now)
-            self._check_cargo(r)
-            if out:
-                self.bus.send(out, now)
-            t_agents += (b - a) + (clock() - c)
-            t_exec += c - b
-        t3 = clock()
+        self.host.step()
+
+    def _output(self, robot: int, out, now: float) -> None:
+        """A robot's cycle: what its executors loaded and unloaded is accounted against the piles."""
+        t = time.perf_counter()
+        for pr in out.progress:
+            self._account(robot, pr)
+        self._check_cargo(robot)
+        t = time.perf_counter() - t
+        self._harness_time += t
+        self._account_time += t
+
+    def _after_cycle(self, now: float) -> None:
+        t = time.perf_counter()
         if self.method is not None:
             self._finish_done(now)
         self._coalitions(now)
-        t4 = clock()
-        before = self.world.poses.copy()
-        self.world.advance(cfg.control_period)
-        t5 = clock()
-        self._steps += 1
-        self._read_poses(before)
-        t6 = clock()
-        self.timing["sonar"] += t2 - t1
-        self.timing["executive"] += t_exec
-        self.timing["agents"] += t_agents
-        self.timing["harness"] += (t4 - t3) + (t6 - t5)
-        self.timing["physics"] += t5 - t4
+        self._before = self.world.poses.copy()
+        self._harness_time += time.perf_counter() - t
 
-    def _read_poses(self, before: np.ndarray | None = None) -> None:
+    def _after_advance(self, now: float) -> None:
+        t = time.perf_counter()
+        self._read_poses(self._before)
+        self._harness_time += time.perf_counter() - t
+
+    def _pose(self, robot: int) -> tuple[float, float, float]:
+        p = self.world.poses[self.world.index[robot]]
+        return (float(p[0]), float(p[1]), float(p[2]))
+
+    def _read_poses(self, before: np.ndarray) -> None:
+        """Distance driven and time stalled, from the poses before and after the world's step."""
         poses = self.world.poses
+        period = self.cfg.control_period
         for r in self.live():
             k = self.world.index[r]
-            rb = self.robots[r]
-            rb.pose = (float(poses[k, 0]), float(poses[k, 1]), float(poses[k, 2]))
-            if before is None:
-                continue
             step = math.hypot(poses[k, 0] - before[k, 0], poses[k, 1] - before[k, 1])
             rec = self.records[r]
             rec.distance += step
-            period = self.cfg.control_period
             turn = abs(math.remainder(poses[k, 2] - before[k, 2], math.tau))
-            if step < STALL_SPEED * period and turn < STALL_TURN * period and self._driving(rb):
+            if step < STALL_SPEED * period and turn < STALL_TURN * period and self._driving(self.robots[r]):
                 rec.stalled += period
 
     @staticmethod
-    def _driving(rb: _Robot) -> bool:
+    def _driving(rb: Hosted) -> bool:
         return any(getattr(e, "phase", None) in (TO_OBJECT, TO_DELIVERY) for e in rb.executive.executors.values())
 
     # ------------------------------------------------------------------ weight, objects, coalitions
@@ -526,7 +479,9 @@ class ForagingRun:
                 co.append((now, n))
 
     def result(self) -> ForagingResult:
-        timing = dict(self.timing)
+        t = self.host.timing
+        timing = {"physics": t.motion, "sonar": t.sense, "executive": t.executive,
+                  "agents": t.deliver + t.robots - t.executive - self._account_time, "harness": self._harness_time}
         timing["total"] = sum(timing.values())
         return ForagingResult(self.cfg, self.now, list(self.objects.values()), dict(self.records), self.bus.stats,
                               timing)

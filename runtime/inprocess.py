@@ -1,0 +1,373 @@
+"""The in-process host: N robot cores (:class:`~runtime.robot.core.RobotCore`, the daemon's logic) on the in-memory
+bus, moved by a motion model, on one simulated clock.  Deterministic for a seed; no sockets, no threads.
+
+It is the one way the project runs a fleet inside one process: the allocation tests and sweeps (kinematic motion,
+:class:`Kinematic`), the paper 000 foraging experiments (:mod:`sitl.foraging.harness` puts the pybullet foraging
+world in as the motion) and the property tests.  Only the lock-step SITL (:mod:`sitl.launcher`) hosts daemons
+instead of bare cores, because the bytes on its device and MAVLink links are what it proves.
+
+Each control period (:meth:`Fleet.step`):
+1. messages due are delivered, each at its own time (:meth:`RobotCore.receive`);
+2. the motion says what every live robot senses (its true pose, bumpers, ranges);
+3. every live robot, in id order, runs one core cycle (:meth:`RobotCore.step`): peers the liveness tracker lost,
+   the agent's tick, the executors -> the command to the motion, its messages to the bus, its progress to
+   ``on_output``;
+4. ``after_cycle(now)``; the motion advances one period; ``after_advance(now)``.
+
+Liveness is the daemon link's: a peer heard and then silent for ``heartbeat_timeout`` is reported lost to the core,
+once per silence; a peer never heard is the core's own ``comms.startup_grace`` rule.
+
+A robot's commitments can also be given instead of allocated (:func:`fixed_method`: the foraging calibration's fixed
+commitments), and ``bus=False`` runs robots that never talk (nothing is sent or delivered).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Callable, Mapping, Protocol, Sequence
+
+from runtime import tasks as T
+from runtime.allocation.agent import DONE, AgentContext, Method
+from runtime.allocation.bus import InMemoryBus
+from runtime.config.robot import CommsConfig, ControlConfig, Peer, PlanningConfig, RobotConfig, RobotIdentity
+from runtime.drivers.base import BaseSensors
+from runtime.robot.core import Inbox, Output, RobotCore, Sensed
+from runtime.robot.ports import BaseFacts
+from runtime.tasks import Commitment, Task
+
+MAV_FRAME_LOCAL_ENU = 4
+
+
+# ---------------------------------------------------------------------------------------------- robots
+
+def robot_config(rid: int, ids: Sequence[int], options, *, speed: float = 0.25, lookahead: float = 0.35,
+                 max_turn_rate: float = 2.0, goal_tolerance: float = 0.08, period: float = 0.05,
+                 heartbeat_timeout: float = 3.0, planner: str = "euclid", inflate: float | None = None,
+                 armed: bool = True) -> RobotConfig:
+    """A robot config for a hosted robot: its id and peers, its control tunables, a straight-line planner (no map)
+    and the allocation method's ``options``.  Built directly, not from YAML: the host's callers already checked
+    what they pass."""
+    return RobotConfig(robot=RobotIdentity(id=int(rid), armed=armed),
+                       comms=CommsConfig(peers=tuple(Peer(int(p)) for p in ids if p != rid), gcs=None,
+                                         heartbeat_timeout=heartbeat_timeout),
+                       control=ControlConfig(rate=1.0 / period, lookahead=lookahead, cruise_speed=speed,
+                                             max_turn_rate=max_turn_rate, goal_tolerance=goal_tolerance),
+                       planning=PlanningConfig(planner=planner, inflate=inflate),
+                       allocation=options)
+
+
+class Liveness:
+    """The daemon link's peer timeout: a peer heard once and then silent for ``timeout`` is lost (once per
+    silence); hearing it again makes it live."""
+
+    def __init__(self, peers: Sequence[int], timeout: float):
+        self.peers = frozenset(peers)
+        self.timeout = float(timeout)
+        self.heard: dict[int, float] = {}
+        self.lost: set[int] = set()
+
+    def hear(self, sender: int, now: float) -> None:
+        if sender in self.peers:
+            self.heard[sender] = now
+            self.lost.discard(sender)
+
+    def due(self, now: float) -> list[int]:
+        out = []
+        for peer, t in self.heard.items():
+            if peer not in self.lost and now - t > self.timeout:
+                self.lost.add(peer)
+                out.append(peer)
+        return out
+
+
+class Hosted:
+    """One robot on the bus: its core and its liveness tracker (the bus calls :meth:`on_message`)."""
+
+    def __init__(self, core: RobotCore, timeout: float):
+        self.core = core
+        self.robot_id = core.id
+        self.liveness = Liveness([p.id for p in core.cfg.comms.peers], timeout)
+
+    @property
+    def node(self):
+        return self.core.node
+
+    @property
+    def agent(self):
+        return self.core.agent
+
+    @property
+    def executive(self):
+        return self.core.executive
+
+    @property
+    def commitments(self) -> tuple[Commitment, ...]:
+        """What the robot works on now (nothing while disarmed)."""
+        return self.core.agent.commitments if self.core.node.armed else ()
+
+    def on_message(self, msg, now: float) -> list:
+        self.liveness.hear(msg.sender, now)
+        return self.core.receive(msg, now)
+
+    def on_tick(self, now: float) -> list:        # the bus's own tick loop is not used: Fleet.step drives cores
+        return []
+
+
+# ---------------------------------------------------------------------------------------------- given commitments
+
+class FixedAgent:
+    """An agent that allocates nothing: it holds the commitments its host gives it (:attr:`commitments`) and
+    ignores tasks, messages and peers.  The foraging calibration works fixed groups this way."""
+
+    def __init__(self, ctx: AgentContext):
+        self.robot_id = ctx.robot_id
+        self.commitments: tuple[Commitment, ...] = ()
+        self.converged = True
+        self.dropped = 0
+
+    def _nothing(self, *args) -> list:
+        return []
+
+    add_tasks = withdraw_tasks = on_message = on_tick = on_peer_lost = on_progress = set_available = _nothing
+
+    def pop_events(self):
+        return []
+
+
+@dataclass(frozen=True)
+class FixedOptions:
+    pass
+
+
+def fixed_method(task_kinds: tuple[str, ...] = tuple(T.KINDS)) -> Method:
+    """The method of :class:`FixedAgent` (never in the registry: no robot allocates this way)."""
+    return Method("fixed", "commitments given by the host, nothing allocated", FixedOptions, FixedAgent, task_kinds)
+
+
+# ---------------------------------------------------------------------------------------------- motion
+
+class Motion(Protocol):
+    """What moves the hosted robots: a world with bodies, or :class:`Kinematic`."""
+
+    def sense(self, robots: Sequence[int]) -> dict[int, tuple[tuple[float, float, float], BaseSensors]]: ...
+    def command(self, robot: int, v: float, w: float) -> None: ...
+    def advance(self, dt: float) -> None: ...
+    def remove(self, robot: int) -> None: ...
+
+
+class Kinematic:
+    """Unicycles with no bodies: each robot follows its command exactly (speed clipped to ``max_speed``, exact
+    arcs over each period); robots pass through each other and through obstacles, and sense nothing but their
+    pose.  For allocation tests and sweeps, where what matters is who does what and when."""
+
+    def __init__(self, starts: Mapping[int, Sequence[float]], max_speed: float = 0.5):
+        self.poses = {int(r): (float(p[0]), float(p[1]), float(p[2]) if len(p) > 2 else 0.0)
+                      for r, p in starts.items()}
+        self.max_speed = float(max_speed)
+        self.commands: dict[int, tuple[float, float]] = {}
+        self.driven = dict.fromkeys(self.poses, 0.0)
+
+    def sense(self, robots):
+        return {r: (self.poses[r], BaseSensors()) for r in robots}
+
+    def command(self, robot, v, w):
+        self.commands[robot] = (max(-self.max_speed, min(self.max_speed, float(v))), float(w))
+
+    def advance(self, dt: float) -> None:
+        for r, (v, w) in self.commands.items():
+            x, y, th = self.poses[r]
+            if abs(w) < 1e-9:
+                x, y = x + v * dt * math.cos(th), y + v * dt * math.sin(th)
+            else:
+                th2 = th + w * dt
+                x, y = x + v / w * (math.sin(th2) - math.sin(th)), y - v / w * (math.cos(th2) - math.cos(th))
+                th = th2
+            self.poses[r] = (x, y, math.remainder(th, math.tau))
+            self.driven[r] += abs(v) * dt
+
+    def remove(self, robot: int) -> None:
+        self.commands.pop(robot, None)
+
+
+# ---------------------------------------------------------------------------------------------- the fleet
+
+@dataclass
+class Timing:
+    """Wall seconds spent, by part (for benchmarks; never part of a result)."""
+    deliver: float = 0.0
+    sense: float = 0.0
+    executive: float = 0.0
+    robots: float = 0.0          # core cycles, the executive included
+    motion: float = 0.0
+
+
+class Fleet:
+    """Robots ``cores`` ({id: RobotCore}) moved by ``motion`` on one clock of ``period`` s steps, talking over the
+    in-memory bus (``delay``, ``jitter``, ``drop``, ``duplicate``, ``seed``; ``bus=False``: they never talk).
+    ``on_output(robot, output, now)`` sees every core cycle's output; ``after_cycle(now)`` runs once all robots
+    cycled, ``after_advance(now)`` once the motion advanced."""
+
+    def __init__(self, cores: Mapping[int, RobotCore], motion: Motion, *, period: float = 0.05,
+                 delay: float = 0.01, jitter: float = 0.0, drop: float = 0.0, duplicate: float = 0.0, seed: int = 0,
+                 heartbeat_timeout: float = 3.0, bus: bool = True,
+                 on_output: Callable[[int, Output, float], None] | None = None,
+                 after_cycle: Callable[[float], None] | None = None,
+                 after_advance: Callable[[float], None] | None = None):
+        self.robots = {int(r): Hosted(c, heartbeat_timeout) for r, c in sorted(cores.items())}
+        self.motion = motion
+        self.period = float(period)
+        self.talk = bool(bus)
+        self.bus = InMemoryBus(dict(self.robots), delay=delay, jitter=jitter, drop=drop, duplicate=duplicate, seed=seed)
+        self.on_output, self.after_cycle, self.after_advance = on_output, after_cycle, after_advance
+        self.steps = 0
+        self.timing = Timing()
+        self._clock = time.perf_counter
+        for h in self.robots.values():
+            _time_executive(h.core, self.timing, self._clock)
+
+    # ------------------------------------------------------------------ the clock
+    @property
+    def now(self) -> float:
+        return self.steps * self.period
+
+    def step(self) -> None:
+        """One control period (see the module's docstring)."""
+        clock, timing, now = self._clock, self.timing, self.now
+        t0 = clock()
+        if self.talk:
+            self.bus.deliver(now)
+        t1 = clock()
+        live = self.live()
+        sensed = self.motion.sense(live)
+        t2 = clock()
+        for r in live:
+            h = self.robots[r]
+            pose, sensors = sensed[r]
+            out = h.core.step(now, Sensed(sensors=sensors, pose=pose),
+                              Inbox(lost=h.liveness.due(now), alive=h.liveness.heard))
+            self.motion.command(r, *out.command)
+            if self.on_output is not None:
+                self.on_output(r, out, now)
+            msgs = out.peer_messages()
+            if msgs and self.talk:
+                self.bus.send(msgs, now)
+        t3 = clock()
+        if self.after_cycle is not None:
+            self.after_cycle(now)
+        t4 = clock()
+        self.motion.advance(self.period)
+        t5 = clock()
+        self.steps += 1
+        if self.after_advance is not None:
+            self.after_advance(self.now)
+        timing.deliver += t1 - t0
+        timing.sense += t2 - t1
+        timing.robots += t3 - t2
+        timing.motion += t5 - t4
+
+    def run(self, until: float, stop: Callable[["Fleet"], bool] | None = None,
+            observe: Callable[["Fleet"], None] | None = None) -> float:
+        """Step until ``until`` s; ``observe(fleet)`` after every step, ``stop(fleet)`` true ends early (it is asked
+        before every step).  Returns the time reached."""
+        while self.now < until - 1e-9:
+            if stop is not None and stop(self):
+                break
+            self.step()
+            if observe is not None:
+                observe(self)
+        return self.now
+
+    # ------------------------------------------------------------------ robots
+    def kill(self, robot: int) -> None:
+        """``robot`` fails now: it neither cycles, sends nor receives again, and the motion drops it."""
+        if robot in self.bus.down:
+            return
+        self.bus.down.add(robot)
+        self.motion.remove(robot)
+
+    def live(self) -> list[int]:
+        return [r for r in self.robots if r not in self.bus.down]
+
+    def hand_in(self, to: int, items, now: float | None = None) -> list[int]:
+        """Mission items ``(command, frame, params, x, y)`` accepted by robot ``to`` as an operator's upload is;
+        its table spreads them.  Returns the new tasks' fleet ids."""
+        now = self.now if now is None else now
+        node = self.robots[to].node
+        before = set(node.table.entries)
+        out = node.add_items(list(items), now)
+        if self.talk:
+            self.bus.send(out, now)
+        return sorted(set(node.table.entries) - before)
+
+    def hand_in_specs(self, to: int, specs, now: float | None = None) -> list[int]:
+        """Tasks by their kinds' specs (``Goto(x, y, hold)``, ``Rendezvous(...)``, ``Transport(...)``)."""
+        items = []
+        for spec in specs:
+            command, params = T.kind(kind_of(spec)).to_item(spec)
+            items.append((command, MAV_FRAME_LOCAL_ENU, params, spec.x, spec.y))
+        return self.hand_in(to, items, now)
+
+    # ------------------------------------------------------------------ what the fleet did
+    def done(self) -> dict[int, tuple[int, ...]]:
+        """Tasks reported done (by any robot's agent) -> the coalition that did them."""
+        return {ev.task: ev.robots for h in self.robots.values() for ev in h.node.events if ev.what == DONE}
+
+    def holders(self) -> dict[int, dict[int, tuple[int, ...]]]:
+        """task -> {robot: its coalition (itself and its partners, sorted)} over the live robots' commitments."""
+        out: dict[int, dict[int, tuple[int, ...]]] = {}
+        for rid in self.live():
+            for c in self.robots[rid].agent.commitments:
+                out.setdefault(c.task_id, {})[rid] = tuple(sorted({rid, *c.partners}))
+        return out
+
+    def table_state(self, task: int) -> int | None:
+        """The task's state in the table of the lowest live robot."""
+        e = self.robots[min(self.live())].node.table.entries.get(task)
+        return None if e is None else e.state
+
+    def task(self, task_id: int) -> Task:
+        return self.robots[min(self.live())].node.table.entries[task_id].task
+
+
+def _time_executive(core: RobotCore, timing: Timing, clock) -> None:
+    """Count the wall time of ``core``'s executive steps into ``timing.executive`` (the core reads no clock)."""
+    inner = core.executive.step
+
+    def step(*args, **kwargs):
+        t = clock()
+        try:
+            return inner(*args, **kwargs)
+        finally:
+            timing.executive += clock() - t
+
+    core.executive.step = step
+
+
+def kind_of(spec) -> str:
+    """The task kind whose Spec ``spec`` is."""
+    for name in T.KINDS:
+        if isinstance(spec, T.kind(name).Spec):
+            return name
+    raise TypeError(f"{spec!r} is not the spec of a task kind")
+
+
+# ---------------------------------------------------------------------------------------------- a kinematic fleet
+
+def kinematic(starts: Mapping[int, Sequence[float]], method: str | Method = "coalition", options=None, *,
+              speed: float = 0.25, radius: float = 0.17, period: float = 0.05, heartbeat_timeout: float = 3.0,
+              **bus) -> Fleet:
+    """A fleet of ``starts`` ({id: (x, y[, heading])}) running allocation ``method`` (a registry name or a Method;
+    ``options`` default its defaults) with :class:`Kinematic` motion at cruise ``speed``: the real agents and
+    executors, bodies of ``radius`` that never touch.  ``bus``: the in-memory bus's delay, jitter, drop,
+    duplicate, seed."""
+    from runtime.allocation import registry
+
+    m = registry.method(method) if isinstance(method, str) else method
+    options = m.options() if options is None else options
+    ids = tuple(sorted(int(r) for r in starts))
+    facts = BaseFacts(radius=radius, max_speed=max(speed, 0.5), ranging=False)
+    cores = {r: RobotCore(robot_config(r, ids, options, speed=speed, period=period,
+                                       heartbeat_timeout=heartbeat_timeout), facts, method=m, base_config=None)
+             for r in ids}
+    return Fleet(cores, Kinematic(starts, facts.max_speed), period=period, heartbeat_timeout=heartbeat_timeout, **bus)

@@ -1,6 +1,6 @@
 """How long the daemons' formation agents (runtime/allocation/formation/family.py: rounds around each method's solver)
 take to settle a 10-robot ring formation on a lossy link: the in-memory bus with kinematic robots
-(runtime/fleet/simulate.py), ten robots in a line, ten station-keeping positions on a 2.5 m ring handed to robot 1,
+(runtime/inprocess.py: robot cores with kinematic motion), ten robots in a line, ten station-keeping positions on a 2.5 m ring handed to robot 1,
 ``--drops`` of the messages lost (5 ms of jitter), one run per seed (tests/test_formation_fleet.py ``settle``).  A
 run settles when every robot holds one task, every task is held, and every robot's rounds have converged; it then
 runs 300 s more, and the time in it when some task was held by two robots or by none is counted.

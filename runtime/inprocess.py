@@ -205,12 +205,12 @@ class Timing:
 class Fleet:
     """Robots ``cores`` ({id: RobotCore}) moved by ``motion`` on one clock of ``period`` s steps, talking over the
     in-memory bus (``delay``, ``jitter``, ``drop``, ``duplicate``, ``seed``; ``bus=False``: they never talk).
-    ``on_output(robot, output, now)`` sees every core cycle's output; ``after_cycle(now)`` runs once all robots
+    ``profile``: also time the executives (:attr:`timing`).  ``on_output(robot, output, now)`` sees every core cycle's output; ``after_cycle(now)`` runs once all robots
     cycled, ``after_advance(now)`` once the motion advanced."""
 
     def __init__(self, cores: Mapping[int, RobotCore], motion: Motion, *, period: float = 0.05,
                  delay: float = 0.01, jitter: float = 0.0, drop: float = 0.0, duplicate: float = 0.0, seed: int = 0,
-                 heartbeat_timeout: float = 3.0, bus: bool = True,
+                 heartbeat_timeout: float = 3.0, bus: bool = True, profile: bool = False,
                  on_output: Callable[[int, Output, float], None] | None = None,
                  after_cycle: Callable[[float], None] | None = None,
                  after_advance: Callable[[float], None] | None = None):
@@ -223,8 +223,9 @@ class Fleet:
         self.steps = 0
         self.timing = Timing()
         self._clock = time.perf_counter
-        for h in self.robots.values():
-            _time_executive(h.core, self.timing, self._clock)
+        if profile:                         # the executive's share of the cores' time
+            for h in self.robots.values():
+                _time_executive(h.core, self.timing, self._clock)
 
     # ------------------------------------------------------------------ the clock
     @property
@@ -269,13 +270,15 @@ class Fleet:
     def run(self, until: float, stop: Callable[["Fleet"], bool] | None = None,
             observe: Callable[["Fleet"], None] | None = None) -> float:
         """Step until ``until`` s; ``observe(fleet)`` after every step, ``stop(fleet)`` true ends early (it is asked
-        before every step).  Returns the time reached."""
+        before every step).  Messages due by the time reached are delivered.  Returns the time reached."""
         while self.now < until - 1e-9:
             if stop is not None and stop(self):
                 break
             self.step()
             if observe is not None:
                 observe(self)
+        if self.talk:
+            self.bus.deliver(self.now)        # what is due by now is heard now (the next step would, first thing)
         return self.now
 
     # ------------------------------------------------------------------ robots
@@ -289,7 +292,7 @@ class Fleet:
     def live(self) -> list[int]:
         return [r for r in self.robots if r not in self.bus.down]
 
-    def hand_in(self, to: int, items, now: float | None = None) -> list[int]:
+    def upload(self, to: int, items, now: float | None = None) -> list[int]:
         """Mission items ``(command, frame, params, x, y)`` accepted by robot ``to`` as an operator's upload is;
         its table spreads them.  Returns the new tasks' fleet ids."""
         now = self.now if now is None else now
@@ -300,13 +303,14 @@ class Fleet:
             self.bus.send(out, now)
         return sorted(set(node.table.entries) - before)
 
-    def hand_in_specs(self, to: int, specs, now: float | None = None) -> list[int]:
-        """Tasks by their kinds' specs (``Goto(x, y, hold)``, ``Rendezvous(...)``, ``Transport(...)``)."""
+    def hand_in(self, to: int, specs, now: float | None = None) -> list[int]:
+        """Tasks by their kinds' specs (``Goto(x, y, hold)``, ``Rendezvous(x, y, robots, value)``,
+        ``Transport(x, y, weight, deadline, u_max)``) uploaded to robot ``to``; returns their fleet ids."""
         items = []
         for spec in specs:
             command, params = T.kind(kind_of(spec)).to_item(spec)
             items.append((command, MAV_FRAME_LOCAL_ENU, params, spec.x, spec.y))
-        return self.hand_in(to, items, now)
+        return self.upload(to, items, now)
 
     # ------------------------------------------------------------------ what the fleet did
     def done(self) -> dict[int, tuple[int, ...]]:
@@ -354,8 +358,8 @@ def kind_of(spec) -> str:
 
 # ---------------------------------------------------------------------------------------------- a kinematic fleet
 
-def kinematic(starts: Mapping[int, Sequence[float]], method: str | Method = "coalition", options=None, *,
-              speed: float = 0.25, radius: float = 0.17, period: float = 0.05, heartbeat_timeout: float = 3.0,
+def kinematic(starts: Mapping[int, Sequence[float]], method: str | Method, options=None, *,
+              speed: float = 0.25, radius: float = 0.17, period: float = 0.1, heartbeat_timeout: float = 3.0,
               **bus) -> Fleet:
     """A fleet of ``starts`` ({id: (x, y[, heading])}) running allocation ``method`` (a registry name or a Method;
     ``options`` default its defaults) with :class:`Kinematic` motion at cruise ``speed``: the real agents and

@@ -69,6 +69,9 @@ AMOUNT = Kind("a finite number >= 0", lambda v: is_finite(v) and v >= 0)
 NUMBER = Kind("a finite number", is_finite)
 ROBOTS = Kind(f"distinct robot ids 1..{MAX_ROBOT}",
               lambda v: isinstance(v, tuple) and all(map(is_robot, v)) and len(set(v)) == len(v))
+TASKS = Kind("fleet task ids (origin robot 1..250 in their upper 16 bits)",
+             lambda v: isinstance(v, tuple) and all(map(is_task, v)))
+PLACE = Kind("a number (NaN: not localized)", lambda v: is_finite(v) or (isinstance(v, float) and math.isnan(v)))
 
 RobotId = Annotated[int, ROBOT]
 Dest = Annotated[int, DEST]
@@ -77,6 +80,8 @@ Count = Annotated[int, COUNT]
 Amount = Annotated[float, AMOUNT]
 Number = Annotated[float, NUMBER]
 RobotIds = Annotated[tuple[int, ...], ROBOTS]
+TaskIds = Annotated[tuple[int, ...], TASKS]
+Place = Annotated[float, PLACE]
 
 _checks: dict[type, tuple[tuple[str, Kind], ...]] = {}
 
@@ -161,20 +166,18 @@ class TaskRecord(Message):
 class RobotState(Message):
     """A robot's state (at once when it changes, else every second): what it does, the fleet tasks it holds, where
     it is, and the size and CRC-32 of its task table."""
-    sender: int
-    dest: int
+    sender: RobotId
+    dest: Dest
     state: int
-    tasks: tuple[int, ...]
-    x: float
-    y: float
-    known: int
-    digest: int
+    tasks: TaskIds
+    x: Place
+    y: Place
+    known: Count
+    digest: Count
 
     def check(self) -> str | None:
         if self.state not in ROBOT_STATE_NAMES:
-            return f"state {self.state}: expected 0..4"
-        if any(not 1 <= task_origin(t) <= MAX_ROBOT for t in self.tasks):
-            return f"tasks {list(self.tasks)}: expected fleet task ids"
+            return f"state {self.state!r}: expected 0..4"
         return None
 
 

@@ -1,5 +1,6 @@
-"""Shared set-ups of the dr tests (runtime/allocation/dr): fleets on the in-memory bus with kinematic transport
-trips (runtime/allocation/dr/sim.py) and single agents fed by hand."""
+"""Shared set-ups of the dr tests (runtime/allocation/dr): fleets of robot cores on the in-process host with
+kinematic motion (runtime/inprocess.py: the real agents and transport executors, bodies that never touch) and
+single agents fed by hand."""
 from __future__ import annotations
 
 import copy
@@ -9,22 +10,36 @@ from types import SimpleNamespace
 from runtime.allocation.agent import AgentContext
 from runtime.allocation.dr.family import DrAgent
 from runtime.allocation.dr.options import DrOptions
-from runtime.allocation.dr.sim import TransportFleet
-from runtime.fleet.simulate import StraightLineEstimator
+from runtime.inprocess import Fleet, kinematic
 from runtime.tasks import Profile, Task
 from runtime.tasks.transport import Transport
+from tests.alloc_util import StraightLineEstimator
 
 _BUSY = None
 
 
-def busy_fleet() -> TransportFleet:
+def put(f: Fleet, to: int, objects) -> list[int]:
+    """Objects ``(x, y, weight wu, deadline s, u_max)`` handed to robot ``to`` (mission items 31001); their ids."""
+    return f.hand_in(to, [Transport(*map(float, o)) for o in objects])
+
+
+def delivered(f: Fleet) -> dict[int, float]:
+    """task -> wu delivered, summed over every robot's own account (the loads it was granted and unloaded)."""
+    out: dict[int, float] = {}
+    for r in f.robots.values():
+        for task, e in r.agent.accounts.items():
+            out[task] = out.get(task, 0.0) + e.delivered
+    return out
+
+
+def busy_fleet() -> Fleet:
     """Five robots working on two objects (groups formed, loads on the way), built once; callers may poke it."""
     global _BUSY
     if _BUSY is None:
-        f = TransportFleet({1: (-2, -1), 2: (-2, 0), 3: (-2, 1), 4: (2, -1), 5: (2, 0)}, tick=0.1,
+        f = kinematic({1: (-2, -1), 2: (-2, 0), 3: (-2, 1), 4: (2, -1), 5: (2, 0)}, "dr", period=0.1,
                            options=DrOptions(strategy="NM_NI"))
         f.run(0.5)
-        f.put(1, [(1.5, 1.5, 30, 60, 100), (-1.5, 1.0, 30, 60, 100)])
+        put(f, 1, [(1.5, 1.5, 30, 60, 100), (-1.5, 1.0, 30, 60, 100)])
         f.run(25.0)
         roles = [r.agent.role(t) for r in f.robots.values() for t in r.agent.world.tasks]
         assert roles.count("leader") == 2 and "member" in roles
@@ -132,7 +147,7 @@ def forage(f, objects: int, present: int, rnd, weight=(8.0, 16.0), deadline: flo
         while len(open_) < present and len(handed) < objects:
             r, a = rnd.uniform(1.0, 3.0), rnd.uniform(0, 6.283)
             w = round(rnd.uniform(*weight))
-            (t,) = fl.put(min(fl.live()), [(r * math.cos(a), r * math.sin(a), w, deadline, 100.0)])
+            (t,) = put(fl, min(fl.live()), [(r * math.cos(a), r * math.sin(a), w, deadline, 100.0)])
             handed[t] = w
             open_.append(t)
 

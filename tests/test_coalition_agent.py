@@ -7,7 +7,7 @@ from runtime.allocation.agent import AWARDED, DONE, RELEASED, AgentContext
 from runtime.allocation.coalition import meeting
 from runtime.allocation.coalition.family import CoalitionAgent
 from runtime.allocation.coalition.options import CoalitionOptions
-from runtime.fleet.simulate import StraightLineEstimator
+from tests.alloc_util import StraightLineEstimator
 from runtime.allocation.coalition.wdp_messages import (AwardAck, AwardCancel, CoalitionAward, CoalitionBid,
                                                        CoalitionDone, MemberReport, TaskOffer)
 from runtime.messages import IDLE, RobotState

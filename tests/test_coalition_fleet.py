@@ -1,5 +1,5 @@
 """The coalition method on the in-memory bus: FleetNodes running CoalitionAgents with kinematic execution
-(runtime/fleet/simulate.py).  Every task done by a coalition of its size, coalitions disjoint
+(runtime/inprocess.py: robot cores with kinematic motion).  Every task done by a coalition of its size, coalitions disjoint
 at every step, round 1 optimal over the bids received, leftovers after the first completion, lost members,
 a lost auctioneer, a disarmed member, and a lossy bus."""
 from __future__ import annotations
@@ -9,7 +9,7 @@ import math
 from hypothesis import given, settings, strategies as st
 
 from runtime.allocation.coalition.options import CoalitionOptions
-from runtime.fleet.simulate import SimFleet
+from runtime.inprocess import Fleet, kinematic
 from runtime.messages import DONE as T_DONE
 from runtime.tasks.rendezvous import Rendezvous
 
@@ -43,7 +43,7 @@ class Watch:
         self.done_at: dict[int, float] = {}
         self.violations: list[str] = []
 
-    def __call__(self, f: SimFleet) -> None:
+    def __call__(self, f: Fleet) -> None:
         for rid in f.live():
             a = f.robots[rid].agent.auction
             seen: dict[int, int] = {}
@@ -70,13 +70,13 @@ def all_done(ids):
     return lambda f: all(f.table_state(t) == T_DONE for t in ids)
 
 
-def start(f: SimFleet, to: int = 1, tasks=TASKS) -> list[int]:
+def start(f: Fleet, to: int = 1, tasks=TASKS) -> list[int]:
     f.run(0.5)
     return f.hand_in(to, [Rendezvous(*t) for t in tasks])
 
 
 def test_every_task_done_by_a_coalition_of_its_size_and_round_one_is_optimal():
-    f = SimFleet(STARTS)
+    f = kinematic(STARTS, "coalition")
     ids = start(f)
     watch = Watch()
     f.run(200, stop=all_done(ids), observe=watch)
@@ -102,7 +102,7 @@ def test_every_task_done_by_a_coalition_of_its_size_and_round_one_is_optimal():
 
 
 def test_round_values_match_winner_determination_over_the_bids_received_on_a_lossy_bus():
-    f = SimFleet(STARTS, drop=0.2, duplicate=0.2, jitter=0.005, seed=11)
+    f = kinematic(STARTS, "coalition", drop=0.2, duplicate=0.2, jitter=0.005, seed=11)
     ids = start(f)
     f.run(400, stop=all_done(ids))
     assert sorted(f.done()) == ids
@@ -114,7 +114,7 @@ def test_round_values_match_winner_determination_over_the_bids_received_on_a_los
         assert len(used) == len(set(used))
 
 
-def _member_driving(f: SimFleet, not_robot: int | None = None):
+def _member_driving(f: Fleet, not_robot: int | None = None):
     """A robot committed to a coalition and not arrived yet (lowest id first)."""
     for rid in sorted(f.live()):
         job = f.robots[rid].agent.member.job
@@ -124,7 +124,7 @@ def _member_driving(f: SimFleet, not_robot: int | None = None):
 
 
 def test_a_lost_member_gets_its_task_offered_again_and_done():
-    f = SimFleet(STARTS)
+    f = kinematic(STARTS, "coalition")
     ids = start(f)
     f.run(60, stop=lambda fl: _member_driving(fl, not_robot=1) is not None)
     victim, task = _member_driving(f, not_robot=1)
@@ -141,7 +141,7 @@ def test_a_lost_member_gets_its_task_offered_again_and_done():
 
 
 def test_a_lost_auctioneer_is_replaced_and_no_task_is_lost():
-    f = SimFleet(STARTS)
+    f = kinematic(STARTS, "coalition")
     ids = start(f)
     f.run(60, stop=lambda fl: fl.robots[1].agent.member.job is not None
           and not fl.robots[1].agent.member.job.arrived and len(fl.holders()) >= 3)
@@ -158,7 +158,7 @@ def test_a_lost_auctioneer_is_replaced_and_no_task_is_lost():
 
 
 def test_a_disarmed_member_leaves_and_its_task_is_done_by_others():
-    f = SimFleet(STARTS)
+    f = kinematic(STARTS, "coalition")
     ids = start(f)
     f.run(60, stop=lambda fl: _member_driving(fl, not_robot=1) is not None)
     victim, task = _member_driving(f, not_robot=1)
@@ -174,7 +174,7 @@ def test_a_disarmed_member_leaves_and_its_task_is_done_by_others():
 @settings(max_examples=6, deadline=None)
 @given(seed=st.integers(0, 10_000), drop=st.sampled_from([0.05, 0.15, 0.3]), duplicate=st.sampled_from([0.0, 0.3]))
 def test_dropped_duplicated_and_reordered_messages_are_tolerated(seed, drop, duplicate):
-    f = SimFleet(STARTS, drop=drop, duplicate=duplicate, jitter=0.02, seed=seed)
+    f = kinematic(STARTS, "coalition", drop=drop, duplicate=duplicate, jitter=0.02, seed=seed)
     ids = start(f)
     watch = Watch(strict=False)          # a lost cancel may leave a member holding a task for a moment
     f.run(600, stop=all_done(ids), observe=watch)
@@ -189,7 +189,7 @@ def test_dropped_duplicated_and_reordered_messages_are_tolerated(seed, drop, dup
 
 
 def test_a_task_handed_to_another_robot_and_tasks_arriving_later():
-    f = SimFleet(STARTS)
+    f = kinematic(STARTS, "coalition")
     first = start(f, to=5, tasks=TASKS[:2])
     f.run(5)
     second = f.hand_in(3, [Rendezvous(*t) for t in TASKS[2:]])
@@ -198,7 +198,7 @@ def test_a_task_handed_to_another_robot_and_tasks_arriving_later():
 
 
 def test_a_task_needing_more_robots_than_the_fleet_has_waits_and_is_said_so(caplog):
-    f = SimFleet({1: (0.0, 0.0), 2: (1.0, 0.0)})
+    f = kinematic({1: (0.0, 0.0), 2: (1.0, 0.0)}, "coalition")
     ids = start(f, tasks=[(2.0, 2.0, 3, 100.0), (1.0, 1.0, 2, 100.0)])
     with caplog.at_level("WARNING"):
         f.run(60, stop=lambda fl: fl.table_state(ids[1]) == T_DONE)

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from runtime.allocation.coalition import wdp_messages as W
-from runtime.fleet.simulate import SimFleet
+from runtime.inprocess import Fleet, kinematic
 from runtime.tasks.rendezvous import Rendezvous
 from runtime.comms import codec, dialect
 from runtime.messages import RobotState, why_invalid
@@ -124,11 +124,11 @@ def test_bit_flipped_and_truncated_frames_never_raise(mod, msgs, rnd, flips):
 _FLEET = None
 
 
-def _busy_fleet() -> SimFleet:
+def _busy_fleet() -> Fleet:
     """Robot 1 auctioneer with coalitions running, robots committed (built once, then copied per use)."""
     global _FLEET
     if _FLEET is None:
-        f = SimFleet({1: (-3.0, -2.0), 2: (-3.0, 0.0), 3: (3.0, 0.0), 4: (3.0, 2.0)})
+        f = kinematic({1: (-3.0, -2.0), 2: (-3.0, 0.0), 3: (3.0, 0.0), 4: (3.0, 2.0)}, "coalition")
         f.run(0.5)
         f.hand_in(1, [Rendezvous(0.0, 0.0, 2, 100.0), Rendezvous(0.0, 2.0, 2, 100.0), Rendezvous(1.0, -2.0, 3, 100.0)])
         f.run(4.0)

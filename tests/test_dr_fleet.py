@@ -1,5 +1,5 @@
-"""Whole dr fleets on the in-memory bus with kinematic transport trips (runtime/allocation/dr/sim.py, a SimRobot
-whose transport execution is trips: drive, dwell load * load_time, loaded, drive, dwell, delivered).
+"""Whole dr fleets on the in-process host (runtime/inprocess.py): robot cores with kinematic motion, so the real
+transport executor makes the trips (drive, dwell load * load_time, loaded, drive, dwell, delivered).
 
 Every object delivered with its whole weight exactly once, with and without 10 % message loss (invariants
 checked at every step: tests/dr_util.Watch); a killed leader and a killed member; SR and Greedy against DR;
@@ -14,10 +14,10 @@ from hypothesis import HealthCheck, example, given, settings, strategies as st
 from runtime.allocation.agent import DONE
 from runtime.allocation.dr.interference import InterferenceModel
 from runtime.allocation.dr.options import DrOptions
-from runtime.allocation.dr.sim import TransportFleet
 from runtime.messages import DONE as T_DONE
 
-from tests.dr_util import Watch, forage
+from runtime.inprocess import Fleet, kinematic
+from tests.dr_util import Watch, delivered, forage, put
 
 SIX = {1: (-2.0, -1.0), 2: (-2.0, 0.0), 3: (-2.0, 1.0), 4: (2.0, -1.0), 5: (2.0, 0.0), 6: (2.0, 1.0)}
 TEN = {**SIX, 7: (0.0, 2.5), 8: (0.0, -2.5), 9: (-1.0, 2.5), 10: (1.0, -2.5)}
@@ -34,7 +34,7 @@ def done_events(f) -> dict[int, int]:
 
 
 def check_books(f, handed: dict[int, float]) -> None:
-    got = f.delivered()
+    got = delivered(f)
     for t, w in handed.items():
         assert got.get(t, 0.0) == pytest.approx(w, abs=1e-5), (t, got.get(t), w)
         assert f.table_state(t) == T_DONE
@@ -43,7 +43,7 @@ def check_books(f, handed: dict[int, float]) -> None:
 
 def test_every_object_is_delivered_with_its_whole_weight_once():
     o = DrOptions(strategy="NM_NI")
-    f = TransportFleet(SIX, options=o, tick=0.1)
+    f = kinematic(SIX, "dr", options=o, period=0.1)
     watch = Watch(o)
     handed = forage(f, objects=6, present=3, rnd=random.Random(1), observe=watch)
     assert not watch.violations, watch.violations[:5]
@@ -55,8 +55,8 @@ def test_every_object_is_delivered_with_its_whole_weight_once():
           f"{sorted(round(fin.time, 1) for fin in finishes)} s")
 
 
-def _lossy(seed: int, robots, objects: int, options: DrOptions) -> tuple[TransportFleet, Watch, dict]:
-    f = TransportFleet(robots, options=options, drop=0.1, duplicate=0.02, jitter=0.01, seed=seed, tick=0.1)
+def _lossy(seed: int, robots, objects: int, options: DrOptions) -> tuple[Fleet, Watch, dict]:
+    f = kinematic(robots, "dr", options=options, drop=0.1, duplicate=0.02, jitter=0.01, seed=seed, period=0.1)
     watch = Watch(options)
     handed = forage(f, objects=objects, present=3, rnd=random.Random(seed), observe=watch, until=1500.0)
     return f, watch, handed
@@ -98,13 +98,17 @@ def _leader(f, task):
 def test_a_killed_leader_is_replaced_within_15_s_and_the_weight_left_is_carried_on(drop, seed, link):
     """``link`` False: the link never reports the dead leader lost, only its silence tells (leader_timeout)."""
     o = DrOptions(strategy="NM_NI")
-    f = TransportFleet(FIVE, options=o, drop=drop, seed=seed, tick=0.1)
+    f = kinematic(FIVE, "dr", options=o, drop=drop, seed=seed, period=0.1)
     if not link:
         for r in f.robots.values():
-            r.timeout = 1e9
+            r.liveness.timeout = 1e9
     f.run(0.5)
-    (tid,) = f.put(1, [(1.5, 1.5, 20, 60, 100)])
-    f.run(20.0)
+    (tid,) = put(f, 1, [(1.5, 1.5, 20, 60, 100)])
+
+    def delivering(fl) -> bool:                   # killed mid-task: some weight delivered, some left
+        lead = _leader(fl, tid)
+        return lead is not None and fl.robots[lead].agent.leader_view(tid).delivered > 0
+    f.run(40.0, stop=delivering)
     old = _leader(f, tid)
     a = f.robots[old].agent
     before = a.leader_view(tid)
@@ -127,9 +131,9 @@ def test_a_killed_leader_is_replaced_within_15_s_and_the_weight_left_is_carried_
     assert seen["left"] - killed <= o.leader_timeout + 0.2
     assert when - killed <= o.leader_timeout + o.time_leadership + 0.3
     assert left == pytest.approx(before.left)                    # the books went on where the old leader stopped
-    got = f.delivered()[tid]
+    got = delivered(f)[tid]
     assert got == pytest.approx(20.0)                            # the dead leader's load went back and was re-taken
-    fin = f.robots[new].agent.finished[tid]
+    (fin,) = [h.agent.finished[tid] for h in f.robots.values() if tid in h.agent.finished]   # one leader finished it
     assert fin.started < killed                                  # the first leader's election carried on
     print(f"drop {drop}, link {link}: new leader {new} {when - killed:.2f} s after the kill (members gone after "
           f"{seen['left'] - killed:.2f} s); {before.left:g} wu left, {on_board:g} wu on the dead leader put back")
@@ -143,10 +147,10 @@ def test_with_carrier_leads_killed_leaders_under_loss_keep_every_invariant_and_t
     o = DrOptions(strategy="NM_NI", carrier_leads=True)
     asked = 0
     for seed in range(1, 9):
-        f = TransportFleet(FIVE, options=o, drop=0.1, seed=seed, tick=0.1)
+        f = kinematic(FIVE, "dr", options=o, drop=0.1, seed=seed, period=0.1)
         watch = Watch(o)
         f.run(0.5)
-        (tid,) = f.put(1, [(1.5, 1.5, 20, 60, 100)])
+        (tid,) = put(f, 1, [(1.5, 1.5, 20, 60, 100)])
         f.run(20.0, observe=watch)
         old = _leader(f, tid)
         assert old is not None
@@ -160,7 +164,7 @@ def test_with_carrier_leads_killed_leaders_under_loss_keep_every_invariant_and_t
                 seen["leader"] = fl.now
         f.run(300, stop=lambda fl: fl.table_state(tid) == T_DONE, observe=observe)
         assert not watch.violations, (seed, watch.violations[:3])
-        assert f.delivered()[tid] == pytest.approx(20.0), seed
+        assert delivered(f)[tid] == pytest.approx(20.0), seed
         assert seen["leader"] - killed <= 15.0, seed
         asked += sum(f.robots[r].agent.carrier_requests for r in f.robots)
     assert asked > 0
@@ -169,9 +173,9 @@ def test_with_carrier_leads_killed_leaders_under_loss_keep_every_invariant_and_t
 
 def test_a_killed_member_is_dropped_and_the_leader_auctions_again_when_eq8_fails():
     o = DrOptions(strategy="NM_NI")
-    f = TransportFleet({**FIVE, 6: (2.0, 1.0)}, options=o, tick=0.1)
+    f = kinematic({**FIVE, 6: (2.0, 1.0)}, "dr", options=o, period=0.1)
     f.run(0.5)
-    (tid,) = f.put(1, [(1.5, 1.5, 24, 75, 100)])
+    (tid,) = put(f, 1, [(1.5, 1.5, 24, 75, 100)])
     f.run(18.0)
     leader = _leader(f, tid)
     lead = f.robots[leader].agent.lead
@@ -193,7 +197,7 @@ def test_a_killed_member_is_dropped_and_the_leader_auctions_again_when_eq8_fails
     f.run(300, stop=lambda fl: fl.table_state(tid) == T_DONE, observe=watch)
     assert seen["dropped"] - killed <= o.member_timeout + 0.2
     assert seen["round"] - seen["dropped"] <= 0.2 and "joined" in seen
-    assert f.delivered()[tid] == pytest.approx(24.0)
+    assert delivered(f)[tid] == pytest.approx(24.0)
     print(f"member {victim} dropped {seen['dropped'] - killed:.2f} s after the kill, new round at once, "
           f"a new member {seen['joined'] - killed:.2f} s after")
 
@@ -208,9 +212,9 @@ def test_dr_robots_take_the_greatest_bid_and_sr_robots_the_first():
     joined = {}
     for auction in ("dr", "sr"):
         o = DrOptions(auction=auction, strategy="NM_NI", utility="hard")
-        f = TransportFleet(starts, options=o, tick=0.1)
+        f = kinematic(starts, "dr", options=o, period=0.1)
         f.run(0.5)
-        late, fresh = f.put(1, [(-1.5, 0.0, 40, 0.5, 100), (3.0, 3.0, 40, 150, 100)])
+        late, fresh = put(f, 1, [(-1.5, 0.0, 40, 0.5, 100), (3.0, 3.0, 40, 150, 100)])
         f.run(6.0)
         leaders = {t: _leader(f, t) for t in (late, fresh)}
         assert leaders[late] < leaders[fresh]
@@ -224,7 +228,7 @@ def test_dr_robots_take_the_greatest_bid_and_sr_robots_the_first():
 
 def _max_groups(auction: str, seed: int = 3) -> list[int]:
     o = DrOptions(auction=auction, strategy="NM_NI")
-    f = TransportFleet(TEN, options=o, tick=0.1)
+    f = kinematic(TEN, "dr", options=o, period=0.1)
     forage(f, objects=6, present=3, rnd=random.Random(seed), deadline=50.0)
     return [fin.max_group for r in f.robots.values() for fin in r.agent.finished.values()]
 
@@ -236,9 +240,9 @@ def test_greedy_groups_are_the_largest():
 
 
 def _first_group(options: DrOptions) -> int:
-    f = TransportFleet(TEN, options=options, tick=0.1)
+    f = kinematic(TEN, "dr", options=options, period=0.1)
     f.run(0.5)
-    (tid,) = f.put(1, [(2.0, 0.5, 30, 70, 100)])
+    (tid,) = put(f, 1, [(2.0, 0.5, 30, 70, 100)])
     f.run(8.0)
     return len(f.robots[_leader(f, tid)].agent.lead.group())
 
@@ -257,7 +261,7 @@ def test_the_interference_model_recruits_more_robots_than_the_ideal_capacity(tmp
 
 def test_online_samples_reach_every_robot_despite_loss():
     o = DrOptions(strategy="NM_I", online=True)
-    f = TransportFleet(SIX, options=o, drop=0.1, seed=5, tick=0.1)
+    f = kinematic(SIX, "dr", options=o, drop=0.1, seed=5, period=0.1)
     handed = forage(f, objects=5, present=3, rnd=random.Random(5), until=900.0)
     f.run(f.now + 2.5 * o.sample_period)                         # the last samples are repeated
     models = {r: sorted(f.robots[r].agent.model.samples) for r in f.robots}
@@ -269,9 +273,9 @@ def _first_recruit(strategy: str) -> tuple[float, float]:
     """One object a lone leader believes it can move in time (it thinks it drives 1 m/s; it drives 0.25): when
     does it first recruit, and when was the task done (s after it appeared)?"""
     o = DrOptions(strategy=strategy, speed_belief=1.0)
-    f = TransportFleet({1: (2.0, 0.0), 2: (-2.0, -2.0), 3: (-2.0, 2.0)}, options=o, tick=0.1)
+    f = kinematic({1: (2.0, 0.0), 2: (-2.0, -2.0), 3: (-2.0, 2.0)}, "dr", options=o, period=0.1)
     f.run(0.5)
-    (tid,) = f.put(1, [(2.0, 0.0, 20, 80, 100)])
+    (tid,) = put(f, 1, [(2.0, 0.0, 20, 80, 100)])
     seen = {}
 
     def watch(fl):

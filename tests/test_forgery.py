@@ -1,6 +1,6 @@
 """Forged and replayed messages change nothing and are counted (issue 14, items 4 and 5).
 
-Unsigned fleets (a fleet can still choose so) on the in-memory bus (runtime/fleet/simulate.py), the forgeries
+Unsigned fleets (a fleet can still choose so) on the in-memory bus (runtime/inprocess.py: robot cores with kinematic motion), the forgeries
 going through the codec as a daemon's link would decode them: forged Prices do not livelock the epsilon auction
 nor raise its cost, a forged task set does not send a robot to an attacker's point, forged Awards do not leave
 two robots on one task under BS.  What no check can tell from a genuine message without signing (values within
@@ -17,7 +17,7 @@ from runtime.allocation.formation import messages as M
 from runtime.comms import codec, dialect
 from runtime.comms.link import GCS_LINK, MavlinkLink, signing_timestamp
 from runtime.messages import DONE, OPEN, RobotState, TaskRecord
-from runtime.fleet.simulate import SimFleet
+from runtime.inprocess import Fleet, kinematic
 from runtime.tasks.goto import Goto
 
 STARTS = {1: (-3.0, -3.0), 2: (-3.0, 3.0), 3: (3.0, -3.0), 4: (3.0, 3.0)}
@@ -40,7 +40,7 @@ def decoded(msg):
         return None
 
 
-def drops(f: SimFleet) -> Counter:
+def drops(f: Fleet) -> Counter:
     """Every robot's drops by reason: its node, its agent, the solvers of its rounds."""
     out: Counter = Counter()
     for r in f.robots.values():
@@ -54,7 +54,7 @@ def drops(f: SimFleet) -> Counter:
 class Forger:
     """Puts forged messages on the bus as a host on the fleet's network would (they go through the codec)."""
 
-    def __init__(self, f: SimFleet):
+    def __init__(self, f: Fleet):
         self.f = f
         self.refused_at_decode = 0
 
@@ -67,22 +67,22 @@ class Forger:
                 self.f.bus.send([got], self.f.now)
 
 
-def formation(method: str, positions=POSITIONS) -> tuple[SimFleet, list[int]]:
-    f = SimFleet(STARTS, method=method)
+def formation(method: str, positions=POSITIONS) -> tuple[Fleet, list[int]]:
+    f = kinematic(STARTS, method=method)
     f.run(0.5)
     ids = f.hand_in(1, [Goto(x, y, hold=None) for x, y in positions])      # station keeping: never done
     return f, ids
 
 
-def held(f: SimFleet) -> dict[int, tuple[int, ...]]:
+def held(f: Fleet) -> dict[int, tuple[int, ...]]:
     return {rid: tuple(c.task_id for c in r.agent.commitments) for rid, r in f.robots.items()}
 
 
-def cost(f: SimFleet, ids, assignment) -> float:
+def cost(f: Fleet, ids, assignment) -> float:
     return sum(math.dist(STARTS[r], POSITIONS[ids.index(t[0])]) for r, t in assignment.items())
 
 
-def round_of(f: SimFleet) -> int | None:
+def round_of(f: Fleet) -> int | None:
     """The round every robot has joined, once they all have."""
     common = set.intersection(*(set(r.agent.rounds) for r in f.robots.values()))
     return min(common) if common else None
@@ -216,7 +216,7 @@ def test_forged_coalition_messages_neither_block_a_task_nor_break_a_coalition():
     from runtime.allocation.coalition.wdp_messages import CoalitionDone, TaskOffer
     from runtime.tasks.rendezvous import Rendezvous
 
-    f = SimFleet(STARTS, method="coalition")
+    f = kinematic(STARTS, method="coalition")
     f.run(0.5)
 
     def ignored(fl):

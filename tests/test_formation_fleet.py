@@ -1,5 +1,5 @@
 """The formation methods (BS, RTMA, epsilon auction) as daemon agents, on the in-memory bus with kinematic
-robots (runtime/fleet/simulate.py): tasks arriving at any time, more tasks than robots, robots lost or
+robots (runtime/inprocess.py: robot cores with kinematic motion): tasks arriving at any time, more tasks than robots, robots lost or
 disarmed while holding a task, message loss.  Every task is done, by one robot, and no robot drives to a task
 another has done."""
 from __future__ import annotations
@@ -14,7 +14,7 @@ from runtime.allocation.formation.messages import Price, RoundLeave, Status
 from runtime.messages import BROADCAST
 from runtime.allocation.agent import DONE
 from runtime.messages import DONE as T_DONE
-from runtime.fleet.simulate import SimFleet
+from runtime.inprocess import Fleet, kinematic
 from runtime.tasks.goto import Goto
 
 METHODS = ("bs", "rtma", "auction")
@@ -32,7 +32,7 @@ class Once:
     def __init__(self):
         self.late: list[str] = []
 
-    def __call__(self, f: SimFleet) -> None:
+    def __call__(self, f: Fleet) -> None:
         for task, who in f.holders().items():
             if f.table_state(task) == T_DONE:
                 for rid in who:
@@ -40,7 +40,7 @@ class Once:
                         self.late.append(f"t={f.now:.2f} robot {rid} holds done task {task}")
 
 
-def done_by(f: SimFleet) -> dict[int, list[int]]:
+def done_by(f: Fleet) -> dict[int, list[int]]:
     out: dict[int, list[int]] = {}
     for rid, r in f.robots.items():
         for ev in r.node.events:
@@ -51,7 +51,7 @@ def done_by(f: SimFleet) -> dict[int, list[int]]:
 
 @pytest.mark.parametrize("method", METHODS)
 def test_more_tasks_than_robots_and_a_second_hand_in_while_busy(method):
-    f = SimFleet(STARTS, method=method)
+    f = kinematic(STARTS, method=method)
     f.run(0.5)
     first = f.hand_in(1, SIX)
     f.run(5.0)
@@ -67,7 +67,7 @@ def test_more_tasks_than_robots_and_a_second_hand_in_while_busy(method):
 
 @pytest.mark.parametrize("method", METHODS)
 def test_a_robot_lost_while_holding_a_task_and_one_disarmed_do_not_lose_their_tasks(method):
-    f = SimFleet({**STARTS, 4: (3.0, 3.0)}, method=method)
+    f = kinematic({**STARTS, 4: (3.0, 3.0)}, method=method)
     f.run(0.5)
     ids = f.hand_in(1, SIX)
     f.run(60.0, stop=lambda fl: all(fl.robots[r].agent.commitments for r in (3, 4)))
@@ -87,7 +87,7 @@ def test_a_robot_lost_while_holding_a_task_and_one_disarmed_do_not_lose_their_ta
 def test_a_formation_is_one_task_per_robot_and_the_auction_is_optimal(method):
     starts = {1: (-3.0, -3.0), 2: (-3.0, 3.0), 3: (3.0, -3.0), 4: (3.0, 3.0)}
     positions = [(0.0, 1.5), (1.5, 0.0), (0.0, -1.5), (-1.5, 0.0)]
-    f = SimFleet(starts, method=method)
+    f = kinematic(starts, method=method)
     f.run(0.5)
     ids = f.hand_in(1, [Goto(x, y, hold=None) for x, y in positions])      # station keeping: never done
     f.run(60.0)
@@ -103,7 +103,7 @@ def test_a_formation_is_one_task_per_robot_and_the_auction_is_optimal(method):
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.sampled_from(METHODS), st.integers(0, 10_000), st.floats(0.0, 0.25), st.floats(0.0, 0.2))
 def test_every_task_is_done_once_over_a_lossy_bus(method, seed, drop, duplicate):
-    f = SimFleet(STARTS, method=method, drop=drop, duplicate=duplicate, jitter=0.005, seed=seed)
+    f = kinematic(STARTS, method=method, drop=drop, duplicate=duplicate, jitter=0.005, seed=seed)
     f.run(0.5)
     ids = f.hand_in(1, SIX[:4])
     f.run(600.0, stop=all_done(ids))
@@ -122,7 +122,7 @@ def settle(method: str, drop: float, seed: int, limit: float = 600.0, hold: floa
     lost: (s from the hand-in until every robot holds one task, every task is held and every round has converged,
     inf if not within ``limit``; s of the ``hold`` s after that in which the formation was broken: some task
     held by two robots or by none)."""
-    f = SimFleet(TEN, method=method, drop=drop, jitter=0.005, seed=seed)
+    f = kinematic(TEN, method=method, drop=drop, jitter=0.005, seed=seed)
     f.run(0.5)
     ids = sorted(f.hand_in(1, [Goto(x, y, hold=None) for x, y in RING]))
     t0 = f.now
@@ -160,7 +160,7 @@ def test_ten_robots_settle_a_ring_formation_and_keep_it(method, seed, drop):
 
 
 def test_a_robot_asked_about_a_round_it_is_not_in_says_so_at_most_once_a_bid_timeout():
-    f = SimFleet({1: (0.0, 0.0), 2: (1.0, 0.0)}, method="auction")
+    f = kinematic({1: (0.0, 0.0), 2: (1.0, 0.0)}, method="auction")
     a = f.robots[1].agent
     other = 2 << 16 | 5                                   # robot 2's fifth round: robot 1 is not in it
     ask = Status(2, BROADCAST, 0, NO_TASK, False, round=other)

@@ -12,7 +12,7 @@ from runtime.allocation.agent import AgentContext
 from runtime.allocation.bus import InMemoryBus
 from runtime.allocation.formation.messages import Announce, RoundLeave, RoundStart
 from runtime.messages import ALLOCATING, EXECUTING, IDLE, RobotState
-from runtime.fleet.simulate import StraightLineEstimator
+from tests.alloc_util import StraightLineEstimator
 from runtime.tasks import Profile, Task
 from runtime.tasks.goto import Goto
 

@@ -130,8 +130,6 @@ def test_no_module_imports_one_that_imports_it_back():
 
 
 FAMILIES = ("formation", "coalition", "dr", "comutar")
-# re-assemblies of a robot's stack for in-process fleets, until the one in-process host replaces them
-HOSTS_STILL_IN_FAMILIES = {"runtime.allocation.dr.sim"}
 
 
 def test_allocation_families_import_the_ground_floor_not_the_fleet_or_each_other():
@@ -144,7 +142,7 @@ def test_allocation_families_import_the_ground_floor_not_the_fleet_or_each_other
         for t in targets:
             tp = t.split(".")
             other_family = tp[:2] == ["runtime", "allocation"] and len(tp) > 2 and tp[2] in FAMILIES and tp[2] != parts[2]
-            if other_family or (_under(t, "runtime.fleet") and m not in HOSTS_STILL_IN_FAMILIES):
+            if other_family or _under(t, "runtime.fleet"):
                 wrong.append(f"{m} -> {t}")
     assert wrong == []
 

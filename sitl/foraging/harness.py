@@ -242,7 +242,7 @@ class ForagingRun:
         self.world = (world or _fast_world)(starts, cfg)
         self.host = Fleet(self._cores(ids, options), _WorldMotion(self.world, cfg.sonar), period=cfg.control_period,
                           delay=cfg.delay, jitter=cfg.jitter, drop=cfg.drop, duplicate=cfg.duplicate, seed=cfg.seed,
-                          heartbeat_timeout=cfg.heartbeat_timeout, bus=self.method is not None,
+                          heartbeat_timeout=cfg.heartbeat_timeout, bus=self.method is not None, profile=True,
                           on_output=self._output, after_cycle=self._after_cycle, after_advance=self._after_advance)
         self.robots = self.host.robots
         self.bus = self.host.bus
@@ -330,7 +330,7 @@ class ForagingRun:
         weight, deadline, u_max = (d.draw(self._rng) for d in (cfg.weight, cfg.deadline, cfg.u_max))
         spec = Transport(x, y, weight, deadline, u_max)
         command, params = T.kind("transport").to_item(spec)
-        (tid,) = self.host.hand_in(live[0], [(command, MAV_FRAME_LOCAL_ENU, params, x, y)], now)
+        (tid,) = self.host.upload(live[0], [(command, MAV_FRAME_LOCAL_ENU, params, x, y)], now)
         self.objects[tid] = ObjectRecord(tid, x, y, weight, deadline, u_max, now, pile=weight, coalition=[(now, 0)])
         self.present.append(tid)
 

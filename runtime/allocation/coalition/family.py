@@ -166,6 +166,6 @@ def _make(ctx: AgentContext) -> CoalitionAgent:
 
 
 # no Method.solver: that slot holds the formation problem's in-process solvers (mrta assign, the formation
-# experiments); the coalition family's in-process runs are runtime.fleet.simulate
+# experiments); the coalition family's in-process runs are runtime.inprocess
 COALITION = Method("coalition", "paper 001 simultaneous coalition auction: rendezvous tasks by coalitions of robots",
                    CoalitionOptions, _make, KINDS, WIRE_MESSAGES, str(Path(__file__).with_name("coalition.xml")))

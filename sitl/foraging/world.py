@@ -1,5 +1,6 @@
-"""A fast lock-stepped pybullet world for paper 000's foraging: a square walled arena and Pioneer-sized robots
-commanded by unicycle velocities; objects and the delivery point are marks on the floor, not bodies.
+"""Paper 000's foraging world: the SITL's pybullet world (:class:`sitl.world.World`) in its planar profile, a
+square walled arena with Pioneer-sized disc robots commanded by unicycle velocities; objects and the delivery
+point are marks on the floor, not bodies.
 
 Bodies.  Each robot is a disc of the p3dx-sh RobotRadius (0.25 m) and the Pioneer's 10 kg
 (:mod:`sitl.bodies.pioneer3dx`), moving in the plane: a fixed-base pybullet multibody of three joints
@@ -30,10 +31,12 @@ from typing import Mapping
 import numpy as np
 import pybullet as p
 
+from runtime.config import WorldConfig
 from runtime.errors import InputError
 from sitl.bodies import pioneer3dx as p3dx
 from sitl.devices.arcos import ROT_ACCEL, TRANS_ACCEL
 from sitl.sensing import sonar_ring as sonar
+from sitl.world import PLANAR, World
 
 RADIUS = p3dx.PARAMS.radius_mm / 1000.0          # 0.25 m
 MASS = p3dx.MASS_TOTAL                            # 10 kg
@@ -43,14 +46,13 @@ ACCEL = TRANS_ACCEL / 1000.0                      # m/s^2, ARCOS default
 ROT_ACC = math.radians(ROT_ACCEL)                 # rad/s^2
 MAX_SPEED = 0.75                                  # m/s: the robot config's base.max_speed
 MAX_TURN = 2 * MAX_SPEED / p3dx.WHEEL_TRACK
-DT = 0.05                                         # s, physics step (see docs/foraging.md)
-SOLVER_ITERATIONS = 10
+DT = PLANAR.dt                                    # s, physics step (see docs/foraging.md)
+SOLVER_ITERATIONS = PLANAR.solver_iterations
 BUMP_MARGIN = 0.005                               # m: a disc this close to another or a wall touches it
 BUMPER_HALF = p3dx.BUMPER_ARC / 2                 # 67.5 deg each side of ahead
 BUMPER_CENTRE = p3dx.BUMPER_ARC / p3dx.BUMPER_SEGMENTS / 2        # the centre segment presses both sides
-WALL_THICKNESS = 0.1
-HEIGHT = RADIUS                                   # centre height of every disc and wall
-FRICTION = 0.1                                    # between bodies (painted metal)
+HEIGHT = RADIUS                                   # centre height of every disc (and of the planar profile's walls)
+FRICTION = PLANAR.wall_friction                   # between bodies (painted metal)
 PARKED = 1000.0                                   # m: where a removed robot's body waits, out of everyone's way
 
 
@@ -76,15 +78,12 @@ class ForagingWorld:
         self.target = np.zeros((n, 2))               # (v, w) commanded
         self.velocity = np.zeros((n, 2))             # (v, w) after the acceleration limits
         self._sent: list = [None] * n                # last joint targets handed to each robot's motors
-        self._steps = 0
         self._sonar_at: int | None = None
         self._sonar = np.zeros((n, sonar.N_SONARS))
-        self._client = p.connect(p.DIRECT)
+        self.arena = World(WorldConfig(size=(self.size, self.size), walls=True), dt=self.dt, profile=PLANAR,
+                           solver_iterations=solver_iterations)
+        self._client = self.arena.client_id
         kw = self._kw = {"physicsClientId": self._client}
-        p.setPhysicsEngineParameter(fixedTimeStep=self.dt, numSubSteps=0, numSolverIterations=int(solver_iterations),
-                                    deterministicOverlappingPairs=1, **kw)
-        p.setGravity(0, 0, 0, **kw)
-        self._walls()
         disc = p.createCollisionShape(p.GEOM_SPHERE, radius=self.radius, **kw)
         self.bodies = [self._robot(disc, row) for row in start]
 
@@ -101,14 +100,6 @@ class ForagingWorld:
                 if math.dist(start[a, :2], start[b, :2]) < 2 * self.radius:
                     raise InputError(f"robot {self.ids[a]} start: expected at least {2 * self.radius:g} m from robot "
                                      f"{self.ids[b]}, the two overlap")
-
-    def _walls(self) -> None:
-        half, t, kw = self.size / 2, WALL_THICKNESS, self._kw
-        for cx, cy, hx, hy in ((0, half + t / 2, half + t, t / 2), (0, -half - t / 2, half + t, t / 2),
-                               (half + t / 2, 0, t / 2, half), (-half - t / 2, 0, t / 2, half)):
-            shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=(hx, hy, 2 * HEIGHT), **kw)
-            wall = p.createMultiBody(0, shape, -1, (cx, cy, HEIGHT), **kw)
-            p.changeDynamics(wall, -1, lateralFriction=FRICTION, restitution=0.0, **kw)
 
     def _robot(self, disc: int, start) -> int:
         kw = self._kw
@@ -131,7 +122,7 @@ class ForagingWorld:
     @property
     def t(self) -> float:
         """Simulated time (s)."""
-        return self._steps * self.dt
+        return self.arena.t
 
     def command(self, robot: int, v: float, w: float) -> None:
         """Target unicycle velocity of ``robot`` (m/s, rad/s), clipped to the base's limits."""
@@ -157,9 +148,8 @@ class ForagingWorld:
                     p.setJointMotorControlArray(self.bodies[k], [0, 1, 2], p.VELOCITY_CONTROL,
                                                 targetVelocities=targets,
                                                 forces=[DRIVE_FORCE, DRIVE_FORCE, TURN_TORQUE], **self._kw)
-            p.stepSimulation(**self._kw)
+            self.arena.step()
             heading += self.velocity[:, 1] * self.dt
-            self._steps += 1
         self._read_poses()
 
     def _read_poses(self) -> None:
@@ -221,22 +211,17 @@ class ForagingWorld:
     def sonar(self) -> np.ndarray:
         """(N, 16) sonar ranges (m from each transducer; :data:`sitl.sensing.sonar_ring.MAX_RANGE` for no echo), rows
         in ``ids`` order; a removed robot's row is all no-echo.  Computed once per physics step."""
-        if self._sonar_at != self._steps:
+        if self._sonar_at != self.arena.steps:
             live = np.flatnonzero(self.alive)
             self._sonar[:] = sonar.MAX_RANGE
             if len(live):
                 self._sonar[live] = sonar.ring_ranges(self.poses[live], self.radius, self.size / 2)
-            self._sonar_at = self._steps
+            self._sonar_at = self.arena.steps
         return self._sonar
 
     # ------------------------------------------------------------------ lifecycle
     def close(self) -> None:
-        if self._client is not None and self._client >= 0:
-            try:
-                p.disconnect(**self._kw)
-            except p.error:
-                pass
-            self._client = -1
+        self.arena.close()
 
     def __enter__(self) -> "ForagingWorld":
         return self

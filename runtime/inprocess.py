@@ -190,6 +190,89 @@ class Kinematic:
         self.commands.pop(robot, None)
 
 
+class Discs:
+    """Discs of ``radius`` in the plane that never overlap, among static discs ``obstacles`` (x, y, radius): each
+    robot follows its command on exact arcs over the period, then contacts are resolved in id order.  A disc
+    whose new place would overlap another robot (at its new place if it already moved, else its old one) or an
+    obstacle is pushed back out along the contact normal, so it slides along the other disc as rigid bodies
+    without friction would; if that still overlaps something it stays put.  A head-on contact (the slide keeps
+    less than a quarter of the move) keeps right: the move turned -90 deg is tried and taken if it gets further
+    (else turned +90 deg, when a third disc blocks the right).  Each such move counts one contact.  A removed
+    robot's disc stays where it stopped.  Senses nothing but the pose."""
+
+    def __init__(self, starts: Mapping[int, Sequence[float]], radius: float, obstacles=()):
+        import numpy as np
+        self.ids = sorted(int(r) for r in starts)
+        self.index = {r: i for i, r in enumerate(self.ids)}
+        self.radius = float(radius)
+        self.poses = np.array([list(map(float, starts[r]))[:3] for r in self.ids], dtype=float).reshape(-1, 3)
+        self.static = np.asarray(obstacles, dtype=float).reshape(-1, 3)
+        self.v = np.zeros(len(self.ids))
+        self.w = np.zeros(len(self.ids))
+        self.driven = np.zeros(len(self.ids))
+        self.contacts = 0
+
+    def sense(self, robots):
+        return {r: (tuple(float(x) for x in self.poses[self.index[r]]), BaseSensors()) for r in robots}
+
+    def command(self, robot, v, w):
+        i = self.index[robot]
+        self.v[i], self.w[i] = v, w
+
+    def remove(self, robot):
+        self.command(robot, 0.0, 0.0)
+
+    def advance(self, dt: float) -> None:
+        from runtime.control.cspace import advance
+        self.move(advance(self.poses, self.v, self.w, dt))
+
+    def move(self, proposed) -> None:
+        """Every robot to its ``proposed`` pose (n, 3), contacts resolved as the class says."""
+        import numpy as np
+        old = self.poses
+        final = old.copy()
+        final[:, 2] = proposed[:, 2]
+        for i in range(len(self.ids)):
+            want = proposed[i, :2]
+            if np.hypot(*(want - old[i, :2])) < 1e-12:
+                continue
+            others = np.delete(final[:, :2], i, axis=0)
+            discs = np.column_stack([others, np.full(len(others), self.radius)])
+            if len(self.static):
+                discs = np.vstack([discs, self.static])
+            pos, touched = self._slide(old[i, :2], want, discs)
+            step = want - old[i, :2]
+            if touched and np.dot(pos - old[i, :2], step) < 0.25 * np.dot(step, step):
+                for side in (np.array([step[1], -step[0]]), np.array([-step[1], step[0]])):    # right, then left
+                    alt, _ = self._slide(old[i, :2], old[i, :2] + side, discs)
+                    if np.hypot(*(alt - old[i, :2])) > max(np.hypot(*(pos - old[i, :2])), 0.25 * np.hypot(*step)):
+                        pos = alt
+                        break
+            if touched:
+                self.contacts += 1
+            final[i, :2] = pos
+        self.driven += np.hypot(final[:, 0] - old[:, 0], final[:, 1] - old[:, 1])
+        self.poses = final
+
+    def _slide(self, start, want, discs):
+        """``want`` pushed out of every disc it overlaps along the contact normal (at most 3 pushes); ``start``
+        if it still overlaps one.  Returns (position, touched)."""
+        import numpy as np
+        pos, touched = want.copy(), False
+        for _ in range(3):
+            gap = np.hypot(discs[:, 0] - pos[0], discs[:, 1] - pos[1]) - discs[:, 2] - self.radius
+            j = int(np.argmin(gap)) if len(gap) else -1
+            if j < 0 or gap[j] >= -1e-9:
+                return pos, touched
+            touched = True
+            n = pos - discs[j, :2]
+            norm = np.hypot(*n)
+            n = n / norm if norm > 1e-12 else (start - discs[j, :2]) / max(np.hypot(*(start - discs[j, :2])), 1e-12)
+            pos = discs[j, :2] + n * (discs[j, 2] + self.radius + 1e-9)
+        gap = np.hypot(discs[:, 0] - pos[0], discs[:, 1] - pos[1]) - discs[:, 2] - self.radius
+        return (start.copy() if len(gap) and gap.min() < -1e-9 else pos), touched
+
+
 # ---------------------------------------------------------------------------------------------- the fleet
 
 @dataclass
@@ -370,7 +453,9 @@ def kinematic(starts: Mapping[int, Sequence[float]], method: str | Method, optio
     m = registry.method(method) if isinstance(method, str) else method
     options = m.options() if options is None else options
     ids = tuple(sorted(int(r) for r in starts))
-    facts = BaseFacts(radius=radius, max_speed=max(speed, 0.5), ranging=False)
+    # ranging: the robot's (empty) range readings are the truth in a world without bodies, so an idle robot never
+    # makes way for a peer's reported position (nothing can touch it)
+    facts = BaseFacts(radius=radius, max_speed=max(speed, 0.5), ranging=True)
     cores = {r: RobotCore(robot_config(r, ids, options, speed=speed, period=period,
                                        heartbeat_timeout=heartbeat_timeout), facts, method=m, base_config=None)
              for r in ids}

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from runtime.tasks.avoid_obstacles import AvoidObstacles
-from runtime.allocation.comutar.kinematic import PIONEER_RADIUS, KinematicFleet
+from sitl.experiments.comutar_kinematic import PIONEER_RADIUS, KinematicFleet
 from runtime.tasks.surveillance import Surveillance
 from runtime.errors import InputError
 from runtime.tasks import Task

@@ -1,6 +1,6 @@
 """Paper 003 Section 3: the surveillance task (Figs. 4 and 5) and sensor sharing (Figs. 6 and 7), reproduced with
 the CoMutaR agents on the in-memory bus driving a fast kinematic 2D fleet
-(:mod:`runtime.allocation.comutar.kinematic`).
+(:mod:`sitl.experiments.comutar_kinematic`).
 
 Surveillance: a 9 x 9 grid of waypoints 2 m apart over 16 x 16 m (the digest's reading of "a 2 x 2 m region"
 beside Fig. 4's +-8 m trajectories), each to be visited at least once; visits are broadcast, the first claim on
@@ -34,7 +34,7 @@ import numpy as np
 
 from runtime.allocation.comutar import actions as A
 from runtime.tasks.avoid_obstacles import AvoidObstacles
-from runtime.allocation.comutar.kinematic import PIONEER_RADIUS, KinematicFleet
+from sitl.experiments.comutar_kinematic import PIONEER_RADIUS, KinematicFleet
 from runtime.allocation.comutar.options import ComutarOptions
 from runtime.tasks.surveillance import Surveillance
 from runtime.errors import InputError

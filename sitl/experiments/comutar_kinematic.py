@@ -1,5 +1,6 @@
-"""A fast kinematic 2D simulation for CoMutaR: the real agents on the in-memory bus, each robot a
-differential-drive disc (Pioneer-sized: 0.25 m radius) commanded through its c-space grids.
+"""The paper 003 reproduction's fleet: the real CoMutaR agents on the in-memory bus, each robot a
+differential-drive disc (Pioneer-sized: 0.25 m radius) commanded through the c-space grids, the whole fleet's
+constraints evaluated in one batch each frame (the reproduction's joint solver, not the daemon's executors).
 
 Each frame (the window's ``T_f``):
 
@@ -13,14 +14,9 @@ Each frame (the window's ``T_f``):
    serving another robot keeping that robot's region in view (Alg. 3);
 3. the whole fleet's constraints are evaluated in one batch and each robot takes its best command
    (:func:`~runtime.control.cspace.choose`); a conflict (empty intersection) stops it;
-4. robots move on exact arcs.  Robot-robot contact: a robot whose new disc would overlap another robot's
-   (at its new position if it already moved this frame, else its old one) or a static obstacle is pushed
-   back out along the contact normal, so it slides along the other disc as rigid bodies without friction
-   would; if that still overlaps something it stays put.  A head-on contact (the slide keeps less than a quarter of
-   the move: the normal cancels it, and two robots, or a robot and a parked one, would push forever) keeps
-   right: the move turned -90 deg is tried and taken if it gets further (else turned +90 deg, when a third
-   disc blocks the right).  Each such move is counted as a
-   contact.  So discs never overlap;
+4. robots move on exact arcs as the in-process host's non-overlapping discs (:class:`runtime.inprocess.Discs`:
+   a robot that would overlap another or a static obstacle slides along it; head-on, it keeps right; each such
+   move is counted as a contact);
 5. a robot holding a surveillance task within ``visit_radius`` of an open waypoint reports it visited.
 
 No sensing noise, no wheel slip: runs differ by their start poses and the bus's seeded jitter.
@@ -37,6 +33,7 @@ from runtime.allocation.agent import AgentContext
 from runtime.allocation.bus import InMemoryBus
 from runtime.allocation.comutar import actions as A
 from runtime.control import cspace as C
+from runtime.inprocess import Discs
 from runtime.allocation.comutar.options import ComutarOptions
 from runtime.allocation.comutar.protocol import VISITED, ComutarAgent
 from runtime.tasks import Profile, Progress, Task
@@ -83,12 +80,10 @@ class KinematicFleet:
                                                     self.options), tuple(self.sensors.get(r, ())))
                        for r in self.ids}
         self.bus = InMemoryBus(dict(self.agents), delay=self.delay, jitter=self.jitter, drop=self.drop, seed=self.seed)
-        self.poses = np.array([list(map(float, self.starts[r]))[:3] for r in self.ids], dtype=float).reshape(-1, 3)
-        self.static = np.asarray(self.obstacles, dtype=float).reshape(-1, 3)
+        self.motion = Discs(self.starts, self.radius, self.obstacles)      # the in-process host's disc bodies
+        self.static = self.motion.static
         self.now = 0.0
-        self.contacts = 0
         self.conflicts = 0
-        self.driven = np.zeros(len(self.ids))
         self.visits: dict[int, dict[int, tuple[float, int]]] = {}   # task -> waypoint -> (time, robot) first visit
         self.revisits = 0
         self.tracks: list[np.ndarray] = [self.poses.copy()] if self.trace else []
@@ -228,54 +223,20 @@ class KinematicFleet:
         return out
 
     # ------------------------------------------------------------------ motion and visits
-    def _move(self, proposed: np.ndarray) -> None:
-        """Move every robot to its proposed pose, resolving contacts in id order: a disc that would overlap
-        another robot (at its new position if it already moved, else its old one) or a static obstacle is
-        pushed back out along the contact normal (it slides along the other disc); if that still overlaps
-        something, it does not move.  Each resolved or refused move counts one contact."""
-        old = self.poses
-        final = old.copy()
-        final[:, 2] = proposed[:, 2]
-        for i in range(len(self.ids)):
-            want = proposed[i, :2]
-            if np.hypot(*(want - old[i, :2])) < 1e-12:
-                continue
-            others = np.delete(final[:, :2], i, axis=0)
-            discs = np.column_stack([others, np.full(len(others), self.radius)])
-            if len(self.static):
-                discs = np.vstack([discs, self.static])
-            pos, touched = self._slide(old[i, :2], want, discs)
-            step = want - old[i, :2]
-            if touched and np.dot(pos - old[i, :2], step) < 0.25 * np.dot(step, step):
-                # head-on: the contact normal cancels the move; keep right (the move turned -90 deg), or left
-                # when the right is blocked too
-                for side in (np.array([step[1], -step[0]]), np.array([-step[1], step[0]])):
-                    alt, _ = self._slide(old[i, :2], old[i, :2] + side, discs)
-                    if np.hypot(*(alt - old[i, :2])) > max(np.hypot(*(pos - old[i, :2])), 0.25 * np.hypot(*step)):
-                        pos = alt
-                        break
-            if touched:
-                self.contacts += 1
-            final[i, :2] = pos
-        self.driven += np.hypot(final[:, 0] - old[:, 0], final[:, 1] - old[:, 1])
-        self.poses = final
+    @property
+    def poses(self) -> np.ndarray:
+        return self.motion.poses
 
-    def _slide(self, start: np.ndarray, want: np.ndarray, discs: np.ndarray) -> tuple[np.ndarray, bool]:
-        """``want`` pushed out of every disc it overlaps along the contact normal (at most 3 pushes); ``start``
-        if it still overlaps one.  Returns (position, touched)."""
-        pos, touched = want.copy(), False
-        for _ in range(3):
-            gap = np.hypot(discs[:, 0] - pos[0], discs[:, 1] - pos[1]) - discs[:, 2] - self.radius
-            j = int(np.argmin(gap)) if len(gap) else -1
-            if j < 0 or gap[j] >= -1e-9:
-                return pos, touched
-            touched = True
-            n = pos - discs[j, :2]
-            norm = np.hypot(*n)
-            n = n / norm if norm > 1e-12 else (start - discs[j, :2]) / max(np.hypot(*(start - discs[j, :2])), 1e-12)
-            pos = discs[j, :2] + n * (discs[j, 2] + self.radius + 1e-9)
-        gap = np.hypot(discs[:, 0] - pos[0], discs[:, 1] - pos[1]) - discs[:, 2] - self.radius
-        return (start.copy() if len(gap) and gap.min() < -1e-9 else pos), touched
+    @property
+    def contacts(self) -> int:
+        return self.motion.contacts
+
+    @property
+    def driven(self) -> np.ndarray:
+        return self.motion.driven
+
+    def _move(self, proposed: np.ndarray) -> None:
+        self.motion.move(proposed)
 
     def _visit(self) -> None:
         rad = self.options.visit_radius

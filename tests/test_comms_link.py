@@ -442,3 +442,40 @@ def test_mrta_key_makes_a_0600_key_the_link_loads_and_never_overwrites(tmp_path,
     assert path.read_bytes() == before
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and str(path) in err and "never overwritten" in err
+
+
+def test_mrta_key_from_a_passphrase_is_the_key_mavproxy_derives_in_the_same_file_format(tmp_path, capsys):
+    """MAVProxy's `signing key P` signs with hashlib.sha256(P.encode('ascii')).digest()
+    (MAVProxy/modules/mavproxy_signing.py, passphrase_to_key); `mrta key FILE --passphrase P` writes that key as
+    `mrta key FILE` writes a fresh one: 64 hex characters and a newline, mode 0600."""
+    import hashlib
+    import os
+    import stat
+
+    from runtime.cli import main
+    path = tmp_path / "fleet.key"
+    assert main(["key", str(path), "--passphrase", "Rover-fleet_42!"]) == 0
+    assert load_key(path) == hashlib.sha256("Rover-fleet_42!".encode("utf-8")).digest()
+    assert path.read_text() == hashlib.sha256(b"Rover-fleet_42!").hexdigest() + "\n"
+    assert stat.S_IMODE(os.stat(path).st_mode) == 0o600
+    fresh = tmp_path / "fresh.key"
+    assert main(["key", str(fresh)]) == 0
+    assert len(fresh.read_text()) == len(path.read_text()) and load_key(fresh) != load_key(path)
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize("passphrase, expected", [
+    ("", "--passphrase: expected a passphrase, got an empty one"),
+    ("two words", "--passphrase: expected printable ASCII without spaces, quotes or ';'"),
+    ("clé", "--passphrase: expected printable ASCII without spaces, quotes or ';'"),
+    ('say"hi', "--passphrase: expected printable ASCII without spaces, quotes or ';'"),
+    ("a;b", "--passphrase: expected printable ASCII without spaces, quotes or ';'"),
+])
+def test_a_passphrase_mavproxy_cannot_take_as_typed_is_refused_with_one_line_and_no_file(tmp_path, capsys,
+                                                                                         passphrase, expected):
+    from runtime.cli import main
+    path = tmp_path / "fleet.key"
+    assert main(["key", str(path), "--passphrase", passphrase]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"mrta: {expected}") and err.count("\n") == 1, err
+    assert not list(tmp_path.iterdir())

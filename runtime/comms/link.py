@@ -87,11 +87,36 @@ def signing_timestamp(unix_time: float) -> int:
 
 
 def new_key(path: str | Path) -> Path:
-    """Write a fresh 32-byte signing key (64 hex characters) to ``path``: created with mode 0600 under a
-    temporary name and renamed into place, so the key is never readable by others, not even for a moment, and
-    a reader never sees half a key.  Refuses to replace an existing file."""
+    """Write a fresh 32-byte signing key to ``path`` (:func:`write_key`)."""
     import secrets
 
+    return write_key(path, secrets.token_bytes(32))
+
+
+def passphrase_key(passphrase: str, what: str = "passphrase") -> bytes:
+    """The 32-byte signing key a ground station derives from ``passphrase``: SHA-256 of its bytes, as MAVProxy's
+    ``signing key P`` and ``signing setup P`` do (MAVProxy/modules/mavproxy_signing.py, ``passphrase_to_key``:
+    ``hashlib.sha256(P.encode('ascii'))``).  Refused (InputError naming ``what``) unless MAVProxy can take it as
+    typed: not empty, ASCII only (MAVProxy cannot encode anything else), and no whitespace, quotes or ``;``
+    (its command line splits on those, so ``signing key P`` would hash something else)."""
+    expected = (f"{what}: expected printable ASCII without spaces, quotes or ';' "
+                "(as MAVProxy's `signing key P` takes it)")
+    if not passphrase:
+        raise InputError(f"{what}: expected a passphrase, got an empty one")
+    bad = next((c for c in passphrase if not (c.isascii() and c.isprintable()) or c in " \"';"), None)
+    if bad is not None:
+        raise InputError(f"{expected}, got {bad!r}")
+    import hashlib
+
+    return hashlib.sha256(passphrase.encode("ascii")).digest()
+
+
+def write_key(path: str | Path, key: bytes) -> Path:
+    """Write the 32-byte signing ``key`` (64 hex characters and a newline) to ``path``: created with mode 0600 under
+    a temporary name and renamed into place, so the key is never readable by others, not even for a moment, and a
+    reader never sees half a key.  Refuses to replace an existing file."""
+    if len(key) != 32:
+        raise InputError(f"signing key: expected 32 bytes, got {len(key)}")
     path = Path(path)
     if path.exists():
         raise InputError(f"{path}: a file is already there (a signing key is never overwritten)")
@@ -99,7 +124,7 @@ def new_key(path: str | Path) -> Path:
     try:
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
         with os.fdopen(fd, "w") as fh:
-            fh.write(secrets.token_hex(32) + "\n")
+            fh.write(key.hex() + "\n")
         os.replace(tmp, path)
     except OSError as e:
         tmp.unlink(missing_ok=True)
@@ -107,24 +132,26 @@ def new_key(path: str | Path) -> Path:
     return path
 
 
-def load_key(path: str | Path) -> bytes:
-    """The 32-byte signing key in ``path`` (64 hex characters; surrounding whitespace ignored)."""
+def load_key(path: str | Path, what: str | None = None) -> bytes:
+    """The 32-byte signing key in ``path`` (64 hex characters; surrounding whitespace ignored).  Errors name the
+    file, after ``what`` if given (the option that named it, e.g. ``--key``)."""
     expected = "expected 64 hex characters (a 32-byte MAVLink signing key)"
+    name = f"{what} {path}" if what else str(path)
     try:
         text = Path(path).read_text(encoding="ascii")
     except FileNotFoundError:
-        raise InputError(f"{path}: signing key file not found") from None
+        raise InputError(f"{name}: signing key file not found") from None
     except UnicodeDecodeError:
-        raise InputError(f"{path}: {expected}, got non-ASCII data") from None
+        raise InputError(f"{name}: {expected}, got non-ASCII data") from None
     except OSError as e:
-        raise InputError(f"{path}: cannot read signing key ({e.strerror})") from None
+        raise InputError(f"{name}: cannot read signing key ({e.strerror})") from None
     s = text.strip()
     if len(s) != 64:
-        raise InputError(f"{path}: {expected}, got {len(s)} characters")
+        raise InputError(f"{name}: {expected}, got {len(s)} characters")
     try:
         return bytes.fromhex(s)
     except ValueError:
-        raise InputError(f"{path}: {expected}, got a non-hex character") from None
+        raise InputError(f"{name}: {expected}, got a non-hex character") from None
 
 
 def parse_address(text: str, what: str, *, allow_port_zero: bool = False) -> tuple[str, int]:

@@ -100,3 +100,22 @@ def test_a_fleet_run_on_a_passphrase_key_obeys_that_key_only(passphrase_fleet):
         other.close()
     f.close()
     assert key_file.exists()                     # a key of one's own is never removed with the run
+
+
+def test_signing_setup_from_a_ground_station_leaves_the_fleet_key_and_says_why(passphrase_fleet):
+    """MAVProxy's `signing setup P2` sends SETUP_SIGNING with a new key: the robot keeps its key, counts the refusal
+    in its status snapshot, and tells the ground station why in one STATUSTEXT."""
+    from runtime.comms.link import KEY_REFUSAL_TEXT
+
+    f, run, gcs, _ = passphrase_fleet
+    daemon = run.daemons[1]
+    new = hashlib.sha256(b"another-pass").digest()
+    gcs.mav.setup_signing_send(1, 1, list(new), gcs.mav.signing.timestamp)
+    run.step()
+    assert daemon.snapshot()["link"]["setup_signing_refused"] == 1
+    seen = gcs.wait(lambda m: m.get_type() == "STATUSTEXT" and m.text == KEY_REFUSAL_TEXT, 5.0, run.step)
+    assert seen and seen[-1].get_srcSystem() == 1
+    assert daemon.link.mav.signing.secret_key == f.key
+    _autopilot_version(gcs)                                     # the fleet key still commands the robot
+    assert gcs.wait(lambda m: m.get_type() == "AUTOPILOT_VERSION", 5.0, run.step)
+

@@ -119,3 +119,27 @@ def test_signing_setup_from_a_ground_station_leaves_the_fleet_key_and_says_why(p
     _autopilot_version(gcs)                                     # the fleet key still commands the robot
     assert gcs.wait(lambda m: m.get_type() == "AUTOPILOT_VERSION", 5.0, run.step)
 
+
+def test_every_ftp_request_is_answered_within_one_control_cycle(passphrase_fleet):
+    """MAVProxy's parameter download opens @PARAM/param.pck over MAVLink FTP (OpenFileRO, opcode 4) and waits ~3 s
+    for an answer before it falls back to PARAM_REQUEST_LIST: every FTP request gets its ACK or NAK (seq + 1, the
+    request's opcode echoed, data[0] the MAV_FTP_ERR code) from the very next control cycle of the robot."""
+    import struct
+
+    f, run, gcs, _ = passphrase_fleet
+    asked = {4: (b"@PARAM/param.pck?withdefaults=1", 129, 10), 3: (b"/", 129, 10), 5: (b"", 129, 4),
+             6: (b"x", 129, 9), 77: (b"", 129, 7), 0: (b"", 128, None)}
+    for k, (opcode, (name, _, _)) in enumerate(asked.items()):
+        raw = struct.pack("<HBBBBBBI", 100 * k + 7, 0, opcode, len(name), 0, 0, 0, 0) + name
+        gcs.mav.file_transfer_protocol_send(0, 1, 1, list(raw.ljust(251, b"\0")))
+    run.step()                                                 # one control cycle, no more
+    replies = {}
+    for _ in asked:
+        seen = gcs.wait(lambda m: m.get_type() == "FILE_TRANSFER_PROTOCOL", 5.0)
+        assert seen and seen[-1].get_type() == "FILE_TRANSFER_PROTOCOL", f"answered {sorted(replies)} of {sorted(asked)}"
+        m = seen[-1]
+        assert (m.target_system, m.target_component) == (255, 190)
+        seq, session, op, size, req_op = struct.unpack("<HBBBB", bytes(m.payload[:6]))
+        replies[req_op] = (seq, op, size, m.payload[12] if size else None)
+    assert replies == {opcode: (100 * k + 8, reply, 1 if err is not None else 0, err)
+                       for k, (opcode, (_, reply, err)) in enumerate(asked.items())}

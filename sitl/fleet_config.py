@@ -36,7 +36,7 @@ class FleetConfig:
     scenario: Any = union_field("type", _scenarios, None)
     gcs: str = "127.0.0.1:14550"
     base_port: int = field(default=14600, metadata=rng(1024, 65000))
-    signing_key: Optional[str] = None
+    signing_key: Optional[str] = None             # a fleet key file, relative to this file (null: see the launcher)
     seed: int = field(default=1, metadata=rng(0, 2**32 - 1))
     speedup: float = field(default=1.0, metadata=rng(0.1, 100))
     timeout: float = field(default=120.0, metadata=rng(1, 36000))    # sim seconds
@@ -70,7 +70,8 @@ def load_fleet(path: str | Path) -> FleetConfig:
     robots = tuple(dataclasses.replace(r, robot=resolve(r.robot, f"robots[{i}].robot") if r.robot else None)
                    for i, r in enumerate(fleet.robots))
     fleet = dataclasses.replace(fleet, world=resolve(fleet.world, "world"), robot=resolve(fleet.robot, "robot"),
-                                robots=robots)
+                                robots=robots,
+                                signing_key=resolve(fleet.signing_key, "signing_key") if fleet.signing_key else None)
     parse_hostport(fleet.gcs, str(path), "gcs")
     world = load_world(fleet.world)
     for i, r in enumerate(fleet.robots):

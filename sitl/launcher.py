@@ -71,6 +71,7 @@ class Fleet:
     scenario: object = None
     key: bytes | None = None            # the fleet's signing key (None: an unsigned fleet)
     fresh_key: Path | None = None       # a key made for this run: removed by close() unless keep_key
+    key_path: Path | None = None        # the file the robots read the key from (fresh, --key or the fleet's)
     device_period: float = 0.005
     events: list[str] = field(default_factory=list)
     device_hook: object = None          # called with the sim time after every device service
@@ -151,10 +152,11 @@ def claim_ports(fleet: FC.FleetConfig, instance: int = 0) -> FC.FleetConfig:
 def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: str | Path | None = None,
           seed: int | None = None, signing: bool = True, method: str | None = None,
           speedup: float | None = None, instance: int = 0, peer_loss: float | None = None,
-          loss_burst: float | None = None) -> Fleet:
+          loss_burst: float | None = None, key: str | Path | None = None) -> Fleet:
     """Load the fleet, build the world and devices, write robot configs and the manifest.  ``peer_loss`` and
     ``loss_burst`` (else the fleet's, else each template's) become every robot's ``comms.peer_loss`` and
-    ``comms.loss_burst``."""
+    ``comms.loss_burst``.  The fleet signs with the key file ``key`` (``--key``), else the fleet's ``signing_key``,
+    else (``signing``) a fresh key in the run directory, removed by :meth:`Fleet.close` unless kept."""
     from sitl import scenarios
 
     fleet = claim_ports(FC.load_fleet(fleet_path), instance)
@@ -176,13 +178,10 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
     seed = fleet.seed if seed is None else seed
     run_dir = Path(run_dir or tempfile.mkdtemp(prefix="mrta-sitl-"))
     run_dir.mkdir(parents=True, exist_ok=True)
-    key_path, key, fresh_key = None, None, False
-    if signing or fleet.signing_key:
-        from runtime.comms.link import load_key, new_key
-        if fleet.signing_key:
-            key_path = Path(fleet.signing_key)
-        else:                          # a fresh fleet key for this run, removed at the end unless kept
-            key_path, fresh_key = new_key(run_dir / "fleet.key"), True
+    key_path, fresh_key = fleet_key(fleet, key, signing, run_dir)
+    key = None
+    if key_path is not None:
+        from runtime.comms.link import load_key
         key = load_key(key_path)
 
     world = World(world_cfg, seed=seed)
@@ -225,12 +224,28 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
 
     manifest_path = Path(manifest) if manifest else run_dir / "manifest.json"
     out = Fleet(fleet, world_cfg, robots, world, run_dir, manifest_path, key=key,
-                fresh_key=key_path if fresh_key else None)
+                fresh_key=key_path if fresh_key else None, key_path=key_path)
     out.scenario = scenarios.module(fleet.scenario.type).Scenario(fleet, world_cfg)
     if hasattr(out.scenario, "build"):
         out.scenario.build(world)                 # the scenario's own bodies (unmapped obstacles)
     write_manifest(out, speedup if speedup is not None else fleet.speedup, seed, key_path)
     return out
+
+
+def fleet_key(fleet: FC.FleetConfig, key: str | Path | None, signing: bool, run_dir: Path) -> tuple[Path | None, bool]:
+    """(the key file the robots sign with, whether it was made for this run): ``key`` (``--key``, checked: an
+    InputError naming it if it is missing or not a key), else the fleet's ``signing_key`` (resolved against the
+    fleet file), else with ``signing`` a fresh key in ``run_dir``; (None, False) for an unsigned fleet."""
+    from runtime.comms.link import load_key, new_key
+
+    if key is not None:
+        load_key(key, "--key")
+        return Path(key).resolve(), False
+    if fleet.signing_key:
+        return Path(fleet.signing_key).resolve(), False
+    if signing:
+        return new_key(run_dir / "fleet.key"), True
+    return None, False
 
 
 TEMPLATE_PATHS = (("allocation", "model"),)      # file paths a robot template may give relative to itself
@@ -601,6 +616,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--no-signing", dest="signing", action="store_false",
                    help="an unsigned fleet (default: every frame signed with a fresh fleet key, or the fleet's "
                         "signing_key)")
+    r.add_argument("--key", default=None, metavar="FILE",
+                   help="sign with this fleet key file (mrta key FILE [--passphrase P]) instead of a fresh key or "
+                        "the fleet's signing_key; it is left in place after the run")
     r.add_argument("--keep-key", action="store_true",
                    help="keep the run's fresh fleet key (RUN_DIR/fleet.key) for a ground station after the run")
     r.add_argument("--method", choices=registry.names(), default=None, help="allocation method")
@@ -622,7 +640,7 @@ def _main(args) -> int:
 
     run_args.check(args)          # every option, before the world is built
     f = build(args.fleet, args.run_dir, args.manifest, args.seed, args.signing, args.method, args.speedup,
-              args.instance, args.peer_loss, args.loss_burst)
+              args.instance, args.peer_loss, args.loss_burst, args.key)
     speedup = args.speedup or f.fleet.speedup
     stop = {"flag": False}
 
@@ -641,7 +659,7 @@ def _main(args) -> int:
                 time.sleep(0.002)
             return 0
         if getattr(f.fleet.scenario, "wait", False):
-            key = f" --key {f.fresh_key or f.fleet.signing_key}" if f.key else ""
+            key = f" --key {f.key_path}" if f.key else ""
             print(f"waiting for an operator: upload missions to the robots' MAVLink ports in {f.manifest_path} "
                   f"(mrta mission upload 127.0.0.1:{f.robots[min(f.robots)].udp_port} FILE{key}); Ctrl-C to stop",
                   flush=True)

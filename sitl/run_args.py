@@ -2,13 +2,15 @@
 
 Numbers that override the fleet config (``--speedup``, ``--timeout``, ``--seed``, ``--peer-loss``, ``--loss-burst``)
 take the fleet config's own ranges; ``--instance`` must leave every port of the fleet in 1..65535; the run folder,
-the manifest and the JSON result must be writable now, not only when the run ends.
+the manifest and the JSON result must be writable now, not only when the run ends; ``--key`` must be a key file,
+and asks for a signed fleet (not with ``--no-signing``).
 """
 from __future__ import annotations
 
 import dataclasses
 
 from runtime import argcheck
+from runtime.errors import InputError
 from sitl import fleet_config as FC
 from sitl.ports import check_instance
 
@@ -30,5 +32,10 @@ def check(args) -> None:
     argcheck.output_dir(args.run_dir, "--run-dir")
     argcheck.output_file(args.manifest, "--manifest", make_parents=True)
     argcheck.output_file(args.json, "--json")
+    if args.key is not None:
+        if not args.signing:
+            raise InputError("--key: expected a signed fleet, got --no-signing as well")
+        from runtime.comms.link import load_key
+        load_key(args.key, "--key")
     if args.instance:
         check_instance(FC.load_fleet(args.fleet), args.instance)

@@ -99,9 +99,33 @@ def test_sitl_run_takes_good_options_as_they_are(tmp_path, no_fleet):
         cli.main(["sitl", "run", str(FLEET), "--speedup", "0.1", "--seed", "0", "--timeout", "1", "--run-dir",
                   str(run_dir), "--manifest", str(tmp_path / "a" / "b" / "m.json"), "--json", str(tmp_path / "r.json"),
                   "--peer-loss", "0.1", "--loss-burst", "2"])
-    fleet, rd, manifest, seed, signing, method, speedup, instance, peer_loss, loss_burst = no_fleet["args"]
-    assert (rd, seed, speedup, instance, peer_loss, loss_burst) == (str(run_dir), 0, 0.1, 0, 0.1, 2.0)
+    fleet, rd, manifest, seed, signing, method, speedup, instance, peer_loss, loss_burst, key = no_fleet["args"]
+    assert (rd, seed, speedup, instance, peer_loss, loss_burst, key) == (str(run_dir), 0, 0.1, 0, 0.1, 2.0, None)
     assert not list(tmp_path.iterdir())           # checked, not made (nor left a probe behind)
+
+
+@pytest.mark.parametrize("content, expected", [
+    (None, "--key {key}: signing key file not found"),
+    ("abc\n", "--key {key}: expected 64 hex characters (a 32-byte MAVLink signing key), got 3 characters"),
+    ("zz" * 32, "--key {key}: expected 64 hex characters (a 32-byte MAVLink signing key), got a non-hex character"),
+])
+def test_sitl_run_refuses_a_key_file_that_is_missing_or_no_key(tmp_path, capsys, no_fleet, content, expected):
+    key = tmp_path / "fleet.key"
+    if content is not None:
+        key.write_text(content)
+    err = one_line_exit_2(capsys, ["sitl", "run", str(FLEET), "--key", str(key)])
+    assert err == f"mrta: {expected.format(key=key)}\n"
+    assert "args" not in no_fleet
+
+
+def test_sitl_run_takes_a_key_file_for_a_signed_fleet_only(tmp_path, capsys, no_fleet):
+    key = tmp_path / "fleet.key"
+    key.write_text("ab" * 32 + "\n")
+    err = one_line_exit_2(capsys, ["sitl", "run", str(FLEET), "--key", str(key), "--no-signing"])
+    assert err == "mrta: --key: expected a signed fleet, got --no-signing as well\n"
+    with pytest.raises(Started):
+        cli.main(["sitl", "run", str(FLEET), "--key", str(key)])
+    assert no_fleet["args"][-1] == str(key)
 
 
 def test_argument_errors_are_one_line(capsys):

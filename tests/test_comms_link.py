@@ -442,3 +442,162 @@ def test_mrta_key_makes_a_0600_key_the_link_loads_and_never_overwrites(tmp_path,
     assert path.read_bytes() == before
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and str(path) in err and "never overwritten" in err
+
+
+def test_mrta_key_from_a_passphrase_is_the_key_mavproxy_derives_in_the_same_file_format(tmp_path, capsys):
+    """MAVProxy's `signing key P` signs with hashlib.sha256(P.encode('ascii')).digest()
+    (MAVProxy/modules/mavproxy_signing.py, passphrase_to_key); `mrta key FILE --passphrase P` writes that key as
+    `mrta key FILE` writes a fresh one: 64 hex characters and a newline, mode 0600."""
+    import hashlib
+    import os
+    import stat
+
+    from runtime.cli import main
+    path = tmp_path / "fleet.key"
+    assert main(["key", str(path), "--passphrase", "Rover-fleet_42!"]) == 0
+    assert load_key(path) == hashlib.sha256("Rover-fleet_42!".encode("utf-8")).digest()
+    assert path.read_text() == hashlib.sha256(b"Rover-fleet_42!").hexdigest() + "\n"
+    assert stat.S_IMODE(os.stat(path).st_mode) == 0o600
+    fresh = tmp_path / "fresh.key"
+    assert main(["key", str(fresh)]) == 0
+    assert len(fresh.read_text()) == len(path.read_text()) and load_key(fresh) != load_key(path)
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize("passphrase, expected", [
+    ("", "--passphrase: expected a passphrase, got an empty one"),
+    ("two words", "--passphrase: expected printable ASCII without spaces, quotes or ';'"),
+    ("clé", "--passphrase: expected printable ASCII without spaces, quotes or ';'"),
+    ('say"hi', "--passphrase: expected printable ASCII without spaces, quotes or ';'"),
+    ("a;b", "--passphrase: expected printable ASCII without spaces, quotes or ';'"),
+])
+def test_a_passphrase_mavproxy_cannot_take_as_typed_is_refused_with_one_line_and_no_file(tmp_path, capsys,
+                                                                                         passphrase, expected):
+    from runtime.cli import main
+    path = tmp_path / "fleet.key"
+    assert main(["key", str(path), "--passphrase", passphrase]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"mrta: {expected}") and err.count("\n") == 1, err
+    assert not list(tmp_path.iterdir())
+
+
+# ---------------------------------------------------------------------------------------- SETUP_SIGNING
+
+def setup_signing(new_key: bytes, key=None, system=255, component=190, link_id=0) -> bytes:
+    """MAVProxy's `signing setup P` as it goes on the wire: SETUP_SIGNING with the new key, signed with ``key`` (the
+    key the ground station has already, `signing key P` before) or unsigned."""
+    mod = dialect.load()
+    mav = mod.MAVLink(None, srcSystem=system, srcComponent=component)
+    if key is not None:
+        mav.signing.secret_key, mav.signing.sign_outgoing, mav.signing.link_id = key, True, link_id
+        mav.signing.timestamp = signing_timestamp(time.time())
+    return mav.setup_signing_encode(1, 1, list(new_key), signing_timestamp(time.time())).pack(mav)
+
+
+class Station:
+    """A UDP socket on loopback that sends raw frames to a link and reads what comes back (parsed with ``key``)."""
+
+    def __init__(self, key=None):
+        import socket
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.setblocking(False)
+        self.rx = dialect.load().MAVLink(None)
+        if key is not None:
+            self.rx.signing.secret_key = key
+
+    def texts(self, limit=0.3) -> list:
+        """The STATUSTEXTs that arrive within ``limit`` s (loopback: at once), as (text, link id of the frame)."""
+        out, t0 = [], time.monotonic()
+        while time.monotonic() - t0 < limit:
+            try:
+                data, _ = self.sock.recvfrom(65535)
+            except BlockingIOError:
+                time.sleep(0.002)
+                continue
+            for m in self.rx.parse_buffer(data) or []:
+                if m.get_type() == "STATUSTEXT":
+                    out.append((m.text, data[-13] if data[2] & 1 else None))
+        return out
+
+    def close(self):
+        self.sock.close()
+
+
+@pytest.fixture
+def station():
+    made = []
+
+    def make(key=None):
+        made.append(Station(key))
+        return made[-1]
+
+    yield make
+    for s in made:
+        s.close()
+
+
+def reconciles(c) -> bool:
+    return c.datagrams == c.received + c.dropped
+
+
+@pytest.mark.parametrize("sent_with", [KEY, None], ids=["signed-with-the-fleet-key", "unsigned"])
+def test_setup_signing_is_refused_counted_and_answered_once_and_the_key_stays(links, station, sent_with):
+    from runtime.comms.link import GCS_LINK, KEY_REFUSAL_PERIOD, KEY_REFUSAL_TEXT
+    a = links(1, key=KEY)
+    peer = links(2, peers=[a], key=KEY)
+    gcs = station(KEY)
+    for k in range(3):                                   # MAVProxy's `signing setup P`, typed three times
+        gcs.sock.sendto(setup_signing(OTHER_KEY, sent_with), a.address)
+    settle(a, 1.0, "setup_signing_refused", 3)
+    assert a.counters.setup_signing_refused == 3 and a.counters.received == 0 and reconciles(a.counters)
+    assert gcs.texts() == [(KEY_REFUSAL_TEXT, GCS_LINK)] and a.counters.setup_signing_replies == 1
+    assert len(KEY_REFUSAL_TEXT) <= 50                   # one STATUSTEXT, no chunks
+    assert a.mav.signing.secret_key == KEY
+    peer.send_agent([M.Bid(2, 0, 1, 1, 1.0)], 2.0)       # the fleet key still works, the offered one does not
+    assert [m.cost for m in drain(a, 2.0)] == [1.0]
+    rogue = links(2, peers=[a], key=OTHER_KEY)
+    rogue.send_agent([M.Bid(2, 0, 1, 1, 9.0)], 2.0)
+    assert settle(a, 2.0, "bad_signature_dropped", 1) == 1
+    gcs.sock.sendto(setup_signing(OTHER_KEY, sent_with), a.address)      # a period later: told again
+    settle(a, 1.0 + KEY_REFUSAL_PERIOD, "setup_signing_refused", 4)
+    assert gcs.texts() == [(KEY_REFUSAL_TEXT, GCS_LINK)] and a.counters.setup_signing_replies == 2
+
+
+def test_an_unsigned_robot_takes_no_key_either_and_a_peer_is_told_on_the_peer_link(links, station):
+    from runtime.comms.link import KEY_REFUSAL_TEXT, PEER_LINK
+    a = links(1)
+    peer = station()
+    peer.sock.sendto(setup_signing(KEY, system=2, component=1), a.address)
+    settle(a, 0.0, "setup_signing_refused", 1)
+    assert not a.signing and a.mav.signing.secret_key is None
+    assert peer.texts() == [(KEY_REFUSAL_TEXT, None)]            # an unsigned robot's answer is unsigned
+    b = links(3, key=KEY)
+    peer.rx.signing.secret_key = KEY
+    peer.sock.sendto(setup_signing(OTHER_KEY, KEY, system=2, component=1), b.address)
+    settle(b, 0.0, "setup_signing_refused", 1)
+    assert peer.texts() == [(KEY_REFUSAL_TEXT, PEER_LINK)]
+
+
+def test_a_wrongly_signed_setup_signing_is_a_bad_signature_and_gets_no_answer(links, station):
+    a = links(1, key=KEY)
+    gcs = station()
+    gcs.sock.sendto(setup_signing(OTHER_KEY, OTHER_KEY), a.address)
+    settle(a, 0.0, "bad_signature_dropped", 1)
+    assert a.counters.setup_signing_refused == 0 and gcs.texts() == [] and a.mav.signing.secret_key == KEY
+
+
+def test_refusals_cannot_be_used_to_flood_many_addresses(links):
+    """Every SETUP_SIGNING is counted, but answers go to at most MAX_KEY_REFUSAL_SENDERS addresses per period,
+    whatever source addresses a flood claims."""
+    from runtime.comms.link import KEY_REFUSAL_PERIOD, MAX_KEY_REFUSAL_SENDERS
+    a = links(1, key=KEY)
+    sink = links(9)                                           # where the answers land (all claimed addresses)
+    frame = setup_signing(OTHER_KEY)
+    n = MAX_KEY_REFUSAL_SENDERS + 20
+    for k in range(n):
+        a.feed(frame, 5.0, ("127.0.0.1", sink.address[1] if k == 0 else 40000 + k))
+    assert a.counters.setup_signing_refused == n
+    assert a.counters.setup_signing_replies == MAX_KEY_REFUSAL_SENDERS
+    a.feed(frame, 5.0 + KEY_REFUSAL_PERIOD, ("127.0.0.1", 40000 + n))     # a period on, the table has room again
+    assert a.counters.setup_signing_replies == MAX_KEY_REFUSAL_SENDERS + 1

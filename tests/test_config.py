@@ -357,3 +357,20 @@ def test_building_the_cli_loads_no_simulator():
     proc = subprocess.run([sys.executable, "-c", code + "; main(['experiment', '--help'])"], cwd=ROOT, timeout=60,
                           capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(ROOT)))
     assert "pybullet build time" not in proc.stderr + proc.stdout, proc.stderr[-300:]
+
+
+def test_a_fleet_signing_key_is_found_beside_the_fleet_file_whatever_the_working_folder(tmp_path, monkeypatch):
+    """``signing_key`` resolves against the fleet file, as ``world`` and ``robot`` do; a missing one names the key."""
+    (tmp_path / "keys").mkdir()
+    (tmp_path / "keys" / "fleet.key").write_text("ab" * 32 + "\n")
+    data = dict(yaml.safe_load((CONFIGS / "fleets" / "create2_4.yaml").read_text()),
+                world=str(CONFIGS / "worlds" / "arena_10m.yaml"), robot=str(CONFIGS / "robots" / "create2.yaml"),
+                signing_key="keys/fleet.key")
+    path = _write(tmp_path, data, "fleet.yaml")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    assert Path(FC.load_fleet(path).signing_key).resolve() == (tmp_path / "keys" / "fleet.key").resolve()
+    path = _write(tmp_path, dict(data, signing_key="keys/none.key"), "fleet.yaml")
+    with pytest.raises(ConfigError, match=r"fleet.yaml: signing_key: expected a path to an existing file relative"):
+        FC.load_fleet(path)

@@ -26,23 +26,29 @@ def fresh_stamp() -> int:
     return _stamp[0]
 
 
-def frame(msg, key=None, link_id=PEER_LINK, stamp=None) -> bytes:
-    """``msg`` (one of our dataclasses) as a frame from its sender, signed with ``key`` on ``link_id``."""
-    mod = dialect.load()
-    mav = mod.MAVLink(None, srcSystem=msg.sender, srcComponent=1)
+def sender(system: int, key=None, link_id=PEER_LINK, stamp=None):
+    """A MAVLink encoder for system ``system``, signing with ``key`` on ``link_id`` (None: unsigned)."""
+    mav = dialect.load().MAVLink(None, srcSystem=system, srcComponent=1)
     if key is not None:
         mav.signing.secret_key, mav.signing.sign_outgoing, mav.signing.link_id = key, True, link_id
         mav.signing.timestamp = fresh_stamp() if stamp is None else stamp
-    return codec.encode(msg, mav)
+    return mav
+
+
+def frame(msg, key=None, link_id=PEER_LINK, stamp=None) -> bytes:
+    """``msg`` (one of our dataclasses) as a frame from its sender, signed with ``key`` on ``link_id``."""
+    return codec.encode(msg, sender(msg.sender, key, link_id, stamp))
 
 
 def heartbeat(system: int, key=None, link_id=PEER_LINK) -> bytes:
-    mod = dialect.load()
-    mav = mod.MAVLink(None, srcSystem=system, srcComponent=1)
-    if key is not None:
-        mav.signing.secret_key, mav.signing.sign_outgoing, mav.signing.link_id = key, True, link_id
-        mav.signing.timestamp = fresh_stamp()
+    mod, mav = dialect.load(), sender(system, key, link_id)
     return mav.heartbeat_encode(mod.MAV_TYPE_GROUND_ROVER, mod.MAV_AUTOPILOT_GENERIC, 0, 0, 4).pack(mav)
+
+
+def setup_signing(system: int, key=None, link_id=PEER_LINK) -> bytes:
+    """A SETUP_SIGNING offering OTHER_KEY, as MAVProxy's `signing setup` sends it."""
+    mav = sender(system, key, link_id)
+    return mav.setup_signing_encode(1, 1, list(OTHER_KEY), fresh_stamp()).pack(mav)
 
 
 def reconciles(c) -> bool:
@@ -79,8 +85,11 @@ def datagrams(draw):
             return draw(st.binary(min_size=1, max_size=300))
         key = draw(st.sampled_from([None, KEY, OTHER_KEY]))
         link_id = draw(st.sampled_from([PEER_LINK, GCS_LINK, 7]))
-        data = bytearray(heartbeat(draw(st.integers(1, 255)), key, link_id) if kind == "heartbeat"
-                         else frame(draw(MSG), key, link_id))
+        if kind == "frame":
+            data = bytearray(frame(draw(MSG), key, link_id))
+        else:
+            data = bytearray((heartbeat if kind == "heartbeat" else setup_signing)(draw(st.integers(1, 255)), key,
+                                                                                    link_id))
         how = draw(st.sampled_from(["whole", "cut", "flip"]))
         if how == "cut":
             data = data[:draw(st.integers(1, len(data) - 1))]
@@ -101,6 +110,7 @@ def test_every_datagram_has_exactly_one_outcome(rx, data, which):
     moved = {k: after[k] - before[k] for k in ("received",) + DROP_REASONS if after[k] != before[k]}
     assert after["datagrams"] - before["datagrams"] == 1
     assert sum(moved.values()) == 1, moved
+    assert link.mav.signing.secret_key == (KEY if which == "signed" else None)      # nothing changes the key
     assert not out or moved == {"received": 1}
     assert reconciles(link.counters)
 

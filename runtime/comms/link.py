@@ -31,6 +31,13 @@ the key can still be seen; it never counts as peer liveness.  Unsigned robot HEA
 frame are dropped and counted.  A refused frame cannot advance pymavlink's per-stream replay window (see
 :func:`signing_guard`).
 
+Keys never come from the network: a SETUP_SIGNING (MAVProxy's ``signing setup``, a peer, anyone) is refused
+whether it is signed with the fleet key or unsigned (``setup_signing_refused``; one with a wrong signature is
+``bad_signature_dropped`` like any other), the key stays as it is, and the sender's address gets one STATUSTEXT
+saying why (:data:`KEY_REFUSAL_TEXT`), at most once per ``KEY_REFUSAL_PERIOD`` seconds per address and to at most
+``MAX_KEY_REFUSAL_SENDERS`` addresses per period, so it cannot be used to flood anyone (``setup_signing_replies``
+counts them).  The key is set on the robot: ``comms.signing_key``, a file `mrta key` writes.
+
 Link ids (the signature's ``link_id`` byte; pymavlink keeps one replay window per link id, system and
 component): a frame's link id says where it was sent, so a signed frame cannot be replayed to another kind of
 destination.
@@ -78,6 +85,10 @@ MAX_GCS_INBOX = 256                    # ground-station requests kept between tw
 GCS_TIMEOUT = 10.0                     # s a ground station that talked to us keeps getting telemetry
 PEER_LINK, GCS_LINK, OPERATOR_LINK, MISSION_LINK = 0, 1, 2, 3       # signing link ids (module docstring)
 KERNEL_DROPS_PERIOD = 1.0              # s between reads of the kernel's drop count when no datagram brings it
+KEY_REFUSAL_TEXT = "SETUP_SIGNING refused: key is set on the robot"      # one STATUSTEXT (<= 50 characters)
+KEY_REFUSAL_PERIOD = 10.0              # s between two refusal STATUSTEXTs to one address
+MAX_KEY_REFUSAL_SENDERS = 64           # addresses told within one period; beyond, refusals go unanswered
+MAV_SEVERITY_WARNING = 4
 _IFLAG_SIGNED = 0x01
 
 
@@ -87,11 +98,36 @@ def signing_timestamp(unix_time: float) -> int:
 
 
 def new_key(path: str | Path) -> Path:
-    """Write a fresh 32-byte signing key (64 hex characters) to ``path``: created with mode 0600 under a
-    temporary name and renamed into place, so the key is never readable by others, not even for a moment, and
-    a reader never sees half a key.  Refuses to replace an existing file."""
+    """Write a fresh 32-byte signing key to ``path`` (:func:`write_key`)."""
     import secrets
 
+    return write_key(path, secrets.token_bytes(32))
+
+
+def passphrase_key(passphrase: str, what: str = "passphrase") -> bytes:
+    """The 32-byte signing key a ground station derives from ``passphrase``: SHA-256 of its bytes, as MAVProxy's
+    ``signing key P`` and ``signing setup P`` do (MAVProxy/modules/mavproxy_signing.py, ``passphrase_to_key``:
+    ``hashlib.sha256(P.encode('ascii'))``).  Refused (InputError naming ``what``) unless MAVProxy can take it as
+    typed: not empty, ASCII only (MAVProxy cannot encode anything else), and no whitespace, quotes or ``;``
+    (its command line splits on those, so ``signing key P`` would hash something else)."""
+    expected = (f"{what}: expected printable ASCII without spaces, quotes or ';' "
+                "(as MAVProxy's `signing key P` takes it)")
+    if not passphrase:
+        raise InputError(f"{what}: expected a passphrase, got an empty one")
+    bad = next((c for c in passphrase if not (c.isascii() and c.isprintable()) or c in " \"';"), None)
+    if bad is not None:
+        raise InputError(f"{expected}, got {bad!r}")
+    import hashlib
+
+    return hashlib.sha256(passphrase.encode("ascii")).digest()
+
+
+def write_key(path: str | Path, key: bytes) -> Path:
+    """Write the 32-byte signing ``key`` (64 hex characters and a newline) to ``path``: created with mode 0600 under
+    a temporary name and renamed into place, so the key is never readable by others, not even for a moment, and a
+    reader never sees half a key.  Refuses to replace an existing file."""
+    if len(key) != 32:
+        raise InputError(f"signing key: expected 32 bytes, got {len(key)}")
     path = Path(path)
     if path.exists():
         raise InputError(f"{path}: a file is already there (a signing key is never overwritten)")
@@ -99,7 +135,7 @@ def new_key(path: str | Path) -> Path:
     try:
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
         with os.fdopen(fd, "w") as fh:
-            fh.write(secrets.token_hex(32) + "\n")
+            fh.write(key.hex() + "\n")
         os.replace(tmp, path)
     except OSError as e:
         tmp.unlink(missing_ok=True)
@@ -107,24 +143,26 @@ def new_key(path: str | Path) -> Path:
     return path
 
 
-def load_key(path: str | Path) -> bytes:
-    """The 32-byte signing key in ``path`` (64 hex characters; surrounding whitespace ignored)."""
+def load_key(path: str | Path, what: str | None = None) -> bytes:
+    """The 32-byte signing key in ``path`` (64 hex characters; surrounding whitespace ignored).  Errors name the
+    file, after ``what`` if given (the option that named it, e.g. ``--key``)."""
     expected = "expected 64 hex characters (a 32-byte MAVLink signing key)"
+    name = f"{what} {path}" if what else str(path)
     try:
         text = Path(path).read_text(encoding="ascii")
     except FileNotFoundError:
-        raise InputError(f"{path}: signing key file not found") from None
+        raise InputError(f"{name}: signing key file not found") from None
     except UnicodeDecodeError:
-        raise InputError(f"{path}: {expected}, got non-ASCII data") from None
+        raise InputError(f"{name}: {expected}, got non-ASCII data") from None
     except OSError as e:
-        raise InputError(f"{path}: cannot read signing key ({e.strerror})") from None
+        raise InputError(f"{name}: cannot read signing key ({e.strerror})") from None
     s = text.strip()
     if len(s) != 64:
-        raise InputError(f"{path}: {expected}, got {len(s)} characters")
+        raise InputError(f"{name}: {expected}, got {len(s)} characters")
     try:
         return bytes.fromhex(s)
     except ValueError:
-        raise InputError(f"{path}: {expected}, got a non-hex character") from None
+        raise InputError(f"{name}: {expected}, got a non-hex character") from None
 
 
 def parse_address(text: str, what: str, *, allow_port_zero: bool = False) -> tuple[str, int]:
@@ -159,7 +197,7 @@ def _resolve(text: str, what: str, family: int | None = None, *, listen: bool = 
 
 
 DROP_REASONS = ("parse_errors", "bad_crc", "unsigned_dropped", "bad_signature_dropped", "replayed_dropped",
-                "unknown", "invalid", "not_for_us", "ignored", "gcs_overflow")
+                "unknown", "invalid", "not_for_us", "ignored", "gcs_overflow", "setup_signing_refused")
 
 
 @dataclass
@@ -177,6 +215,7 @@ class LinkCounters:
     not_for_us: int = 0             # an agent message for another robot, or claiming our own id
     ignored: int = 0                # a valid frame of a message the link has no use for
     gcs_overflow: int = 0           # a ground-station request dropped: the inbox was full
+    setup_signing_refused: int = 0  # a SETUP_SIGNING: the key is never changed from the network
     kernel_dropped: int = 0         # datagrams the kernel dropped before we read them (receive buffer full)
     # frames (a datagram may carry several)
     agent_received: int = 0         # agent messages returned by poll
@@ -189,6 +228,7 @@ class LinkCounters:
     send_errors: int = 0
     encode_errors: int = 0          # agent messages whose values do not fit the wire types
     loss_injected: int = 0          # datagrams to peers not sent: ``peer_loss`` (a lossy radio, for testing)
+    setup_signing_replies: int = 0  # STATUSTEXTs telling a SETUP_SIGNING's sender why it was refused
 
     def as_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -296,6 +336,7 @@ class MavlinkLink:
         self.module = dialect.load()
         codec.check(self.module)
         self._hb_id = self.module.MAVLINK_MSG_ID_HEARTBEAT
+        self._unsigned_ok = frozenset({self._hb_id, self.module.MAVLINK_MSG_ID_SETUP_SIGNING})
         self._gcs_type = self.module.MAV_TYPE_GCS
         self.mav = signing_guard(self.module.MAVLink)(None, srcSystem=self.robot_id,
                                                         srcComponent=COMPONENT_ID)
@@ -334,6 +375,7 @@ class MavlinkLink:
         self.gcs_last_heartbeat: float | None = None
         self.gcs_inbox: list[tuple[object, tuple]] = []       # (pymavlink message, source address)
         self._gcs_seen: dict[tuple, float] = {}               # ground-station addresses -> last heard
+        self._key_refusals: dict[tuple, float] = {}           # addresses told KEY_REFUSAL_TEXT -> when
 
     # ------------------------------------------------------------------ addresses
     @property
@@ -501,8 +543,9 @@ class MavlinkLink:
         return out
 
     def _allow_unsigned(self, mav, msg_id: int) -> bool:
-        # only HEARTBEAT gets past pymavlink unsigned; _dispatch keeps it only if it is a GCS's
-        return msg_id == self._hb_id
+        # only HEARTBEAT and SETUP_SIGNING get past pymavlink unsigned; _dispatch keeps a HEARTBEAT only if it is a
+        # GCS's, and refuses every SETUP_SIGNING (so the sender can be told why)
+        return msg_id in self._unsigned_ok
 
     def _dispatch(self, m, now: float, addr=None) -> tuple[str | None, object]:
         """One decoded frame: (None if taken, else the counter of why it was refused; the agent message for us)."""
@@ -512,6 +555,11 @@ class MavlinkLink:
             return refusal(m), None
         if kind.startswith("UNKNOWN"):
             return "unknown", None
+        if kind == "SETUP_SIGNING":
+            if self._badly_signed(m):
+                return "bad_signature_dropped", None
+            self._refuse_key_change(m, now, addr)
+            return "setup_signing_refused", None
         src = m.get_srcSystem()
         if self.signing and m.get_signed() and 1 <= src <= MAX_ROBOT_ID and m.get_link_id() != PEER_LINK:
             return "replayed_dropped", None       # a robot's frame to a ground station, replayed to us
@@ -536,15 +584,42 @@ class MavlinkLink:
         c.agent_received += 1
         return None, agent
 
+    def _badly_signed(self, m) -> bool:
+        """A frame pymavlink let through only because its id may come unsigned (``_allow_unsigned``), though it is
+        signed, with a wrong signature or an old timestamp."""
+        return self.signing and not m.get_signed() and bool(m.get_header().incompat_flags & _IFLAG_SIGNED)
+
+    def _refuse_key_change(self, m, now: float, addr) -> None:
+        """Tell a SETUP_SIGNING's sender why nothing changed: one STATUSTEXT per address and KEY_REFUSAL_PERIOD
+        (to a robot on the peer link id, where it takes robot frames; to anyone else on the ground-station one)."""
+        if addr is None:
+            return
+        told = self._key_refusals
+        last = told.get(addr)
+        if last is not None and now - last < KEY_REFUSAL_PERIOD:
+            return
+        if last is None and len(told) >= MAX_KEY_REFUSAL_SENDERS:
+            for a in [a for a, t in told.items() if now - t >= KEY_REFUSAL_PERIOD]:
+                del told[a]
+            if len(told) >= MAX_KEY_REFUSAL_SENDERS:
+                return
+        told[addr] = now
+        src = m.get_srcSystem()
+        self.log.warning("SETUP_SIGNING from system %d at %s refused: the key is set on the robot, not over the "
+                         "network", src, addr)
+        text = self.mav.statustext_encode(MAV_SEVERITY_WARNING, KEY_REFUSAL_TEXT.encode())
+        link_id = PEER_LINK if 1 <= src <= MAX_ROBOT_ID else GCS_LINK
+        if self._sendto(self._pack(text, link_id), addr):
+            self.counters.setup_signing_replies += 1
+
     def _on_heartbeat(self, m, now: float) -> str | None:
         """Record a HEARTBEAT: None if taken, else why not."""
         c = self.counters
         is_gcs = m.type == self._gcs_type
-        if self.signing and not m.get_signed():
-            if m.get_header().incompat_flags & _IFLAG_SIGNED:
-                return "bad_signature_dropped"
-            if not is_gcs:
-                return "unsigned_dropped"
+        if self._badly_signed(m):
+            return "bad_signature_dropped"
+        if self.signing and not m.get_signed() and not is_gcs:
+            return "unsigned_dropped"
         src = m.get_srcSystem()
         if is_gcs:
             self.gcs_last_heartbeat = now

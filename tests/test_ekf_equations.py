@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from filterpy import kalman                # the [test] extra's, for this comparison only
 
 from runtime.localization.ekf import _UnicycleEKF
 from runtime.localization.enu import wrap_angle
@@ -16,8 +17,6 @@ def _random_spd(rng, n):
 
 @pytest.mark.parametrize("known", [True, False])
 def test_predict_and_update_match_filterpy(known):
-    kalman = pytest.importorskip("filterpy.kalman")
-
     class Reference(kalman.ExtendedKalmanFilter):
         predict_x = _UnicycleEKF.predict_x
 

@@ -99,12 +99,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         except ModuleNotFoundError as exc:
             if exc.name == name:     # command not built in this checkout
                 continue
-            if exc.name not in SIMULATOR:
-                raise
-            stub = sub.add_parser(command, help=f"(needs the [sitl] extra) {command}")
-            stub.add_argument("rest", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
-            stub.set_defaults(func=_needs_simulator(None))
-            continue
+            raise                    # a sitl module imports pybullet or matplotlib only when its command runs
         module.register(sub)
         if name.startswith("sitl.") and command in sub.choices:
             _wrap_funcs(sub.choices[command])

@@ -66,6 +66,15 @@ def test_robot_commands_print_their_help_without_the_simulator(command):
     assert r.stdout.rstrip().endswith("exit 0 []")      # and the simulator's modules were never imported
 
 
+def test_mrta_help_lists_the_simulator_commands_without_the_simulator():
+    r = _run("""
+        from runtime import cli
+        sys.exit(cli.main(sys.argv[1:]))
+    """, "--help")
+    assert r.returncode == 0, r.stderr          # the sitl modules import pybullet and matplotlib lazily
+    assert "sitl " in r.stdout and "experiment " in r.stdout and "daemon " in r.stdout
+
+
 @pytest.mark.parametrize("argv", [["sitl", "run", "create2_4"], ["experiment", "formation-world"]])
 def test_simulator_commands_say_what_to_install(argv):
     r = _run("""

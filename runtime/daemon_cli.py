@@ -59,6 +59,8 @@ def _main(args) -> int:
     cfg = C.load_robot(args.config)
     C.validate_robot(cfg)             # what start-up needs, checked before any device or socket opens
     if args.check:
+        from runtime.comms import codec, dialect
+        codec.check(dialect.load())   # the MAVLink bindings: shipped, or generated into a cache it can write
         print(f"{args.config}: ok (robot {cfg.robot.id}, base {cfg.base.type}, allocation {cfg.allocation.method})")
         return 0
     daemon = D.Daemon(cfg)

@@ -12,8 +12,31 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
 
+import runtime
 from runtime.config.build import ConfigError, load, parse_hostport, rng, union_field
 from runtime.config.world import check_inside, load_world
+from runtime.errors import InputError
+
+# The example configs shipped in the package (runtime/examples is the repository's configs/ directory)
+EXAMPLES = Path(runtime.__file__).resolve().parent / "examples"
+
+
+def shipped_fleets() -> list[str]:
+    """Names of the shipped example fleets (``create2_4`` for ``examples/fleets/create2_4.yaml``)."""
+    return sorted(p.stem for p in (EXAMPLES / "fleets").glob("*.yaml"))
+
+
+def find_fleet(name_or_path: str | Path) -> Path:
+    """The fleet config ``name_or_path`` names: a file, else a shipped fleet by name (with or without .yaml).
+    Neither: one line listing the shipped names (InputError, exit 2)."""
+    path = Path(name_or_path)
+    if path.is_file():
+        return path
+    shipped = EXAMPLES / "fleets" / path.with_suffix(".yaml").name
+    if path.name == str(name_or_path) and path.suffix in ("", ".yaml") and shipped.is_file():
+        return shipped
+    raise InputError(f"fleet: {str(name_or_path)!r} is neither a fleet file nor a shipped fleet "
+                     f"({', '.join(shipped_fleets())})")
 
 
 def _scenarios():

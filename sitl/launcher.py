@@ -602,7 +602,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("sitl", help="software-in-the-loop simulation")
     s = p.add_subparsers(dest="sitl_cmd", metavar="SUBCOMMAND", required=True)
     r = s.add_parser("run", help="run a fleet: world, emulated devices, one daemon per robot, an operator")
-    r.add_argument("fleet", help="fleet config YAML")
+    r.add_argument("fleet", help="fleet config YAML, or the name of a shipped fleet (create2_4, ...)")
     r.add_argument("--manifest", default=None, help="write the ports manifest here (JSON)")
     r.add_argument("--run-dir", default=None, help="where robot configs, logs, trace and picture go (default: a temp dir)")
     r.add_argument("--seed", type=int, default=None, help="override the fleet's seed (%d..%d)" % fleet_range("seed"))
@@ -638,6 +638,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _main(args) -> int:
     from sitl import run_args
 
+    args.fleet = str(FC.find_fleet(args.fleet))      # a file, or a shipped fleet by name
     run_args.check(args)          # every option, before the world is built
     f = build(args.fleet, args.run_dir, args.manifest, args.seed, args.signing, args.method, args.speedup,
               args.instance, args.peer_loss, args.loss_burst, args.key)

@@ -104,7 +104,7 @@ def test_concurrent_first_loads_in_separate_processes(tmp_path):
         while not os.path.exists({str(go)!r}):
             time.sleep(0.002)
         from runtime.comms import dialect
-        mod = dialect.load()
+        mod = dialect.load(dialect.fleet_xml())       # generated into the cache (load() takes the shipped one)
         print(mod.__file__, mod.MAVLINK_MSG_ID_MRTA_BID)
     """)
     env = dict(os.environ, MRTA_CACHE_DIR=str(cache))

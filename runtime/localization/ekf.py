@@ -1,4 +1,5 @@
-"""Pose EKF: unicycle model fusing wheel odometry and GPS, on filterpy's ExtendedKalmanFilter.
+"""Pose EKF: unicycle model fusing wheel odometry and GPS (the predict and update of filterpy's
+ExtendedKalmanFilter, written out here: filterpy requires matplotlib, which a robot does not install).
 
 State ``(x, y, heading, v, w)`` in the fleet ENU frame (x east, y north, heading counter-clockwise
 from east).  ``predict(dt)`` moves the state along the unicycle (midpoint heading) with white
@@ -38,7 +39,6 @@ from dataclasses import dataclass
 from statistics import NormalDist
 
 import numpy as np
-from filterpy.kalman import ExtendedKalmanFilter
 
 from runtime.config import LocalizationConfig
 from runtime.localization.enu import wrap_angle
@@ -74,10 +74,18 @@ def chi2_quantile(p: float, dof: int) -> float:
     return dof * (1.0 - a + z * math.sqrt(a)) ** 3
 
 
-class _UnicycleEKF(ExtendedKalmanFilter):
-    """filterpy EKF whose state transition is the unicycle; ``u = (dt, heading_known)``."""
+class _UnicycleEKF:
+    """EKF whose state transition is the unicycle; ``u = (dt, heading_known)``.  ``F`` and ``Q`` are set before
+    each :meth:`predict`; :meth:`update` uses the Joseph form, as filterpy's ``ExtendedKalmanFilter`` does."""
 
-    def predict_x(self, u=0):
+    def __init__(self, dim_x: int, dim_z: int):
+        self.x = np.zeros(dim_x)
+        self.P = np.eye(dim_x)
+        self.F = np.eye(dim_x)
+        self.Q = np.eye(dim_x)
+        self._I = np.eye(dim_x)
+
+    def predict_x(self, u) -> None:
         dt, known = u
         x, y, th, v, w = self.x
         if known:
@@ -86,6 +94,18 @@ class _UnicycleEKF(ExtendedKalmanFilter):
                                wrap_angle(th + w * dt), v, w])
         else:
             self.x = np.array([x, y, th, v, w])
+
+    def predict(self, u) -> None:
+        self.predict_x(u)
+        self.P = self.F @ self.P @ self.F.T + self.Q
+
+    def update(self, z, HJacobian, Hx, R, residual=np.subtract) -> None:
+        H = HJacobian(self.x)
+        PHT = self.P @ H.T
+        K = PHT @ np.linalg.inv(H @ PHT + R)
+        self.x = self.x + K @ residual(z, Hx(self.x))
+        I_KH = self._I - K @ H
+        self.P = I_KH @ self.P @ I_KH.T + K @ R @ K.T
 
 
 class PoseEKF:

@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import sys
 import time
 from pathlib import Path
 
@@ -39,6 +38,7 @@ from runtime.allocation.comutar.options import ComutarOptions
 from runtime.tasks.surveillance import Surveillance
 from runtime.errors import InputError
 from runtime.log import get_logger
+from sitl.experiments.progress import Progress
 from runtime.tasks import Task
 from sitl.experiments import report
 
@@ -191,38 +191,13 @@ def sharing_run(seed: int, max_time: float = 1500.0) -> dict:
 
 # ---------------------------------------------------------------------- the sweep
 
-class Progress:
-    """A one-line progress bar on stderr (a log line every 10 % when stderr is not a terminal)."""
-
-    def __init__(self, total: int, width: int = 30):
-        self.total, self.width, self.done = total, width, 0
-        self.t0 = time.perf_counter()
-        self.tty = sys.stderr.isatty()
-        self._last = -1
-
-    def step(self, what: str = "") -> None:
-        self.done += 1
-        frac = self.done / max(self.total, 1)
-        el = time.perf_counter() - self.t0
-        eta = el / frac - el if frac > 0 else 0.0
-        if self.tty:
-            bar = "#" * int(frac * self.width) + "." * (self.width - int(frac * self.width))
-            sys.stderr.write(f"\r[{bar}] {self.done}/{self.total} runs, {el:.0f} s, ~{eta:.0f} s left {what:<24}")
-            if self.done == self.total:
-                sys.stderr.write("\n")
-            sys.stderr.flush()
-        elif int(frac * 10) != self._last:
-            self._last = int(frac * 10)
-            log.info("%d/%d runs (%.0f %%), %.0f s, ~%.0f s left", self.done, self.total, 100 * frac, el, eta)
-
-
 def sweep(scenarios, counts, runs: int, seed: int, max_time: float, jobs: int) -> tuple[list[dict], dict]:
     """Every (scenario, robots, run); returns the rows in order and the Fig. 4 trajectories."""
     keys = [(s, n, r) for s in scenarios for n in counts for r in range(runs)]
     traced = {(s, FIG4[s], 0) for s in scenarios if FIG4[s] in counts}
     rows: dict = {}
     tracks: dict = {}
-    bar = Progress(len(keys))
+    bar = Progress(len(keys), log, lines=10)
 
     def take(key, res) -> None:
         rows[key] = res["row"]

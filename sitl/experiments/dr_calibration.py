@@ -28,6 +28,7 @@ import numpy as np
 
 from runtime.errors import InputError
 from runtime.log import get_logger
+from sitl.experiments.progress import Progress
 from sitl.experiments import report
 from sitl.foraging import scenario
 
@@ -172,24 +173,19 @@ def _parse(v: str):
     return {"True": True, "False": False}.get(v, v)
 
 
-def _bar(done: int, total: int, width: int = 30) -> str:
-    k = int(width * done / total) if total else width
-    return "[" + "#" * k + "-" * (width - k) + f"] {done}/{total}"
-
-
 def run_all(cases: list[tuple], args, done: dict[tuple, dict], out_csv: Path) -> dict[tuple, dict]:
     """Run ``cases`` ((n, d_du, dt) each) not in ``done``, ``--jobs`` at a time, largest groups first; the CSV is
     rewritten as each finishes, so an interrupted run can ``--resume``."""
     todo = [c for c in cases if c not in done]
     order = sorted(todo, key=lambda c: (-c[0] * (1 + 4 * (c[2] < args.dt)), c[1]))
-    t0 = time.perf_counter()
+    progress = Progress(len(cases), log, done=len(cases) - len(todo))     # resumed runs count as done
 
     def finished(case, row) -> None:
         done[case] = row
         report.write_csv(out_csv, [done[c] for c in cases if c in done])
-        log.info("%s n=%d d=%d du dt=%.3f: %.0f wu moved, %.1f %% of ideal, I=%.4f wu/s (%.0f s wall; %.0f s in all)",
-                 _bar(sum(c in done for c in cases), len(cases)), case[0], case[1], case[2], row["moved_wu"],
-                 100 * row["fraction_of_ideal"], row["I_wu_per_s"], row["wall_s"], time.perf_counter() - t0)
+        progress.step(f"n={case[0]} d={case[1]} du dt={case[2]:.3f}: {row['moved_wu']:.0f} wu moved, "
+                      f"{100 * row['fraction_of_ideal']:.1f} % of ideal, I={row['I_wu_per_s']:.4f} wu/s",
+                      wall=row["wall_s"])
 
     if args.jobs <= 1 or len(order) <= 1:
         for c in order:

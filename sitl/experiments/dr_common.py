@@ -31,6 +31,7 @@ from runtime.allocation.dr.interference import InterferenceModel
 from runtime.allocation.dr.options import DrOptions
 from runtime.errors import InputError
 from runtime.log import get_logger
+from sitl.experiments.progress import Progress
 from sitl.experiments import report
 from sitl.foraging import scenario
 from sitl.foraging.scenario import Dist
@@ -171,22 +172,16 @@ def mean(values: Sequence[float]) -> float:
 
 # ---------------------------------------------------------------------- many runs
 
-def bar(done: int, total: int, width: int = 30) -> str:
-    k = int(width * done / total) if total else width
-    return "[" + "#" * k + "-" * (width - k) + f"] {done}/{total}"
-
-
 def run_all(jobs: Sequence[tuple[Cell, Setup, int]], model: Path | None, workers: int) -> list[dict]:
     """Every (cell, setup, seed) run, ``workers`` at a time; results in the order of ``jobs``."""
     out: list[dict | None] = [None] * len(jobs)
-    t0 = time.perf_counter()
+    progress = Progress(len(jobs), log)
 
     def finished(k: int, res: dict) -> None:
         out[k] = res
         r = res["run"]
-        log.info("%s %s seed %d: %d objects done, %.0f wu moved, %.0f %% <= DL (%.0f s wall; %.0f s in all)",
-                 bar(sum(x is not None for x in out), len(out)), r["cell"], r["seed"], r["objects_done"],
-                 r["moved_wu"], r["within_dl_pct"], r["wall_s"], time.perf_counter() - t0)
+        progress.step(f"{r['cell']} seed {r['seed']}: {r['objects_done']} objects done, {r['moved_wu']:.0f} wu moved, "
+                      f"{r['within_dl_pct']:.0f} % <= DL", wall=r["wall_s"])
 
     if workers <= 1 or len(jobs) <= 1:
         for k, (cell, setup, seed) in enumerate(jobs):

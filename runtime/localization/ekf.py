@@ -39,6 +39,7 @@ from dataclasses import dataclass
 from statistics import NormalDist
 
 import numpy as np
+import scipy.linalg
 
 from runtime.config import LocalizationConfig
 from runtime.localization.enu import wrap_angle
@@ -102,7 +103,7 @@ class _UnicycleEKF:
     def update(self, z, HJacobian, Hx, R, residual=np.subtract) -> None:
         H = HJacobian(self.x)
         PHT = self.P @ H.T
-        K = PHT @ np.linalg.inv(H @ PHT + R)
+        K = PHT @ scipy.linalg.inv(H @ PHT + R)       # scipy's inverse, as filterpy's: the same bits
         self.x = self.x + K @ residual(z, Hx(self.x))
         I_KH = self._I - K @ H
         self.P = I_KH @ self.P @ I_KH.T + K @ R @ K.T

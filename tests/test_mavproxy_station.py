@@ -2,7 +2,8 @@
 operator_4 signed with the key of a passphrase (`mrta key FILE --passphrase P`, `mrta sitl run FLEET --key FILE`):
 with `signing key P` it loads the parameters (no FTP timeout), uploads a waypoint file whose home line the robot
 skips, sees every waypoint reached, reads the mission back and disarms and arms robot 1; without the passphrase it
-sees the robot and nothing it says is taken.
+sees the robot and nothing it says is taken.  Without a key at all it commands a fleet run with --no-signing, and a
+signed one that lists its network in comms.unsigned_gcs (--unsigned-gcs 127.0.0.1/32).
 
 MAVProxy runs as a subprocess reading commands on stdin (as typed at its prompt), connected to robot 1's MAVLink
 port (``--master=udpout:``, as docs/ground-station.md says); the fleet is lock-stepped in this process and paced
@@ -108,18 +109,23 @@ class MavProxy:
 
 
 @pytest.fixture
-def fleet(tmp_path):
-    """operator_4 on free ports, lock-stepped, signed with the key of PASSPHRASE; ``pace()`` steps it to at most
-    SPEEDUP x the wall time since the fixture started."""
+def fleet(request, tmp_path):
+    """operator_4 on free ports, lock-stepped, signed with the key of PASSPHRASE (the fixture's param, if given:
+    "no-signing", an unsigned fleet; "unsigned-gcs", signed and taking unsigned frames from 127.0.0.1/32);
+    ``pace()`` steps it to at most SPEEDUP x the wall time since the fixture started."""
     from runtime.cli import main
     from sitl import launcher
     from tests.sitl_util import shipped_fleet
 
     if not MAVPROXY.exists():
         pytest.skip(f"no {MAVPROXY} (pip install 'MAVProxy>=1.8.75')")
+    how = getattr(request, "param", "passphrase")
     key_file = tmp_path / "fleet.key"
     assert main(["key", str(key_file), "--passphrase", PASSPHRASE]) == 0
-    f = launcher.build(shipped_fleet(tmp_path, "operator_4.yaml"), tmp_path / "run", key=key_file)
+    f = launcher.build(shipped_fleet(tmp_path, "operator_4.yaml"), tmp_path / "run",
+                       key=None if how == "no-signing" else key_file, signing=how != "no-signing",
+                       unsigned_gcs=["127.0.0.1/32"] if how == "unsigned-gcs" else None)
+    assert (f.key is None) == (how == "no-signing")
     run = launcher.Lockstep(f)
     wall0, sim0 = time.monotonic(), f.world.t
 
@@ -138,6 +144,16 @@ def fleet(tmp_path):
 
 def _tasks(run, rid=1) -> list:
     return run.daemons[rid].core.node.table.listing()
+
+
+def _disarm_and_arm(mp: MavProxy, node) -> None:
+    """`disarm`, then `arm throttle`: each acknowledged, shown in the HEARTBEAT (MAVProxy's DISARMED / ARMED) and
+    in force on the robot."""
+    for command, said, armed in (("disarm", "DISARMED", False), ("arm throttle", "ARMED", True)):
+        mp.mark()
+        mp.type(command)
+        assert mp.until("COMPONENT_ARM_DISARM: ACCEPTED") and mp.until(said, whole=True), mp.output()
+        assert node.armed == armed
 
 
 def test_mavproxy_with_the_passphrase_commands_the_signed_fleet(fleet, tmp_path):
@@ -183,15 +199,7 @@ def test_mavproxy_with_the_passphrase_commands_the_signed_fleet(fleet, tmp_path)
         latlon = lambda lines: [tuple(float(v) for v in line.split()[8:10]) for line in lines]      # noqa: E731
         assert latlon(saved[1:]) == [pytest.approx(p, abs=1e-6) for p in latlon(wanted[2:])]    # MAVProxy: %f
 
-        node = run.daemons[1].core.node
-        mp.mark()
-        mp.type("disarm")
-        assert mp.until("COMPONENT_ARM_DISARM: ACCEPTED") and mp.until("DISARMED", whole=True), mp.output()
-        assert not node.armed
-        mp.mark()
-        mp.type("arm throttle")
-        assert mp.until("COMPONENT_ARM_DISARM: ACCEPTED") and mp.until("ARMED", whole=True), mp.output()
-        assert node.armed
+        _disarm_and_arm(mp, run.daemons[1].core.node)
     finally:
         mp.close()
     out = mp.output()
@@ -220,3 +228,26 @@ def test_mavproxy_without_the_passphrase_sees_the_robot_and_is_not_obeyed(fleet,
     assert _tasks(run) == [] and node.armed
     link = run.daemons[1].snapshot()["link"]
     assert link["unsigned_dropped"] > 0 and link["unsigned_gcs_taken"] == 0, link
+
+
+@pytest.mark.parametrize("fleet", ["no-signing", "unsigned-gcs"], indirect=True)
+def test_mavproxy_without_a_key_commands_an_unsigned_fleet_and_one_that_lists_its_network(fleet, tmp_path):
+    """A fleet started with --no-signing, and a signed one with --unsigned-gcs 127.0.0.1/32: MAVProxy, which never
+    typed `signing key`, loads the parameters, uploads a mission and disarms and arms robot 1."""
+    f, run, pace = fleet
+    mp = MavProxy(f.robots[1].udp_port, tmp_path / "mavproxy", pace)
+    node = run.daemons[1].core.node
+    try:
+        assert mp.until("online system 1", 30.0), mp.output()
+        mp.mark()
+        mp.type("param fetch")
+        assert mp.until("Received 10 parameters", 15.0), mp.output()
+        mp.type(f"wp load {_waypoint_file(tmp_path / 'three.waypoints', f.world_cfg.datum)}")
+        assert mp.until("MISSION_ACK: TYPE_MISSION: ACCEPTED"), mp.output()
+        assert len(_tasks(run)) == len(WAYPOINTS)
+        _disarm_and_arm(mp, node)
+    finally:
+        mp.close()
+    link = run.daemons[1].snapshot()["link"]
+    if f.key is not None:                 # signed: what MAVProxy sent was taken unsigned, and counted so
+        assert link["unsigned_gcs_taken"] > 0, link

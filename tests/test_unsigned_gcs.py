@@ -313,3 +313,30 @@ def test_mrta_sitl_run_sets_the_list_on_every_robot(tmp_path):
             {("127.0.0.1/32", "fd00::/64")}
     finally:
         f.close()
+
+
+def test_mrta_mission_without_a_key_uploads_only_where_its_network_is_listed(unsigned_fleet, capsys):
+    """`mrta mission upload` without --key (a station that cannot sign) against the signed fleet: taken from a listed
+    network; elsewhere the robot stays silent to it and the tool says the fleet signs."""
+    import threading
+
+    from runtime.cli import main
+    from tests.sitl_util import CONFIGS
+
+    nets, f, run, _ = unsigned_fleet
+    target = f"127.0.0.1:{f.robots[1].udp_port}"
+    rc: list[int] = []
+    tool = threading.Thread(target=lambda: rc.append(main(
+        ["mission", "upload", target, str(CONFIGS / "missions" / "square_6.waypoints"), "--timeout", "3"])))
+    tool.start()
+    t0 = time.monotonic()
+    while tool.is_alive() and time.monotonic() - t0 < 20.0:
+        run.step()
+        time.sleep(0.002)
+    tool.join(timeout=10.0)
+    err = capsys.readouterr().err
+    tasks = run.daemons[1].core.node.table.listing()
+    if nets:
+        assert rc == [0] and len(tasks) == 6, err
+    else:
+        assert rc == [1] and tasks == [] and "pass --key FILE" in err, err

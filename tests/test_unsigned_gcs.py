@@ -185,6 +185,34 @@ def test_peer_traffic_stays_signed_whatever_the_list_says(link_with, net):
     assert c.agent_received == 0 and c.received == 0 and _reconciles(c)
 
 
+def _ipv6_loopback() -> bool:
+    try:
+        with socket.socket(socket.AF_INET6, socket.SOCK_DGRAM) as s:
+            s.bind(("::1", 0))
+        return True
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not _ipv6_loopback(), reason="no IPv6 loopback")
+def test_an_ipv6_station_is_taken_from_a_listed_ipv6_network_only():
+    for nets, taken in ((["::1/128"], 1), (["fd00::/64", "127.0.0.0/8"], 0)):
+        link = MavlinkLink(1, "[::1]:0", [], None, signing_key=KEY, unsigned_gcs=nets)
+        s = socket.socket(socket.AF_INET6, socket.SOCK_DGRAM)
+        try:
+            s.bind(("::1", 0))
+            s.sendto(command_long(255), link.address)
+            t0 = time.monotonic()
+            while link.counters.datagrams == 0 and time.monotonic() - t0 < 2.0:
+                link.poll(0.0)
+                time.sleep(0.001)
+            c = link.counters
+            assert (len(link.gcs_inbox), c.unsigned_gcs_taken, c.unsigned_dropped) == (taken, taken, 1 - taken)
+        finally:
+            s.close()
+            link.close()
+
+
 def test_without_signing_the_list_changes_nothing(link_with, net):
     link = link_with(["10.0.0.0/24"], key=None)
     net.send(link, command_long(255))

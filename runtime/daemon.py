@@ -51,7 +51,8 @@ class Daemon:
             link = MavlinkLink(self.id, cfg.comms.listen, [p.address for p in cfg.comms.peers],
                                cfg.comms.gcs, signing_key=key,
                                heartbeat_timeout=cfg.comms.heartbeat_timeout, peer_loss=cfg.comms.peer_loss,
-                               loss_burst=cfg.comms.loss_burst, loss_seed=cfg.comms.loss_seed)
+                               loss_burst=cfg.comms.loss_burst, loss_seed=cfg.comms.loss_seed,
+                               unsigned_gcs=cfg.comms.unsigned_gcs)
         self.link = link
         fp = base.footprint
         facts = BaseFacts(float(fp.radius), float(getattr(fp, "max_speed", 0.5)), bool(base.ranging),
@@ -68,6 +69,12 @@ class Daemon:
         self.log.info("open: base %s, gps %s, listening %s, allocation %s%s", self.cfg.base.type,
                       self.cfg.gps.port if self.gps else "off", self.cfg.comms.listen, self.core.method.name,
                       "" if self.core.node.armed else " (disarmed)")
+        nets = getattr(self.link, "unsigned_gcs", None)
+        if nets and self.link.signing:
+            self.log.warning("accepting unsigned ground-station frames from %s (comms.unsigned_gcs; peers must "
+                             "sign)", nets)
+        elif nets:
+            self.log.info("comms.unsigned_gcs (%s) changes nothing: signing is off, every frame is taken", nets)
 
     def close(self) -> None:
         try:

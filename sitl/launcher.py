@@ -152,11 +152,13 @@ def claim_ports(fleet: FC.FleetConfig, instance: int = 0) -> FC.FleetConfig:
 def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: str | Path | None = None,
           seed: int | None = None, signing: bool = True, method: str | None = None,
           speedup: float | None = None, instance: int = 0, peer_loss: float | None = None,
-          loss_burst: float | None = None, key: str | Path | None = None) -> Fleet:
+          loss_burst: float | None = None, key: str | Path | None = None,
+          unsigned_gcs: list[str] | None = None) -> Fleet:
     """Load the fleet, build the world and devices, write robot configs and the manifest.  ``peer_loss`` and
     ``loss_burst`` (else the fleet's, else each template's) become every robot's ``comms.peer_loss`` and
     ``comms.loss_burst``.  The fleet signs with the key file ``key`` (``--key``), else the fleet's ``signing_key``,
-    else (``signing``) a fresh key in the run directory, removed by :meth:`Fleet.close` unless kept."""
+    else (``signing``) a fresh key in the run directory, removed by :meth:`Fleet.close` unless kept.  ``unsigned_gcs``
+    (``--unsigned-gcs``; networks in CIDR form) becomes every robot's ``comms.unsigned_gcs``."""
     from sitl import scenarios
 
     fleet = claim_ports(FC.load_fleet(fleet_path), instance)
@@ -210,6 +212,8 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
             value = getattr(fleet, name) if given is None else given
             if value is not None:
                 overrides["comms"][name] = value
+        if unsigned_gcs:
+            overrides["comms"]["unsigned_gcs"] = list(unsigned_gcs)
         if method:
             overrides["allocation"] = {"method": method}
         data = C.deep_merge(template, overrides)
@@ -619,6 +623,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--key", default=None, metavar="FILE",
                    help="sign with this fleet key file (mrta key FILE [--passphrase P]) instead of a fresh key or "
                         "the fleet's signing_key; it is left in place after the run")
+    r.add_argument("--unsigned-gcs", action="append", default=None, metavar="CIDR",
+                   help="every robot takes unsigned ground-station frames from this network (repeatable; e.g. "
+                        "127.0.0.1/32 for a station that cannot sign; peers still sign)")
     r.add_argument("--keep-key", action="store_true",
                    help="keep the run's fresh fleet key (RUN_DIR/fleet.key) for a ground station after the run")
     r.add_argument("--method", choices=registry.names(), default=None, help="allocation method")
@@ -641,7 +648,7 @@ def _main(args) -> int:
     args.fleet = str(FC.find_fleet(args.fleet))      # a file, or a shipped fleet by name
     run_args.check(args)          # every option, before the world is built
     f = build(args.fleet, args.run_dir, args.manifest, args.seed, args.signing, args.method, args.speedup,
-              args.instance, args.peer_loss, args.loss_burst, args.key)
+              args.instance, args.peer_loss, args.loss_burst, args.key, args.unsigned_gcs)
     speedup = args.speedup or f.fleet.speedup
     stop = {"flag": False}
 

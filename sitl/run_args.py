@@ -3,7 +3,7 @@
 Numbers that override the fleet config (``--speedup``, ``--timeout``, ``--seed``, ``--peer-loss``, ``--loss-burst``)
 take the fleet config's own ranges; ``--instance`` must leave every port of the fleet in 1..65535; the run folder,
 the manifest and the JSON result must be writable now, not only when the run ends; ``--key`` must be a key file,
-and asks for a signed fleet (not with ``--no-signing``).
+and asks for a signed fleet (not with ``--no-signing``); so does ``--unsigned-gcs``, each a network in CIDR form.
 """
 from __future__ import annotations
 
@@ -37,5 +37,14 @@ def check(args) -> None:
             raise InputError("--key: expected a signed fleet, got --no-signing as well")
         from runtime.comms.link import load_key
         load_key(args.key, "--key")
+    from runtime.comms.networks import EXPECTED, parse_network
+    for net in args.unsigned_gcs or ():
+        if not args.signing:
+            raise InputError("--unsigned-gcs: expected a signed fleet, got --no-signing as well (every frame is "
+                             "taken unsigned then)")
+        try:
+            parse_network(net)
+        except ValueError as exc:
+            raise InputError(f"--unsigned-gcs: expected {EXPECTED}, got {net!r} ({exc})") from None
     if args.instance:
         check_instance(FC.load_fleet(args.fleet), args.instance)

@@ -423,6 +423,55 @@ def test_pymavlink_stock_dialects_as_ground_station(mod):
     assert send(g2, v20, g2.mission_ack_encode(VEHICLE, 1, 0, 0)) == [] and not server.busy
 
 
+def test_a_home_line_as_mavproxy_sends_it_is_skipped_and_the_rest_renumbered(mod):
+    """MAVProxy's `wp load` sends a WPL file's home line as item 0 (current, NAV_WAYPOINT, MAV_FRAME_GLOBAL): the
+    vehicle keeps no home, so that item is skipped and the waypoints after it are items 0.. of the mission."""
+    from pymavlink import mavwp
+
+    loader = mavwp.MAVWPLoader()
+    loader.load("configs/missions/square_6.waypoints")
+    wps = [loader.wp(i) for i in range(loader.count())]
+    assert (wps[0].seq, wps[0].current, wps[0].frame, wps[0].command) == (0, 1, 0, 16)      # the home line
+    store = Store(OLD)
+    server = make_server(mod, store)
+    g = mod.MAVLink(None, srcSystem=GCS_ID, srcComponent=190)
+    replies_of(server, wire(g.mission_count_encode(VEHICLE, 1, len(wps)), g, mod), 0.0)
+    for wp in wps:
+        msg = g.mission_item_int_encode(VEHICLE, 1, wp.seq, wp.frame, wp.command, wp.current, wp.autocontinue,
+                                        wp.param1, wp.param2, wp.param3, wp.param4, int(wp.x * 1e7),
+                                        int(wp.y * 1e7), wp.z)
+        [ack] = [m for r in replies_of(server, wire(msg, g, mod), 0.0) for m in wire(r, server.mav, mod)]
+    assert (ack.get_type(), ack.type) == ("MISSION_ACK", M.ACCEPTED) and server.home_skipped
+    assert [it.seq for it in store.items] == list(range(len(wps) - 1))
+    assert [(it.x, it.y) for it in store.items] == [(pytest.approx(w.x), pytest.approx(w.y)) for w in wps[1:]]
+
+
+@pytest.mark.parametrize("current, frame, command", [(1, 3, 16), (1, 6, 16), (0, 0, 16), (1, 0, 17)],
+                         ids=["current-relative-alt", "current-relative-alt-int", "not-current", "loiter"])
+def test_an_item_0_that_is_no_home_line_is_kept(mod, current, frame, command):
+    """QGroundControl and MAVSDK mark their first waypoint current but in a relative-altitude frame; a download read
+    back marks nothing current: item 0 is a task then."""
+    store = Store()
+    server = make_server(mod, store)
+    g = mod.MAVLink(None, srcSystem=GCS_ID, srcComponent=190)
+    replies_of(server, wire(g.mission_count_encode(VEHICLE, 1, 2), g, mod), 0.0)
+    for seq in (0, 1):
+        msg = g.mission_item_int_encode(VEHICLE, 1, seq, frame if seq == 0 else 3, command if seq == 0 else 16,
+                                        current if seq == 0 else 0, 1, 0, 0, 0, 0, 337756000 + seq, -843963000, 0)
+        replies_of(server, wire(msg, g, mod), 0.0)
+    assert [it.seq for it in store.items] == [0, 1] and store.items[0].command == command
+    assert not server.home_skipped
+
+
+def test_our_client_marks_no_item_current_so_a_global_first_waypoint_is_kept(mod):
+    store = Store()
+    net = Net(mod, make_server(mod, store))
+    items = [MissionItem(0, 0, 16, x=33.7756, y=-84.3963), MissionItem(1, 3, 16, x=33.7757, y=-84.3963)]
+    c = start(net, net.add("gcs", make_client(mod)), "upload", items)
+    assert net.run(lambda: c.done) and c.result == M.ACCEPTED
+    assert store.items == on_wire(items, mod) and not net.server.home_skipped
+
+
 # ------------------------------------------------------------------------------------------ random input
 
 KINDS = ["mission_count", "mission_request_int", "mission_request", "mission_item_int", "mission_item",

@@ -137,7 +137,8 @@ class GroundServices:
         now = self.port.now
         if new:
             self._out += self.port.hand_in(new, now)
-        self._text(6, f"mission: {len(new)} task(s) added, {len(items) - len(new)} already known")
+        home = ", home item 0 skipped" if self.mission.home_skipped else ""
+        self._text(6, f"mission: {len(new)} task(s) added, {len(items) - len(new)} already known{home}")
         return self._plan_id()
 
     def _on_clear(self, mission_type: int) -> None:

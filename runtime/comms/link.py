@@ -31,6 +31,12 @@ the key can still be seen; it never counts as peer liveness.  Unsigned robot HEA
 frame are dropped and counted.  A refused frame cannot advance pymavlink's per-stream replay window (see
 :func:`signing_guard`).
 
+Ground stations that cannot sign (``unsigned_gcs``, the config's ``comms.unsigned_gcs``: networks in CIDR form): an
+unsigned frame from an address in one of those networks is taken if it is ground-station traffic: its system id is a
+ground station's (above ``MAX_ROBOT_ID``, so no robot's, peer or not) and its address is no peer's.  Anything else
+unsigned stays refused (``unsigned_dropped``) whatever the list says: peers always sign.  Unsigned frames taken this
+way are counted in ``unsigned_gcs_taken``.  The robot signs everything it sends either way.
+
 Keys never come from the network: a SETUP_SIGNING (MAVProxy's ``signing setup``, a peer, anyone) is refused
 whether it is signed with the fleet key or unsigned (``setup_signing_refused``; one with a wrong signature is
 ``bad_signature_dropped`` like any other), the key stays as it is, and the sender's address gets one STATUSTEXT
@@ -74,6 +80,7 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 from runtime.comms import codec, dialect, udp
+from runtime.comms.networks import Networks
 from runtime.errors import InputError
 from runtime.log import get_logger
 
@@ -221,6 +228,7 @@ class LinkCounters:
     agent_received: int = 0         # agent messages returned by poll
     heartbeats: int = 0             # HEARTBEATs taken (peers and ground stations)
     gcs_requests: int = 0           # ground-station frames queued for the services
+    unsigned_gcs_taken: int = 0     # of which unsigned, taken from a network in ``unsigned_gcs``
     frames_dropped: int = 0         # frames and runs of junk refused, in any datagram
     # sending
     sent: int = 0                   # datagrams sent (one per message and destination)
@@ -313,7 +321,8 @@ class MavlinkLink:
     def __init__(self, robot_id: int, listen: str, peers: Iterable[str], gcs: str | None = None,
                  signing_key: bytes | None = None, heartbeat_timeout: float = 3.0, *,
                  heartbeat_period: float = 1.0, wallclock: Callable[[], float] = time.time,
-                 peer_loss: float = 0.0, loss_burst: float = 0.0, loss_seed: int | None = None):
+                 peer_loss: float = 0.0, loss_burst: float = 0.0, loss_seed: int | None = None,
+                 unsigned_gcs: Iterable[str] = ()):
         if not 1 <= int(robot_id) <= 250:
             raise InputError(f"robot id: expected 1..250, got {robot_id!r}")
         if signing_key is not None and len(signing_key) != 32:
@@ -342,6 +351,11 @@ class MavlinkLink:
                                                         srcComponent=COMPONENT_ID)
         self.mav.robust_parsing = True
         self.signing = signing_key is not None
+        try:
+            self.unsigned_gcs = Networks(unsigned_gcs)
+        except ValueError as e:
+            raise InputError(f"comms.unsigned_gcs: expected a network in CIDR form ({e})") from None
+        self._unsigned_net = False        # the datagram being parsed comes from a network in unsigned_gcs
         if self.signing:
             s = self.mav.signing
             s.secret_key = bytes(signing_key)
@@ -520,6 +534,7 @@ class MavlinkLink:
     def feed(self, data: bytes, now: float, addr: tuple | None = None) -> list:
         """Parse one datagram; return the agent messages addressed to us.  Never raises.  The datagram is
         counted once: ``received`` if a frame in it was taken, else the first reason a frame was refused."""
+        self._unsigned_net = self.signing and addr in self.unsigned_gcs
         msgs, after = parse_datagram(self.mav, self.module, data)
         refused: list[str] = []
         out: list = []
@@ -543,9 +558,10 @@ class MavlinkLink:
         return out
 
     def _allow_unsigned(self, mav, msg_id: int) -> bool:
-        # only HEARTBEAT and SETUP_SIGNING get past pymavlink unsigned; _dispatch keeps a HEARTBEAT only if it is a
-        # GCS's, and refuses every SETUP_SIGNING (so the sender can be told why)
-        return msg_id in self._unsigned_ok
+        # only HEARTBEAT and SETUP_SIGNING get past pymavlink unsigned (anything, from an unsigned_gcs network);
+        # _dispatch keeps a HEARTBEAT only if it is a GCS's, refuses every SETUP_SIGNING (so the sender can be told
+        # why), and keeps any other unsigned frame only if it is ground-station traffic (_unsigned_refusal)
+        return self._unsigned_net or msg_id in self._unsigned_ok
 
     def _dispatch(self, m, now: float, addr=None) -> tuple[str | None, object]:
         """One decoded frame: (None if taken, else the counter of why it was refused; the agent message for us)."""
@@ -560,6 +576,11 @@ class MavlinkLink:
                 return "bad_signature_dropped", None
             self._refuse_key_change(m, now, addr)
             return "setup_signing_refused", None
+        unsigned = self.signing and not m.get_signed()
+        if unsigned and kind != "HEARTBEAT":
+            why = self._unsigned_refusal(m, addr)
+            if why is not None:
+                return why, None
         src = m.get_srcSystem()
         if self.signing and m.get_signed() and 1 <= src <= MAX_ROBOT_ID and m.get_link_id() != PEER_LINK:
             return "replayed_dropped", None       # a robot's frame to a ground station, replayed to us
@@ -576,6 +597,7 @@ class MavlinkLink:
             if len(self.gcs_inbox) >= MAX_GCS_INBOX:
                 return "gcs_overflow", None
             c.gcs_requests += 1
+            c.unsigned_gcs_taken += unsigned
             self._gcs_seen[addr] = now
             self.gcs_inbox.append((m if agent is None else agent, addr))
             return None, None
@@ -583,6 +605,17 @@ class MavlinkLink:
             return "not_for_us", None
         c.agent_received += 1
         return None, agent
+
+    def _unsigned_refusal(self, m, addr) -> str | None:
+        """Why an unsigned frame other than a HEARTBEAT (let through by ``_allow_unsigned`` only from an
+        ``unsigned_gcs`` network) is refused, or None if it is ground-station traffic: a ground station's system id
+        (no robot's: peers always sign) from an address that is no peer's."""
+        if self._badly_signed(m):
+            return "bad_signature_dropped"
+        if not (self._unsigned_net and m.get_srcSystem() > MAX_ROBOT_ID
+                and not any(addr[:2] == p[:2] for p in self._peers)):
+            return "unsigned_dropped"
+        return None
 
     def _badly_signed(self, m) -> bool:
         """A frame pymavlink let through only because its id may come unsigned (``_allow_unsigned``), though it is

@@ -23,6 +23,13 @@ timings (src/MissionManager/PlanManager.h: ``_ackTimeoutMilliseconds`` 1500, ``_
   MAV_MISSION_DENIED (common.xml: "Not accepting any mission commands from this communication partner").
 * fence and rally "missions" (MAV_MISSION_TYPE_FENCE/RALLY): this vehicle has none; downloads answer
   count 0, uploads of count > 0 are refused with MAV_MISSION_UNSUPPORTED, clears are accepted.
+* home: this vehicle (a generic autopilot) keeps no home item, but MAVProxy's ``wp load`` sends a WPL file's
+  home line as item 0, as it would to ArduPilot.  An uploaded item 0 that is marked current, is a
+  MAV_CMD_NAV_WAYPOINT and is in MAV_FRAME_GLOBAL (absolute altitude, or its _INT twin) is that home line
+  (:func:`is_home_item`): it is skipped and the items after it are renumbered from 0, as ``mrta mission upload``
+  skips it in a file.  QGroundControl and MAVSDK send no home to a generic autopilot (their waypoints are
+  relative-altitude ones), :class:`MissionClient` marks no item current, and downloads mark none either, so a
+  mission a station read back and uploads again keeps its item 0.
 
 MISSION_ITEM_INT coordinates (common.xml MISSION_ITEM_INT.x/.y: "local: x position in meters * 1e4,
 global: latitude in degrees * 10^7"; devguide "Frames & Positional Information"): in the global frames
@@ -73,6 +80,8 @@ GLOBAL_FRAMES = frozenset({0, 3, 5, 6, 10, 11})         # GLOBAL, GLOBAL_RELATIV
 LOCAL_FRAMES = frozenset({1, 4, 7, 8, 9, 12, 20, 21})   # LOCAL_NED/ENU/OFFSET_NED, BODY_*, LOCAL_FRD/FLU
 INT32_MAX = 2**31 - 1
 MAV_CMD_DO_JUMP = 177
+MAV_CMD_NAV_WAYPOINT = 16
+HOME_FRAMES = frozenset({0, 5})                         # MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_INT
 
 _TRANSFER_KINDS = ("MISSION_COUNT", "MISSION_REQUEST_LIST", "MISSION_CLEAR_ALL")
 
@@ -106,6 +115,13 @@ def decode_xy(n: int, frame: int) -> float:
         return math.nan
     scale = xy_scale(frame)
     return float(n) if scale == 1.0 else n / scale
+
+
+def is_home_item(msg) -> bool:
+    """Whether an uploaded MISSION_ITEM(_INT) is a home line as MAVProxy sends it (module docstring, home): seq 0,
+    current, MAV_CMD_NAV_WAYPOINT, MAV_FRAME_GLOBAL(_INT)."""
+    return (int(msg.seq) == 0 and int(msg.current) == 1 and int(msg.command) == MAV_CMD_NAV_WAYPOINT
+            and int(msg.frame) in HOME_FRAMES)
 
 
 def _nan_key(v: float):
@@ -216,6 +232,7 @@ class _Upload(_Transfer):
     deadline: float = 0.0
     retries: int = 0
     requested_at: float = -math.inf
+    home: bool = False            # item 0 was a home line: skipped
 
 
 @dataclass
@@ -260,6 +277,7 @@ class MissionServer:
         self.log = get_logger("comms.mission", self.system_id)
         self._xfer: _Upload | _Download | None = None
         self._last_upload: tuple | None = None   # (source, mission_type, count, final ack) to repeat it
+        self.home_skipped = False                 # the last upload's item 0 was a home line (is_home_item)
 
     # ------------------------------------------------------------------ public
     @property
@@ -394,6 +412,7 @@ class MissionServer:
             replies = [self._request(x, now)] if now - x.requested_at >= REREQUEST_GAP else []
             return "out_of_sequence", replies
         x.items.append(MissionItem.from_mavlink(msg))
+        x.home = x.home or is_home_item(msg)
         x.retries = 0
         if len(x.items) < x.count:
             return HANDLED, [self._request(x, now)]
@@ -425,6 +444,11 @@ class MissionServer:
     # ------------------------------------------------------------------ outcomes
     def _finish_upload(self, x: _Upload) -> Reply:
         items = list(x.items)
+        self.home_skipped = x.home
+        if x.home:
+            self.log.info("mission item 0 from %s is a home line (current, NAV_WAYPOINT, global frame): skipped",
+                          x.source)
+            items = [replace(it, seq=it.seq - 1) for it in items[1:]]
         try:
             verdict = self._validate(items)
             if verdict is not None:
@@ -695,8 +719,8 @@ class MissionClient:
                                              self.mission_type)
 
     def _item_msg(self, seq: int):
-        return self._upload[seq].to_mavlink_int(self.mav, self.target_system, self.target_component,
-                                                current=seq == 0)
+        # no item marked current: the vehicle would take a current global waypoint at seq 0 for a home line
+        return self._upload[seq].to_mavlink_int(self.mav, self.target_system, self.target_component)
 
     def _request_list(self):
         return self.mav.mission_request_list_encode(self.target_system, self.target_component,

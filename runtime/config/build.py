@@ -6,6 +6,10 @@ the CLI can print one line and exit 2.  Ranges and choices live in field metadat
 
     speed: float = field(default=0.3, metadata=rng(0.0, 0.5))
 
+and so does a string's parser (applied to each string of a list too)::
+
+    nets: tuple[str, ...] = field(default=(), metadata={"check": (parse_network, "a network in CIDR form")})
+
 A field may hold one of several dataclasses chosen by a key of its own mapping (a tagged union), e.g.
 ``base: {type: create_oi, ...}`` or ``allocation: {method: bs, ...}``.  The choices come from a
 registry (a callable returning ``{tag value: dataclass}``, called when a config is built, so the list
@@ -160,7 +164,7 @@ def _build(tp: Any, value: Any, file: str, key: str, meta: dict | None = None) -
         if not isinstance(value, (list, tuple)):
             raise ConfigError(file, key, _type_name(tp), value)
         if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_build(args[0], v, file, f"{key}[{i}]") for i, v in enumerate(value))
+            return tuple(_build(args[0], v, file, f"{key}[{i}]", meta) for i, v in enumerate(value))
         if len(value) != len(args):
             raise ConfigError(file, key, _type_name(tp), value)
         return tuple(_build(a, v, file, f"{key}[{i}]", meta) for i, (a, v) in enumerate(zip(args, value)))
@@ -217,6 +221,12 @@ def _build(tp: Any, value: Any, file: str, key: str, meta: dict | None = None) -
     if tp is str:
         if not isinstance(value, str):
             raise ConfigError(file, key, "a string", value)
+        check = (meta or {}).get("check")       # (parse, what is expected): parse raises ValueError saying why
+        if check is not None:
+            try:
+                check[0](value)
+            except ValueError as exc:
+                raise ConfigError(file, key, f"{check[1]} ({exc})", value) from None
         return value
     raise TypeError(f"unsupported config type {tp!r} at {key}")
 

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, Optional
 
+from runtime.comms.networks import EXPECTED as NETWORK, parse_network
 from runtime.config.build import _build, _read_yaml, deep_merge, rng, union_field
 from runtime.config.world import Datum
 
@@ -72,6 +73,8 @@ class CommsConfig:
     # s: mean length of a spell in which every datagram to a peer is lost (bursts); 0: each lost on its own
     loss_burst: float = field(default=0.0, metadata=rng(0.0, 3600.0))
     loss_seed: Optional[int] = field(default=None, metadata=rng(0, 2**32 - 1))   # of the loss draws; null: robot id
+    # networks (CIDR, IPv4 or IPv6) whose ground stations may send unsigned frames to a signed robot; peers still sign
+    unsigned_gcs: tuple[str, ...] = field(default=(), metadata={"check": (parse_network, NETWORK)})
 
 
 @dataclass(frozen=True)

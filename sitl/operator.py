@@ -142,6 +142,8 @@ class Operator:
             for seq in v.reached[self._reached.get(rid, 0):]:
                 listing = [tid for tid, r in sorted(gcs.table.items()) if STATE_NAMES.get(r.state) in ("open", "done")]
                 tid = listing[seq] if seq < len(listing) else None
+                if tid is not None and rid not in self._holders.get(tid, ()):
+                    continue        # a robot reporting the fleet's progress (an item another robot did)
                 self.trace.event(now, "arrived", tid, (rid,))
             self._reached[rid] = len(v.reached)
         for tid, r in gcs.table.items():

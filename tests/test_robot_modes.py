@@ -148,25 +148,43 @@ def test_message_intervals_are_set_and_read_back():
     assert r.seen("GPS_RAW_INT")[-1].fix_type == mod.GPS_FIX_TYPE_NO_GPS              # this robot has no GPS
 
 
+def _mavsdk_progress(msgs, total: int) -> tuple[list[int], bool]:
+    """MAVSDK mission_raw_impl.cpp: MISSION_ITEM_REACHED sets current = seq + 1 and last_reached = seq;
+    MISSION_CURRENT sets current = seq unless seq == last_reached; is_mission_finished = something reached and the
+    last mission_state COMPLETE.  Returns (the currents it would show, is_mission_finished)."""
+    current, last_reached, state, shown = -1, -1, 0, []
+    for m in msgs:
+        if _type(m) == "MISSION_ITEM_REACHED":
+            current, last_reached = m.seq + 1, m.seq
+        elif _type(m) == "MISSION_CURRENT":
+            if m.seq != last_reached:
+                current = m.seq
+            state = m.mission_state
+        else:
+            continue
+        shown.append(current)
+    return shown, current >= 0 and last_reached >= 0 and total > 0 and state == mod.MISSION_STATE_COMPLETE
+
+
 def test_mission_progress_counts_items_done_by_any_robot():
-    """MAVSDK's MissionRaw: MISSION_ITEM_REACHED sets the progress to seq + 1, MISSION_CURRENT.seq sets it, and
-    is_mission_finished needs one MISSION_ITEM_REACHED and MISSION_CURRENT COMPLETE.  Robot 1 does one task, its
-    peer the other: robot 1 reports both."""
+    """MAVSDK's progress and is_mission_finished from what robot 1 sends, while robot 1 does one task and its peer
+    the other (the later item first): robot 1 counts both, and never shows more done than are."""
     r = Rover(peers=(2,))
     r.core.port.hand_in([_goto_item(0.5, 0.0), _goto_item(-4.0, 0.0)], r.now)
     far = r.core.port.listing()[1]
-    r.core.node.set_armed(True, r.now)
     r.run(0.5)
     r.sent.clear()
     record = next(t for t in r.core.node.table.records(0) if t.task == far.id)
-    r.step(peers=[replace(record, sender=2, state=DONE)])              # robot 2 did the far one
-    assert [m.seq for m in r.seen("MISSION_ITEM_REACHED")] == [1]
+    r.step(peers=[replace(record, sender=2, state=DONE)])              # robot 2 did item 1
+    assert r.seen("MISSION_ITEM_REACHED") == []                         # seq 1 + 1 = 2 would be ahead of the truth
     current = r.seen("MISSION_CURRENT")[-1]
     assert (current.seq, current.total, current.mission_state) == (1, 2, mod.MISSION_STATE_ACTIVE)
-    r.run(15.0)
-    assert [m.seq for m in r.seen("MISSION_ITEM_REACHED")] == [1, 0]   # once each, whoever did it
+    r.run(15.0)                                                         # robot 1 does item 0
+    assert [m.seq for m in r.seen("MISSION_ITEM_REACHED")] == [0, 1]    # once each, whoever did it
     current = r.seen("MISSION_CURRENT")[-1]
     assert (current.seq, current.total, current.mission_state) == (2, 2, mod.MISSION_STATE_COMPLETE)
+    shown, finished = _mavsdk_progress([m for _, m in r.sent], 2)
+    assert shown == sorted(shown) and set(shown) == {1, 2} and finished
 
 
 def test_integer_parameters_are_int32_through_the_core():

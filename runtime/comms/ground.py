@@ -17,10 +17,11 @@ Frames: global (lat, lon) through the datum with pymap3d; MAV_FRAME_LOCAL_ENU (x
 MAV_FRAME_LOCAL_NED (x north, y east).  Positions are metres in the fleet frame from there on.
 
 Reports: the robot's :class:`~runtime.messages.RobotState` at 1 Hz (the fleet tasks it holds), and the fleet's
-mission progress as every robot knows it: MISSION_ITEM_REACHED once per item, when this robot arrives at it or when
-the fleet marks it done (whichever robot did it), then MISSION_CURRENT with ``seq`` = the items done (by any robot)
-and the fleet mission's state (COMPLETE once no item is open: MAVSDK's ``is_mission_finished``); MISSION_CURRENT
-also at 1 Hz; one STATUSTEXT per task awarded, done or failed.
+mission progress as every robot knows it: MISSION_CURRENT with ``seq`` = the items done (by any robot of the fleet)
+and the fleet mission's state (COMPLETE once no item is open: MAVSDK's ``is_mission_finished``), at 1 Hz and at
+once when the count changes; MISSION_ITEM_REACHED once per item done, by any robot, sent only once ``seq`` + 1
+items are done (MAVSDK shows seq + 1 as the progress, so it never runs ahead of the truth); one STATUSTEXT per task
+awarded, reached, done or failed.
 
 Modes (ArduPilot Rover numbers, as MAVSDK and MAVProxy send them: MAV_CMD_DO_SET_MODE with CUSTOM_MODE_ENABLED in
 param1 and the mode in param2, or the SET_MODE message): AUTO (10) takes tasks (the default; also
@@ -87,7 +88,6 @@ class GroundServices:
         self.gcs.register_command(m.MAV_CMD_DO_PAUSE_CONTINUE, self._pause_continue)
         self.gcs.register_command(m.MAV_CMD_SET_MESSAGE_INTERVAL, self._set_interval)
         self.gcs.register_command(m.MAV_CMD_GET_MESSAGE_INTERVAL, self._get_interval)
-        self.gcs.register_message(m.MAVLINK_MSG_ID_HOME_POSITION, self._home)
         for name in STREAMS:
             msg_id = getattr(m, "MAVLINK_MSG_ID_" + name)
             self.gcs.register_message(msg_id, lambda msg_id=msg_id: port.stream_message(msg_id))
@@ -95,6 +95,7 @@ class GroundServices:
         self._next_report = -math.inf
         self.reached: list[int] = []           # seqs reported reached (for tests and the trace)
         self._reached_ids: set[int] = set()    # tasks whose MISSION_ITEM_REACHED went out
+        self._done_reported = 0                # the items done that the last MISSION_CURRENT counted
         self._text_id = 0
         self._faults: tuple[str, ...] = ()     # the base's faults as last reported
         self._arm_after_reset = False
@@ -200,16 +201,6 @@ class GroundServices:
             return y, x
         return x, y
 
-    def _home(self):
-        """HOME_POSITION: where the robot started (its first pose), where RTL drives it; None before a pose."""
-        home = self.port.home
-        if home is None:
-            return None
-        d = self.port.datum
-        lat, lon, alt = pymap3d.enu2geodetic(home[0], home[1], 0.0, d.lat, d.lon, d.alt)
-        return self.mav.home_position_encode(int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
-                                             home[1], home[0], 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0)
-
     def _mode(self, mode: str, now: float) -> int:
         if mode == "rtl" and self.port.home is None:
             self._text(4, "RTL refused: no home yet (not localized)")
@@ -288,22 +279,21 @@ class GroundServices:
     def report(self, now: float) -> None:
         radio, port = self.radio, self.port
         self._base_faults(now)
-        listing = port.listing()
-        reached = []
         for n in port.pop_notices():
-            if n.reached_seq is not None and n.reached_seq < len(listing):
-                reached.append(n.reached_seq)                     # this robot arrived
             self._text(n.severity, n.text)
-        reached += [i for i, e in enumerate(listing) if e.state == DONE]       # done by any robot
-        new = False
-        for seq in reached:
-            if listing[seq].id not in self._reached_ids:
-                self._reached_ids.add(listing[seq].id)
-                self.reached.append(seq)
-                radio.send_gcs(self.mav.mission_item_reached_encode(seq))
-                new = True
-        if now < self._next_report and not new:
+        listing = port.listing()
+        done = sum(e.state == DONE for e in listing)
+        # MISSION_ITEM_REACHED once per item done, by any robot; MAVSDK takes seq + 1 as the progress, so an item
+        # goes out only once that many are done (no progress shown beyond the truth), in seq order, and
+        # MISSION_CURRENT (seq = the items done) follows at once
+        new = [i for i, e in enumerate(listing[:done]) if e.state == DONE and e.id not in self._reached_ids]
+        for seq in new:
+            self._reached_ids.add(listing[seq].id)
+            self.reached.append(seq)
+            radio.send_gcs(self.mav.mission_item_reached_encode(seq))
+        if now < self._next_report and done == self._done_reported:
             return
+        self._done_reported = done
         self._next_report = now + REPORT_PERIOD
         radio.send_gcs(port.robot_state())
         radio.send_gcs(self._mission_current(listing))

@@ -2,9 +2,10 @@
 
 Sent by :meth:`GcsTelemetry.tick` (system id = robot id, component 1):
 
-* 1 Hz: HEARTBEAT (MAV_TYPE_GROUND_ROVER, MAV_AUTOPILOT_ARDUPILOTMEGA), SYS_STATUS (battery, comm errors) and
-  GPS_RAW_INT (the robot's last GPS fix: fix type, satellites; GPS_FIX_TYPE_NO_GPS for a robot without a GPS,
-  NO_FIX while it has no valid fix of the last 2 s); (the robot's tasks go to the ground station as
+* 1 Hz: HEARTBEAT (MAV_TYPE_GROUND_ROVER, MAV_AUTOPILOT_ARDUPILOTMEGA), SYS_STATUS (battery, comm errors),
+  HOME_POSITION (where the robot started: its first pose, where RTL drives it, once it has a pose), GPS_RAW_INT
+  (the robot's last GPS fix: fix type, satellites; GPS_FIX_TYPE_NO_GPS for a robot without a GPS, NO_FIX while
+  it has no valid fix of the last 2 s); (the robot's tasks go to the ground station as
   MRTA_ROBOT_STATE, from :mod:`runtime.comms.ground`);
 * 5 Hz, once a pose exists: GLOBAL_POSITION_INT (pymap3d ENU -> geodetic around the datum), LOCAL_POSITION_NED
   (ENU -> NED: x north, y east, z down) and ATTITUDE (roll and pitch 0, yaw from the pose's heading, NED: 0 north,
@@ -71,8 +72,8 @@ SLOW_PERIOD = 1.0               # s: HEARTBEAT
 GPS_STALE = 2.0                 # s: a fix older than this is no fix
 MAX_RATE = 50.0                 # Hz: the fastest SET_MESSAGE_INTERVAL honoured
 # the streams and their default periods (s); SET_MESSAGE_INTERVAL changes them
-STREAMS = {"SYS_STATUS": 1.0, "GPS_RAW_INT": 1.0, "GLOBAL_POSITION_INT": 0.2, "LOCAL_POSITION_NED": 0.2,
-           "ATTITUDE": 0.2}
+STREAMS = {"SYS_STATUS": 1.0, "GPS_RAW_INT": 1.0, "HOME_POSITION": 1.0, "GLOBAL_POSITION_INT": 0.2,
+           "LOCAL_POSITION_NED": 0.2, "ATTITUDE": 0.2}
 POSE_STREAMS = ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "ATTITUDE")      # once a pose exists
 MODES = ("auto", "hold", "rtl")     # the operator's: take tasks / paused / return to launch
 
@@ -142,6 +143,7 @@ class GcsTelemetry:
         self.armed = bool(armed)
         self.mode = "auto"                       # the operator's mode (MODES)
         self.busy = False                        # the fleet has open tasks (its mission is running)
+        self.home: tuple[float, float] | None = None     # where the robot started (fleet frame; HOME_POSITION)
         self._fix = None                         # the last GPS fix
         self._yaw: tuple[float, float] | None = None     # (time, yaw) of the last ATTITUDE
         self._update_mode(None, NO_TASK, math.nan)
@@ -181,6 +183,8 @@ class GcsTelemetry:
             return self._sys_status(battery, self._remaining(battery), pose is not None, now)
         if name == "GPS_RAW_INT":
             return self._gps_raw(now)
+        if name == "HOME_POSITION":
+            return self._home()
         if pose is None or not all(_finite(v) for v in pose[:2]):
             return None
         if name == "ATTITUDE":
@@ -269,6 +273,17 @@ class GcsTelemetry:
             _clip(speed * 100, 0, 65534) if _finite(speed) else 65535,
             _clip(math.degrees(course) % 360.0 * 100, 0, 35999) if _finite(course) else 65535,
             min(sats, 254) if sats > 0 else 255)
+
+    def _home(self):
+        """HOME_POSITION: where the robot started (its first pose), where RTL drives it; None before a pose."""
+        if self.home is None:
+            return None
+        x, y = self.home
+        lat, lon, alt = pymap3d.enu2geodetic(x, y, 0.0, self.lat0, self.lon0, self.alt0)
+        return self.mav.home_position_encode(_clip(lat * 1e7, -900000000, 900000000),
+                                             _clip(lon * 1e7, -1800000000, 1800000000),
+                                             _clip(alt * 1000, -2**31, 2**31 - 1), y, x, 0.0, [1.0, 0.0, 0.0, 0.0],
+                                             0.0, 0.0, 0.0)
 
     def _attitude(self, now: float, pose):
         theta = pose[2] if len(pose) > 2 else math.nan

@@ -301,7 +301,7 @@ class RobotCore:
         self.radio.present = inbox.ground_present
         commitments = self.agent.commitments
         tel = self.telemetry
-        tel.armed, tel.mode = self.node.armed, self.mode
+        tel.armed, tel.mode, tel.home = self.node.armed, self.mode, self.home
         tel.busy = any(e.state == OPEN for e in self.node.table.listing())
         tel.tick(now, self.pose(), self.velocity(), self.sensors, commitments[0].task_id if commitments else None,
                  self._fixes)

@@ -125,6 +125,7 @@ async def app(port: int, datum) -> dict:
         seen["mode_idle"] = await first(tel.subscribe_flight_mode(), lambda m: m != FlightMode.UNKNOWN,
                                         what="a flight mode")
         seen["sys_armed"] = await within("get_param_int", param.get_param_int("SYS_ARMED"))
+        seen["cruise"] = await within("get_param_float", param.get_param_float("CTL_CRUISE_SPD"))
         await within("arm", action.arm())
         seen["armed"] = await first(tel.subscribe_armed(), lambda a: a, what="armed")
         items = []
@@ -193,7 +194,7 @@ def test_a_mavsdk_app_runs_a_fleet_mission_to_the_end(fleet):
     assert seen["gps"].fix_type in (FixType.FIX_3D, FixType.FIX_2D) and seen["gps"].num_satellites > 0
     h = seen["health"]
     assert h.is_gyrometer_calibration_ok and h.is_accelerometer_calibration_ok and h.is_magnetometer_calibration_ok
-    assert seen["mode_idle"] == FlightMode.HOLD and seen["sys_armed"] == 1
+    assert seen["mode_idle"] == FlightMode.HOLD and seen["sys_armed"] == 1 and 0.0 < seen["cruise"] <= 0.5
     # the mission: progress counts what the fleet did, to the end
     assert seen["progress"][-1] == (len(GOALS), len(GOALS)), seen["progress"]
     assert seen["finished"] is True

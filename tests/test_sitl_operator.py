@@ -10,6 +10,7 @@ import subprocess
 import sys
 import time
 
+import pymap3d
 import pytest
 
 from sitl import launcher
@@ -279,7 +280,9 @@ def test_a_ground_station_connects_and_the_cruise_speed_it_sets_is_driven(tmp_pa
         seen = ask("HOME_POSITION", lambda: g.mav.command_long_send(1, 1, MAV.MAV_CMD_GET_HOME_POSITION, 0, 0, 0, 0, 0,
                                                                      0, 0, 0),
                    lambda m: m.get_type() == "HOME_POSITION")
-        assert (seen[-1].latitude, seen[-1].longitude) == (337756000, -843963000)     # the datum
+        home = seen[-1]                                                 # where robot 1 started: (-2, -2) m
+        e, n, _ = pymap3d.geodetic2enu(home.latitude / 1e7, home.longitude / 1e7, 0.0, 33.7756, -84.3963, 0.0)
+        assert (e, n) == (pytest.approx(-2.0, abs=0.3), pytest.approx(-2.0, abs=0.3))
 
         seen = ask("PARAM_REQUEST_LIST", lambda: g.mav.param_request_list_send(1, 1),
                    lambda m: m.get_type() == "PARAM_VALUE")

@@ -117,7 +117,8 @@ def test_return_to_launch_drives_home_and_home_position_says_where_that_is():
     assert r.command(mod.MAV_CMD_NAV_RETURN_TO_LAUNCH) == mod.MAV_RESULT_ACCEPTED       # MAV_CMD form: already
 
 
-@pytest.mark.parametrize("base, custom", [(CUSTOM, MANUAL), (CUSTOM, 15), (0, AUTO), (CUSTOM, 10.5)])
+@pytest.mark.parametrize("base, custom", [(CUSTOM, MANUAL), (CUSTOM, 15), (0, AUTO), (CUSTOM, 10.5),
+                                          (CUSTOM, float("nan")), (float("inf"), AUTO)])
 def test_modes_the_robot_does_not_have_are_denied_with_a_reason(base, custom):
     r = Rover()
     assert r.command(mod.MAV_CMD_DO_SET_MODE, base, custom) == mod.MAV_RESULT_DENIED
@@ -144,6 +145,9 @@ def test_message_intervals_are_set_and_read_back():
     assert r.command(mod.MAV_CMD_SET_MESSAGE_INTERVAL, mod.MAVLINK_MSG_ID_HEARTBEAT, 1e5) == \
         mod.MAV_RESULT_UNSUPPORTED
     assert r.command(mod.MAV_CMD_SET_MESSAGE_INTERVAL, mod.MAVLINK_MSG_ID_ATTITUDE, -3) == mod.MAV_RESULT_DENIED
+    assert r.command(mod.MAV_CMD_SET_MESSAGE_INTERVAL, mod.MAVLINK_MSG_ID_ATTITUDE, float("nan")) == \
+        mod.MAV_RESULT_DENIED
+    assert r.command(mod.MAV_CMD_GET_MESSAGE_INTERVAL, float("nan")) == mod.MAV_RESULT_UNSUPPORTED
     assert r.command(mod.MAV_CMD_REQUEST_MESSAGE, mod.MAVLINK_MSG_ID_GPS_RAW_INT) == mod.MAV_RESULT_ACCEPTED
     assert r.seen("GPS_RAW_INT")[-1].fix_type == mod.GPS_FIX_TYPE_NO_GPS              # this robot has no GPS
 

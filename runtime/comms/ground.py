@@ -44,7 +44,7 @@ import pymap3d
 
 from runtime import tasks as T
 from runtime.comms import mission as M
-from runtime.comms.gcs_services import GcsServices
+from runtime.comms.gcs_services import GcsServices, _whole
 from runtime.comms.params import Param, ParamTable
 from runtime.comms.telemetry import STREAMS
 from runtime.messages import DONE, OPEN, TableRequest
@@ -210,10 +210,11 @@ class GroundServices:
 
     def _rover_mode(self, base_mode, custom_mode, now: float) -> int:
         """A mode change as DO_SET_MODE and SET_MODE carry it: CUSTOM_MODE_ENABLED and a Rover mode number."""
-        base, custom = float(base_mode), float(custom_mode)
-        mode = ROVER_MODES.get(int(custom)) if custom == int(custom) else None
-        if not int(base) & CUSTOM_MODE_ENABLED or mode is None:
-            self._text(4, f"mode {custom:g} refused: the robot takes AUTO 10, HOLD 4, RTL 11 (custom modes)")
+        base, custom = _whole(base_mode), _whole(custom_mode)
+        mode = ROVER_MODES.get(custom)
+        if base is None or not base & CUSTOM_MODE_ENABLED or mode is None:
+            self._text(4, f"mode {float(custom_mode):g} refused: the robot takes AUTO 10, HOLD 4, RTL 11 "
+                          "(custom modes)")
             return MAV_RESULT_DENIED
         return self._mode(mode, now)
 
@@ -235,18 +236,17 @@ class GroundServices:
         return self._mode("auto" if p1 == 1.0 else "hold", now)
 
     def _set_interval(self, msg, now: float) -> int:
-        msg_id = float(msg.param1)
-        if msg_id != int(msg_id) or self.port.message_interval(int(msg_id)) is None:
+        msg_id = _whole(msg.param1)
+        if msg_id is None or self.port.message_interval(msg_id) is None:
             return self.m.MAV_RESULT_UNSUPPORTED
-        return MAV_RESULT_ACCEPTED if self.port.set_message_interval(int(msg_id), float(msg.param2)) \
-            else MAV_RESULT_DENIED
+        return MAV_RESULT_ACCEPTED if self.port.set_message_interval(msg_id, float(msg.param2)) else MAV_RESULT_DENIED
 
     def _get_interval(self, msg, now: float):
-        msg_id = float(msg.param1)
-        us = self.port.message_interval(int(msg_id)) if msg_id == int(msg_id) else None
+        msg_id = _whole(msg.param1)
+        us = None if msg_id is None else self.port.message_interval(msg_id)
         if us is None:
             return self.m.MAV_RESULT_UNSUPPORTED
-        return MAV_RESULT_ACCEPTED, [self.mav.message_interval_encode(int(msg_id), us)]
+        return MAV_RESULT_ACCEPTED, [self.mav.message_interval_encode(msg_id, us)]
 
     def _arm_disarm(self, msg, now: float) -> int:
         p1 = float(msg.param1)

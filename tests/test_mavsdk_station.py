@@ -24,7 +24,7 @@ from mavsdk.plugins.mission_raw import MissionItem  # noqa: E402
 from mavsdk.plugins.telemetry import FixType, FlightMode  # noqa: E402
 
 from sitl import launcher  # noqa: E402
-from tests.sitl_util import shipped_fleet  # noqa: E402
+from tests.sitl_util import port_block, shipped_fleet  # noqa: E402
 
 GOALS = [(-1.0, -2.0), (-1.0, 2.0), (-2.0, 0.0)]            # fleet frame (m, ENU)
 START = {1: (-2.0, -2.0), 2: (-2.0, 2.0)}                    # the two robots, facing east
@@ -53,12 +53,26 @@ class Stepper:
         self.thread.join(timeout=30)
 
 
+def _build(tmp_path):
+    """The unsigned two-robot fleet, lock-stepped, on free ports away from the block other SITL tests search first
+    (an unsigned robot takes any frame sent to its port); a block taken between the search and the bind: another."""
+    from runtime.errors import InputError
+
+    for attempt in range(3):
+        path = shipped_fleet(tmp_path, "operator_4.yaml", ports_from=port_block(22600) + 40 * attempt,
+                             robots=[{"id": rid, "start": [x, y, 0.0]} for rid, (x, y) in START.items()])
+        f = launcher.build(path, tmp_path / f"run{attempt}", signing=False)
+        try:
+            return f, launcher.Lockstep(f)
+        except InputError as e:
+            f.close()
+            if "Address already in use" not in str(e) or attempt == 2:
+                raise
+
+
 @pytest.fixture
 def fleet(tmp_path):
-    path = shipped_fleet(tmp_path, "operator_4.yaml", robots=[{"id": rid, "start": [x, y, 0.0]}
-                                                                 for rid, (x, y) in START.items()])
-    f = launcher.build(path, tmp_path / "run", signing=False)
-    run = launcher.Lockstep(f)
+    f, run = _build(tmp_path)
     stepper = Stepper(run)
     try:
         yield f, stepper

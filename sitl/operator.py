@@ -17,7 +17,7 @@ import math
 
 from runtime.comms.gcs import GroundStation
 from runtime.comms.mission import ACCEPTED, result_name
-from runtime.messages import ALLOCATING, DONE, STATE_NAMES
+from runtime.messages import ALLOCATING, DONE
 from runtime.log import get_logger
 from sitl.run_trace import RobotTrack, RunTrace, TaskMark
 from sitl.scenarios.base import match_tasks
@@ -139,11 +139,9 @@ class Operator:
                         self.trace.event(now, "awarded", t, (rid,))
                         self._holders[t] = tuple(sorted(set(self._holders.get(t, ())) | {rid}))
                 self._held[rid] = v.tasks
-            for seq in v.reached[self._reached.get(rid, 0):]:
-                listing = [tid for tid, r in sorted(gcs.table.items()) if STATE_NAMES.get(r.state) in ("open", "done")]
-                tid = listing[seq] if seq < len(listing) else None
-                self.trace.event(now, "arrived", tid, (rid,))
-            self._reached[rid] = len(v.reached)
+            for tid in v.arrived[self._reached.get(rid, 0):]:     # its own arrivals (every robot reports
+                self.trace.event(now, "arrived", tid, (rid,))       # every item done as MISSION_ITEM_REACHED)
+            self._reached[rid] = len(v.arrived)
         for tid, r in gcs.table.items():
             if tid not in self.trace.tasks:
                 self._mark(tid, r, now)

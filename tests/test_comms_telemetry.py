@@ -85,7 +85,7 @@ def test_stock_pymavlink_client_sees_a_ground_rover_that_moves(key):
         hb = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=5)
         assert hb is not None
         assert hb.type == mavutil.mavlink.MAV_TYPE_GROUND_ROVER
-        assert hb.autopilot == mavutil.mavlink.MAV_AUTOPILOT_GENERIC
+        assert hb.autopilot == mavutil.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
         assert hb.get_srcSystem() == 7 and hb.get_srcComponent() == 1
         p1 = conn.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=5)
         tel.tick(0.2, (25.0, -40.0, 0.0), (0.0, 0.0), BATTERY, None)
@@ -103,11 +103,12 @@ def test_rates_over_ten_seconds_of_injected_time(make, gcs):
     link, tel = make()
     for i in range(200):                                          # 20 Hz for 10 s
         tel.tick(i * 0.05, (1.0, 2.0, 0.5), (0.1, 0.0), BATTERY, 4)
-    got = gcs.receive(10 * 2 + 50 * 2)
+    got = gcs.receive(10 * 3 + 50 * 3)
     counts: dict[str, int] = {}
     for m in got:
         counts[m.get_type()] = counts.get(m.get_type(), 0) + 1
-    assert counts == {"HEARTBEAT": 10, "SYS_STATUS": 10, "GLOBAL_POSITION_INT": 50, "LOCAL_POSITION_NED": 50}
+    assert counts == {"HEARTBEAT": 10, "SYS_STATUS": 10, "GPS_RAW_INT": 10, "GLOBAL_POSITION_INT": 50,
+                      "LOCAL_POSITION_NED": 50, "ATTITUDE": 50}
 
 
 def test_positions_are_geodetic_and_ned(make, gcs):
@@ -179,7 +180,7 @@ def test_the_link_heartbeat_is_right_before_the_first_tick(make):
 
 def _heartbeat(gcs, tel, now, pose, status, battery=BATTERY):
     tel.tick(now, pose, (0.0, 0.0), battery, status)
-    got = {m.get_type(): m for m in gcs.receive(5)}
+    got = {m.get_type(): m for m in gcs.receive(6 if pose is not None else 3)}     # + GPS_RAW_INT, ATTITUDE
     return got["HEARTBEAT"], got["SYS_STATUS"]
 
 
@@ -315,3 +316,107 @@ def test_no_gcs_means_nothing_sent():
         assert tel.sent == {} and link.counters.sent == 0
     finally:
         link.close()
+
+
+# ---------------------------------------------------------------------- what MAVSDK reads
+
+def _mavsdk_health(s) -> dict:
+    """MAVSDK telemetry_impl.cpp process_sys_status: a calibration is set only from a present bit (false until
+    then); global position = GPS present and healthy; local position = that, optical flow or vision."""
+    m = dialect.load()
+    health = {"gyro": False, "accel": False, "mag": False}
+    for key, bit in (("gyro", m.MAV_SYS_STATUS_SENSOR_3D_GYRO), ("accel", m.MAV_SYS_STATUS_SENSOR_3D_ACCEL),
+                     ("mag", m.MAV_SYS_STATUS_SENSOR_3D_MAG)):
+        if s.onboard_control_sensors_present & bit:
+            health[key] = bool(s.onboard_control_sensors_health & bit)
+    gps = m.MAV_SYS_STATUS_SENSOR_GPS
+    health["global"] = bool(s.onboard_control_sensors_present & gps and s.onboard_control_sensors_health & gps)
+    return health
+
+
+class _Fix:
+    def __init__(self, t, valid=True, quality=1, sats=9):
+        self.t, self.valid, self.fix_quality, self.num_sats = t, valid, quality, sats
+        self.lat, self.lon, self.alt = DATUM.lat + 1e-5, DATUM.lon, 301.5
+        self.hdop, self.speed, self.course = 0.9, 0.25, math.radians(90)
+
+
+def test_attitude_gps_and_health_as_mavsdk_reads_them(gcs):
+    link = MavlinkLink(3, "127.0.0.1:0", [], gcs.address)
+    try:
+        mod = link.module
+        tel = GcsTelemetry(link, 3, DATUM, gps=True)
+        got = {m.get_type(): m for m in _tick(gcs, tel, 0.0, (1.0, 2.0, math.radians(30)), ())}
+        a = got["ATTITUDE"]
+        assert (a.roll, a.pitch) == (0.0, 0.0) and a.yaw == pytest.approx(math.radians(60))     # NED: 060
+        g = got["GPS_RAW_INT"]
+        assert (g.fix_type, g.satellites_visible) == (mod.GPS_FIX_TYPE_NO_FIX, 0)              # no fix yet
+        assert _mavsdk_health(got["SYS_STATUS"]) == {"gyro": True, "accel": True, "mag": True, "global": False}
+        got = {m.get_type(): m for m in _tick(gcs, tel, 1.0, (1.0, 2.0, math.radians(20)), [_Fix(0.9)])}
+        g = got["GPS_RAW_INT"]
+        assert (g.fix_type, g.satellites_visible, g.eph, g.vel, g.cog) == (mod.GPS_FIX_TYPE_3D_FIX, 9, 90, 25, 9000)
+        assert (g.lat, g.alt) == (round((DATUM.lat + 1e-5) * 1e7), 301500)
+        assert _mavsdk_health(got["SYS_STATUS"])["global"] is True
+        assert got["ATTITUDE"].yawspeed == pytest.approx(math.radians(10), rel=1e-3)       # turning clockwise
+        got = {m.get_type(): m for m in _tick(gcs, tel, 4.0, (1.0, 2.0, 0.0), ())}            # the fix is stale
+        assert got["GPS_RAW_INT"].fix_type == mod.GPS_FIX_TYPE_NO_FIX
+        assert _mavsdk_health(got["SYS_STATUS"])["global"] is False
+    finally:
+        link.close()
+
+
+def _tick(gcs, tel, now, pose, fixes):
+    tel._slow.next = None
+    for every in tel.streams.values():
+        every.next = None                        # every stream due: one of each
+    tel.tick(now, pose, (0.0, 0.0), BATTERY, None, fixes)
+    return gcs.receive(6)
+
+
+def test_a_robot_without_gps_says_so(make, gcs):
+    link, tel = make()
+    tel.tick(0.0, (0.0, 0.0, 0.0), (0.0, 0.0), BATTERY, None)
+    got = {m.get_type(): m for m in gcs.receive(6)}
+    assert got["GPS_RAW_INT"].fix_type == link.module.GPS_FIX_TYPE_NO_GPS
+    assert not got["SYS_STATUS"].onboard_control_sensors_present & link.module.MAV_SYS_STATUS_SENSOR_GPS
+
+
+def test_set_message_interval_changes_a_stream_and_get_reads_it(make, gcs):
+    link, tel = make()
+    m = link.module
+    assert tel.interval(m.MAVLINK_MSG_ID_ATTITUDE) == 200000
+    assert tel.set_interval(m.MAVLINK_MSG_ID_ATTITUDE, 500000)                  # 2 Hz
+    assert tel.set_interval(m.MAVLINK_MSG_ID_GPS_RAW_INT, -1)                   # off
+    assert tel.set_interval(m.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 1000)          # 1 kHz asked: 50 Hz given
+    assert tel.interval(m.MAVLINK_MSG_ID_LOCAL_POSITION_NED) == 20000
+    assert not tel.set_interval(m.MAVLINK_MSG_ID_HEARTBEAT, 100000)             # not a stream here
+    assert not tel.set_interval(m.MAVLINK_MSG_ID_ATTITUDE, -5)
+    assert tel.interval(m.MAVLINK_MSG_ID_HEARTBEAT) is None and tel.interval(99999) is None
+    for i in range(100):                                                        # 100 Hz for 1 s
+        tel.tick(i * 0.01, (1.0, 2.0, 0.5), (0.1, 0.0), BATTERY, 4)
+    counts: dict[str, int] = {}
+    for msg in gcs.receive(1 + 1 + 2 + 5 + 50):
+        counts[msg.get_type()] = counts.get(msg.get_type(), 0) + 1
+    assert counts == {"HEARTBEAT": 1, "SYS_STATUS": 1, "ATTITUDE": 2, "GLOBAL_POSITION_INT": 5,
+                      "LOCAL_POSITION_NED": 50}
+    assert tel.set_interval(m.MAVLINK_MSG_ID_GPS_RAW_INT, 0)                    # 0: back to the default
+    assert tel.interval(m.MAVLINK_MSG_ID_GPS_RAW_INT) == 1000000
+
+
+@pytest.mark.parametrize("mode, armed, task, busy, want, mavsdk", [
+    ("auto", True, None, True, "AUTO", "Mission"),            # the fleet's mission runs: this robot bids for it
+    ("auto", True, None, False, "HOLD", "Hold"),              # nothing to do
+    ("hold", True, None, True, "HOLD", "Hold"),               # paused by the operator
+    ("rtl", True, None, True, "RTL", "ReturnToLaunch"),
+    ("rtl", False, None, False, "RTL", "ReturnToLaunch"),
+])
+def test_operator_modes_read_the_same_in_mavproxy_and_mavsdk(make, gcs, mode, armed, task, busy, want, mavsdk):
+    from pymavlink import mavutil
+
+    link, tel = make()
+    tel.mode, tel.armed, tel.busy = mode, armed, busy
+    hb, _ = _heartbeat(gcs, tel, 0.0, POSE, task)
+    assert hb.autopilot == link.module.MAV_AUTOPILOT_ARDUPILOTMEGA
+    assert mavutil.mode_string_v10(hb) == want
+    # MAVSDK flight_mode.cpp to_flight_mode_from_ardupilot_rover_mode
+    assert {10: "Mission", 4: "Hold", 11: "ReturnToLaunch", 0: "Manual", 15: "Offboard"}[hb.custom_mode] == mavsdk

@@ -158,27 +158,33 @@ def test_the_installed_package_version_is_the_projects():
 
 # ---------------------------------------------------------------------- parameters
 
-def qgc_reads(m) -> float:
-    """QGC ParameterManager for a non-ArduPilot vehicle: the float's bytes read as the declared type."""
+def cast_reads(m) -> float:
+    """How MAVSDK (ParamValue::set_from_mavlink_param_value_cast), QGC's APM plugin and MAVProxy
+    (handle_px4_param_value for a non-PX4 autopilot) read a PARAM_VALUE of an ArduPilot vehicle: the number,
+    converted to the declared type."""
+    conv = {mod.MAV_PARAM_TYPE_REAL32: float, mod.MAV_PARAM_TYPE_INT32: int}[m.param_type]
+    return conv(m.param_value)
+
+
+def bytewise_reads(m) -> float:
+    """QGC's (and MAVSDK's) reading for a vehicle that is not ArduPilot: the float's bytes as the declared type."""
     raw = struct.pack("<f", m.param_value)
-    fmt = {mod.MAV_PARAM_TYPE_REAL32: "<f", mod.MAV_PARAM_TYPE_INT32: "<i", mod.MAV_PARAM_TYPE_UINT32: "<I",
-           mod.MAV_PARAM_TYPE_INT16: "<h", mod.MAV_PARAM_TYPE_UINT16: "<H", mod.MAV_PARAM_TYPE_INT8: "<b",
-           mod.MAV_PARAM_TYPE_UINT8: "<B"}[m.param_type]
-    return struct.unpack(fmt, raw[:struct.calcsize(fmt)])[0]
+    fmt = {mod.MAV_PARAM_TYPE_REAL32: "<f", mod.MAV_PARAM_TYPE_INT32: "<i"}[m.param_type]
+    return struct.unpack(fmt, raw)[0]
 
 
-def mavproxy_reads(m) -> float:
-    """MAVProxy handle_px4_param_value for a MAV_AUTOPILOT_GENERIC vehicle: param_value as it is."""
-    return m.param_value
-
-
-def test_both_stock_gcs_read_every_value_right(svc, gcs):
+def test_integers_travel_as_int32_c_cast_and_every_stock_gcs_reads_them(svc, gcs):
     svc.values.update(CTL_CRUISE_SPD=1.75, ALLOC_RETRIES=7)
     ask(svc, gcs, gcs.tx.param_request_list_encode(ROBOT, 0))
     values = {v.param_id: v for v in drain(svc, gcs)}
+    assert values["CTL_CRUISE_SPD"].param_type == mod.MAV_PARAM_TYPE_REAL32
+    assert values["ALLOC_RETRIES"].param_type == mod.MAV_PARAM_TYPE_INT32      # MAVSDK get_param_int needs it
     for name, want in (("CTL_CRUISE_SPD", 1.75), ("ALLOC_RETRIES", 7)):
-        assert values[name].param_type == mod.MAV_PARAM_TYPE_REAL32
-        assert qgc_reads(values[name]) == mavproxy_reads(values[name]) == want
+        assert cast_reads(values[name]) == want
+    assert values["ALLOC_RETRIES"].param_value == 7.0                        # C-cast, not the bytes of int 7
+    assert bytewise_reads(values["ALLOC_RETRIES"]) != 7                      # why the autopilot must say ArduPilot
+    (v,) = ask(svc, gcs, gcs.tx.param_set_encode(ROBOT, COMP, b"ALLOC_RETRIES", 4.0, mod.MAV_PARAM_TYPE_INT32))
+    assert svc.values["ALLOC_RETRIES"] == 4 and cast_reads(v) == 4 and v.param_type == mod.MAV_PARAM_TYPE_INT32
 
 
 def test_a_long_list_is_spread_over_ticks(gcs):

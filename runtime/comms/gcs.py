@@ -26,6 +26,7 @@ flood made the kernel drop) and every refused frame in ``frames_dropped``:
 from __future__ import annotations
 
 import math
+import re
 import socket
 import time
 from collections import deque
@@ -42,6 +43,7 @@ from runtime.log import get_logger
 GCS_SYSTEM, GCS_COMPONENT = 255, 190      # MAVProxy's and QGC's ground-station ids
 HEARTBEAT_PERIOD = 1.0
 MAX_TEXTS = 1000          # STATUSTEXT lines kept per robot
+REACHED_TEXT = re.compile(r"task (\d{1,5})\.(\d{1,5}) reached\Z")      # a robot arrived at a fleet task
 MAX_CHUNKED = 8           # chunked STATUSTEXT lines being reassembled per robot
 
 
@@ -76,7 +78,8 @@ class RobotView:
     tasks: tuple[int, ...] = ()        # fleet task ids it holds
     heard: float = -math.inf           # when its last RobotState came
     messages: int = 0
-    reached: list[int] = field(default_factory=list)
+    reached: list[int] = field(default_factory=list)     # MISSION_ITEM_REACHED seqs: the fleet's items done
+    arrived: list[int] = field(default_factory=list)     # fleet task ids this robot said it reached (STATUSTEXT)
     texts: deque = field(default_factory=lambda: deque(maxlen=MAX_TEXTS))      # (time, line)
     chunks: dict[int, dict[int, str]] = field(default_factory=dict)   # STATUSTEXT id -> chunk_seq -> text
     current: int | None = None         # MISSION_CURRENT.seq
@@ -189,6 +192,9 @@ class GroundStation:
         key = getattr(m, "id", 0)
         if not key:
             view.texts.append((self.now, text))
+            arrived = REACHED_TEXT.match(text)            # the robot's own arrival (runtime.fleet.node's notice)
+            if arrived:
+                view.arrived.append(int(arrived[1]) << 16 | int(arrived[2]))
             return
         if key not in view.chunks and len(view.chunks) >= MAX_CHUNKED:
             del view.chunks[next(iter(view.chunks))]          # the oldest line never finished

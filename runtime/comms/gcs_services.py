@@ -46,7 +46,7 @@ from dataclasses import dataclass, fields
 from typing import Callable
 
 from runtime.comms import ftp_nack
-from runtime.comms.params import ENCODING_CAPABILITY, MAV_PARAM_TYPE_REAL32, ParamTable
+from runtime.comms.params import ENCODING_CAPABILITY, ParamTable
 from runtime.errors import InputError
 from runtime.log import get_logger
 
@@ -173,8 +173,9 @@ class GcsServices:
 
     # ------------------------------------------------------------------ registries
     def register_command(self, cmd_id: int, handler: Callable) -> None:
-        """Serve MAV_CMD ``cmd_id``: ``handler(msg, now) -> MAV_RESULT`` (msg is the COMMAND_LONG or
-        COMMAND_INT).  The COMMAND_ACK is sent for it; a handler that raises is acked FAILED."""
+        """Serve MAV_CMD ``cmd_id``: ``handler(msg, now) -> MAV_RESULT`` or ``(MAV_RESULT, [messages])`` (msg is
+        the COMMAND_LONG or COMMAND_INT; the messages follow the COMMAND_ACK).  A handler that raises is acked
+        FAILED."""
         if int(cmd_id) in self._builtin_commands:
             raise ValueError(f"MAV_CMD {cmd_id} is served by GcsServices itself")
         self.commands[int(cmd_id)] = handler
@@ -255,10 +256,13 @@ class GcsServices:
         except Exception as e:
             self.log.warning("MAV_CMD %d handler failed: %r", cmd, e)
             return m.MAV_RESULT_FAILED, []
+        extra = []
+        if isinstance(result, tuple) and len(result) == 2 and isinstance(result[1], list):
+            result, extra = result                   # a MAV_RESULT and the messages that follow the ack
         if isinstance(result, bool) or not isinstance(result, int) or result not in self._results:
             self.log.warning("MAV_CMD %d handler returned %r, not a MAV_RESULT", cmd, result)
             return m.MAV_RESULT_FAILED, []
-        return result, []
+        return result, extra
 
     def _request_capabilities(self, msg) -> tuple[int, list]:
         return self.m.MAV_RESULT_ACCEPTED, [self.autopilot_version()]
@@ -307,7 +311,7 @@ class GcsServices:
     def _param_value(self, i: int):
         p = self.params.by_index(i)
         self.stats.param_values += 1
-        return self.mav.param_value_encode(p.name.encode("ascii"), self.params.value(p), MAV_PARAM_TYPE_REAL32,
+        return self.mav.param_value_encode(p.name.encode("ascii"), self.params.value(p), self.params.wire_type(p),
                                            len(self.params), i)
 
     def _status(self, severity: int, text: str):

@@ -16,9 +16,18 @@ item's ``seq`` is its place there), in the frame each was uploaded in.
 Frames: global (lat, lon) through the datum with pymap3d; MAV_FRAME_LOCAL_ENU (x east, y north);
 MAV_FRAME_LOCAL_NED (x north, y east).  Positions are metres in the fleet frame from there on.
 
-Reports: the robot's :class:`~runtime.messages.RobotState` at 1 Hz (the fleet tasks it holds),
-MISSION_CURRENT at 1 Hz (the seq of the task it works on, or the task count when idle),
-MISSION_ITEM_REACHED when it arrives at a task, and one STATUSTEXT per task awarded, done or failed.
+Reports: the robot's :class:`~runtime.messages.RobotState` at 1 Hz (the fleet tasks it holds), and the fleet's
+mission progress as every robot knows it: MISSION_CURRENT with ``seq`` = the items done (by any robot of the fleet)
+and the fleet mission's state (COMPLETE once no item is open: MAVSDK's ``is_mission_finished``), at 1 Hz and at
+once when the count changes; MISSION_ITEM_REACHED once per item done, by any robot, sent only once ``seq`` + 1
+items are done (MAVSDK shows seq + 1 as the progress, so it never runs ahead of the truth); one STATUSTEXT per task
+awarded, reached, done or failed.
+
+Modes (ArduPilot Rover numbers, as MAVSDK and MAVProxy send them: MAV_CMD_DO_SET_MODE with CUSTOM_MODE_ENABLED in
+param1 and the mode in param2, or the SET_MODE message): AUTO (10) takes tasks (the default; also
+MAV_CMD_MISSION_START and DO_PAUSE_CONTINUE 1), HOLD (4) pauses the robot: it stops and its tasks go back to the
+fleet, which goes on without it (also DO_PAUSE_CONTINUE 0), RTL (11) hands its tasks back and drives to its home,
+where it started (also MAV_CMD_NAV_RETURN_TO_LAUNCH).  Other modes are DENIED with a STATUSTEXT.
 
 Base faults (``base.sensors.faults``, e.g. ``left_drive_silent``): a STATUSTEXT (CRITICAL) naming each new one;
 a base that latches its faults (``latches_faults``: it stands until reset) also disarms the robot, so its tasks go
@@ -35,9 +44,10 @@ import pymap3d
 
 from runtime import tasks as T
 from runtime.comms import mission as M
-from runtime.comms.gcs_services import GcsServices
+from runtime.comms.gcs_services import GcsServices, _whole
 from runtime.comms.params import Param, ParamTable
-from runtime.messages import OPEN, TableRequest
+from runtime.comms.telemetry import STREAMS
+from runtime.messages import DONE, OPEN, TableRequest
 from runtime.log import get_logger
 
 if TYPE_CHECKING:
@@ -49,6 +59,9 @@ MAV_RESULT_ACCEPTED, MAV_RESULT_DENIED = 0, 2
 REPORT_PERIOD = 1.0
 SAME_POSITION = 1e-3          # m: an uploaded item this close to a listed task (same seq, command, params) is it
 STATUSTEXT_LEN = 50
+ROVER_MODES = {10: "auto", 4: "hold", 11: "rtl"}     # ArduPilot Rover custom_mode -> the robot's mode
+MODE_NAMES = {"auto": "AUTO", "hold": "HOLD", "rtl": "RTL"}
+CUSTOM_MODE_ENABLED = 1       # MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
 
 
 class GroundServices:
@@ -67,11 +80,22 @@ class GroundServices:
                                        validate=self._validate)
         self.params = ParamTable(_params(port, self._out_extend))
         self.gcs = GcsServices(self.mav, port.robot_id, 1, self.params)
+        m = self.m
         self.gcs.register_command(MAV_CMD_COMPONENT_ARM_DISARM, self._arm_disarm)
-        self.gcs.register_message(self.m.MAVLINK_MSG_ID_HOME_POSITION, self._home)
+        self.gcs.register_command(m.MAV_CMD_DO_SET_MODE, self._do_set_mode)
+        self.gcs.register_command(m.MAV_CMD_MISSION_START, lambda msg, now: self._mode("auto", now))
+        self.gcs.register_command(m.MAV_CMD_NAV_RETURN_TO_LAUNCH, lambda msg, now: self._mode("rtl", now))
+        self.gcs.register_command(m.MAV_CMD_DO_PAUSE_CONTINUE, self._pause_continue)
+        self.gcs.register_command(m.MAV_CMD_SET_MESSAGE_INTERVAL, self._set_interval)
+        self.gcs.register_command(m.MAV_CMD_GET_MESSAGE_INTERVAL, self._get_interval)
+        for name in STREAMS:
+            msg_id = getattr(m, "MAVLINK_MSG_ID_" + name)
+            self.gcs.register_message(msg_id, lambda msg_id=msg_id: port.stream_message(msg_id))
         self._out: list = []                   # messages to peers produced while serving (new tasks ...)
         self._next_report = -math.inf
         self.reached: list[int] = []           # seqs reported reached (for tests and the trace)
+        self._reached_ids: set[int] = set()    # tasks whose MISSION_ITEM_REACHED went out
+        self._done_reported = 0                # the items done that the last MISSION_CURRENT counted
         self._text_id = 0
         self._faults: tuple[str, ...] = ()     # the base's faults as last reported
         self._arm_after_reset = False
@@ -89,6 +113,8 @@ class GroundServices:
                 replies += [(r, addr) for r in self.port.answer_table(msg.sender)]
             elif msg.get_type().startswith("MISSION_"):
                 replies += self.mission.handle(msg, now, addr)
+            elif msg.get_type() == "SET_MODE":
+                self._set_mode_message(msg, now)
             else:
                 replies += self.gcs.handle(msg, now, addr)
         replies += self.mission.tick(now)
@@ -176,11 +202,52 @@ class GroundServices:
             return y, x
         return x, y
 
-    def _home(self):
-        """HOME_POSITION: the fleet frame's origin (the datum), where a ground station centres its map."""
-        d = self.port.datum
-        return self.mav.home_position_encode(int(round(d.lat * 1e7)), int(round(d.lon * 1e7)), int(round(d.alt * 1000)),
-                                             0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0)
+    def _mode(self, mode: str, now: float) -> int:
+        if mode == "rtl" and self.port.home is None:
+            self._text(4, "RTL refused: no home yet (not localized)")
+            return self.m.MAV_RESULT_TEMPORARILY_REJECTED
+        self._out += self.port.set_mode(mode, now)
+        return MAV_RESULT_ACCEPTED
+
+    def _rover_mode(self, base_mode, custom_mode, now: float) -> int:
+        """A mode change as DO_SET_MODE and SET_MODE carry it: CUSTOM_MODE_ENABLED and a Rover mode number."""
+        base, custom = _whole(base_mode), _whole(custom_mode)
+        mode = ROVER_MODES.get(custom)
+        if base is None or not base & CUSTOM_MODE_ENABLED or mode is None:
+            self._text(4, f"mode {float(custom_mode):g} refused: the robot takes AUTO 10, HOLD 4, RTL 11 "
+                          "(custom modes)")
+            return MAV_RESULT_DENIED
+        return self._mode(mode, now)
+
+    def _do_set_mode(self, msg, now: float) -> int:
+        return self._rover_mode(msg.param1, msg.param2, now)
+
+    def _set_mode_message(self, msg, now: float) -> None:
+        """SET_MODE (no ack; the HEARTBEAT shows the result), as QGroundControl's mode menu sends it."""
+        try:
+            if int(msg.target_system) == self.port.robot_id:
+                self._rover_mode(msg.base_mode, msg.custom_mode, now)
+        except (TypeError, ValueError) as e:
+            self.log.debug("SET_MODE dropped: %r", e)
+
+    def _pause_continue(self, msg, now: float) -> int:
+        p1 = float(msg.param1)
+        if p1 not in (0.0, 1.0):
+            return MAV_RESULT_DENIED
+        return self._mode("auto" if p1 == 1.0 else "hold", now)
+
+    def _set_interval(self, msg, now: float) -> int:
+        msg_id = _whole(msg.param1)
+        if msg_id is None or self.port.message_interval(msg_id) is None:
+            return self.m.MAV_RESULT_UNSUPPORTED
+        return MAV_RESULT_ACCEPTED if self.port.set_message_interval(msg_id, float(msg.param2)) else MAV_RESULT_DENIED
+
+    def _get_interval(self, msg, now: float):
+        msg_id = _whole(msg.param1)
+        us = None if msg_id is None else self.port.message_interval(msg_id)
+        if us is None:
+            return self.m.MAV_RESULT_UNSUPPORTED
+        return MAV_RESULT_ACCEPTED, [self.mav.message_interval_encode(msg_id, us)]
 
     def _arm_disarm(self, msg, now: float) -> int:
         p1 = float(msg.param1)
@@ -214,28 +281,38 @@ class GroundServices:
         radio, port = self.radio, self.port
         self._base_faults(now)
         for n in port.pop_notices():
-            if n.reached_seq is not None:
-                self.reached.append(n.reached_seq)
-                radio.send_gcs(self.mav.mission_item_reached_encode(n.reached_seq))
             self._text(n.severity, n.text)
-        if now < self._next_report:
+        listing = port.listing()
+        done = sum(e.state == DONE for e in listing)
+        # MISSION_ITEM_REACHED once per item done, by any robot; MAVSDK takes seq + 1 as the progress, so an item
+        # goes out only once that many are done (no progress shown beyond the truth), in seq order, and
+        # MISSION_CURRENT (seq = the items done) follows at once
+        new = [i for i, e in enumerate(listing[:done]) if e.state == DONE and e.id not in self._reached_ids]
+        for seq in new:
+            self._reached_ids.add(listing[seq].id)
+            self.reached.append(seq)
+            radio.send_gcs(self.mav.mission_item_reached_encode(seq))
+        if now < self._next_report and done == self._done_reported:
             return
+        self._done_reported = done
         self._next_report = now + REPORT_PERIOD
         radio.send_gcs(port.robot_state())
-        listing = port.listing()
-        held = port.held()
-        seq = next((i for i, e in enumerate(listing) if held and e.id == held[0]), len(listing))
-        total = len(listing)
-        m = self.m
-        if held:
-            state = m.MISSION_STATE_ACTIVE
-        elif total and all(e.state != OPEN for e in listing):
-            state = m.MISSION_STATE_COMPLETE
-        elif total:
-            state = m.MISSION_STATE_NOT_STARTED
-        else:
+        radio.send_gcs(self._mission_current(listing))
+
+    def _mission_current(self, listing):
+        """MISSION_CURRENT of the fleet's mission: ``seq`` = the items done by any robot (MAVSDK shows it as the
+        progress, ``seq``/``total``), the state COMPLETE once none is open."""
+        m, total = self.m, len(listing)
+        done = sum(e.state == DONE for e in listing)
+        if not total:
             state = m.MISSION_STATE_NO_MISSION
-        radio.send_gcs(self.mav.mission_current_encode(seq, total, state, 0))
+        elif all(e.state != OPEN for e in listing):
+            state = m.MISSION_STATE_COMPLETE
+        elif self.port.mode != "auto":
+            state = m.MISSION_STATE_PAUSED            # this robot takes no part in it now
+        else:
+            state = m.MISSION_STATE_ACTIVE
+        return self.mav.mission_current_encode(done, total, state, 1 if self.port.mode == "auto" else 0)
 
     def _text(self, severity: int, text: str) -> None:
         """One STATUSTEXT, or several chunks of 50 characters with a common ``id`` and their ``chunk_seq``

@@ -4,22 +4,21 @@ A :class:`Param` names a value the robot already holds elsewhere: ``get()`` read
 applies it; the table only checks what comes in (known name, finite, integral for ints, within
 ``lo..hi``) and keeps the order, which gives every parameter its MAVLink ``param_index``.
 
-Wire encoding (PARAM_VALUE / PARAM_SET ``param_value`` is one float32): every parameter travels as
-MAV_PARAM_TYPE_REAL32 holding its numeric value, and AUTOPILOT_VERSION advertises
-MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST (:data:`ENCODING_CAPABILITY`).  Why not INT32 for ints:
-the two stock ground stations decode integer types in opposite ways for a MAV_AUTOPILOT_GENERIC
-vehicle, whatever capability bit it advertises --
+Wire encoding (PARAM_VALUE / PARAM_SET ``param_value`` is one float32): a float parameter travels as
+MAV_PARAM_TYPE_REAL32, an integer one as MAV_PARAM_TYPE_INT32 holding its number C-cast (5 -> 5.0), and
+AUTOPILOT_VERSION advertises MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST (:data:`ENCODING_CAPABILITY`), the encoding
+ArduPilot uses.  The robot's HEARTBEAT says MAV_AUTOPILOT_ARDUPILOTMEGA (:mod:`runtime.comms.telemetry`), and for
+such a vehicle the three stock ground stations read a C-cast INT32 as its number:
 
-* QGroundControl (ParameterManager::_mavlinkParamUnionToVariant) reads the float's *bytes* through
-  ``mavlink_param_union_t`` for every firmware except ArduPilot, whose plugin converts its C casts
-  first (APMFirmwarePlugin::_handleIncomingParamValue): an INT32 5 must arrive bytewise;
-* MAVProxy (mavproxy_param.handle_px4_param_value) unpacks bytes only for MAV_AUTOPILOT_PX4 and
-  otherwise takes ``param_value`` as the number: an INT32 5 must arrive C-cast (5.0).
+* MAVSDK (src/mavsdk/core/mavlink_parameter_client.cpp: ``ParamValue::Conversion::Cast`` and
+  ``get_4_float_bytes_cast`` when the autopilot is ArduPilot, both ways), so ``get_param_int`` works;
+* QGroundControl (APMFirmwarePlugin::_handleIncomingParamValue converts the casts before ParameterManager reads the
+  union);
+* MAVProxy (mavproxy_param.handle_px4_param_value unpacks bytes only for MAV_AUTOPILOT_PX4; otherwise
+  ``param_value`` is the number).
 
-A REAL32 reads the same under both (for a float the two encodings are the same bytes), so integer
-parameters go out as REAL32 too; they are kept integral here and limited to +-2**24, where a float32
-holds every integer exactly.  Incoming PARAM_SETs are decoded the way we advertise: the number in
-``param_value``, whatever ``param_type`` says (QGC and MAVProxy both send REAL32 for our parameters).
+Integers are kept integral here and limited to +-2**24, where a float32 holds every integer exactly.  Incoming
+PARAM_SETs are decoded the way we advertise: the number in ``param_value``, whatever ``param_type`` says.
 """
 from __future__ import annotations
 
@@ -32,6 +31,7 @@ from typing import Callable, Iterator
 from runtime.errors import InputError
 
 MAV_PARAM_TYPE_REAL32 = 9                 # MAVLink MAV_PARAM_TYPE_REAL32
+MAV_PARAM_TYPE_INT32 = 6                  # MAVLink MAV_PARAM_TYPE_INT32
 ENCODING_CAPABILITY = 131072              # MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
 MAX_EXACT_INT = 2 ** 24                   # float32 holds every integer of magnitude <= this exactly
 NAME_RE = re.compile(r"[A-Z][A-Z0-9_]{0,15}\Z")
@@ -119,6 +119,11 @@ class ParamTable:
 
     def by_index(self, i: int) -> Param | None:
         return self._params[i] if isinstance(i, int) and 0 <= i < len(self._params) else None
+
+    @staticmethod
+    def wire_type(p: Param) -> int:
+        """``p``'s MAV_PARAM_TYPE: INT32 for an integer parameter, REAL32 for a float one."""
+        return MAV_PARAM_TYPE_INT32 if p.type is int else MAV_PARAM_TYPE_REAL32
 
     def value(self, p: Param) -> float:
         """``p``'s current value as it travels (float32); NaN if its getter fails or returns a non-number."""

@@ -46,6 +46,7 @@ class FleetNode:
         self.table = TaskTable(self.robot_id)
         self.state_period = float(state_period)
         self.armed = bool(armed)
+        self.paused = False                         # the operator stopped it (HOLD, RTL): armed, takes no tasks
         self.localized = False
         self.pose: tuple[float, float] | None = None
         self.notices: list[Notice] = []
@@ -78,8 +79,18 @@ class FleetNode:
         if armed == self.armed:
             return []
         self.armed = bool(armed)
-        self.notices.append(Notice("armed: taking tasks again" if armed else "disarmed: stopped, tasks released", 4))
-        return self.agent.set_available(armed, now) + self._state_now(now)
+        says = "armed: taking tasks again" if not self.paused else "armed (paused: taking no tasks)"
+        self.notices.append(Notice(says if armed else "disarmed: stopped, tasks released", 4))
+        return self.agent.set_available(armed and not self.paused, now) + self._state_now(now)
+
+    def set_paused(self, paused: bool, now: float, says: str) -> list:
+        """The operator stops the robot taking tasks (its tasks go back to the fleet) or lets it take them again;
+        ``says``: the STATUSTEXT line."""
+        if paused == self.paused:
+            return []
+        self.paused = bool(paused)
+        self.notices.append(Notice(says, 5))
+        return self.agent.set_available(self.armed and not paused, now) + self._state_now(now)
 
     # ------------------------------------------------------------------ peers
     def on_message(self, msg, now: float) -> list:

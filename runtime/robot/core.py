@@ -21,13 +21,18 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
+from runtime.comms.telemetry import MODES
 from runtime.execution import peer_readings
 from runtime.execution.executive import NONE
+from runtime.fleet.node import Notice
 from runtime.log import get_logger
-from runtime.messages import FLEET_MESSAGES
+from runtime.messages import FLEET_MESSAGES, OPEN
 from runtime.robot.ports import BaseFacts, RobotPort
 from runtime.robot.sensing import PoseEstimate
+from runtime.tasks.goto import Goto
+from runtime.tasks.model import Commitment, Task
 
+HOME_TASK = 0                  # the executor's id of the drive home (RTL); fleet task ids are never 0 (origin >= 1)
 PEERS, GCS, TO = "peers", "gcs", "to"          # Output.frames: ("peers", msg) | ("gcs", msg) | ("to", msg, addr)
 
 
@@ -93,11 +98,6 @@ class Radio:
         self.frames.append((TO, mavmsg, addr))
         return True
 
-    def heartbeat(self):
-        m = self.module
-        return self.mav.heartbeat_encode(m.MAV_TYPE_GROUND_ROVER, m.MAV_AUTOPILOT_GENERIC,
-                                         self.base_mode, self.custom_mode, self.system_status)
-
 
 class RobotCore:
     """One robot's logic.  ``base``: what the core knows of the base (:class:`BaseFacts`).  ``mavlink``:
@@ -144,9 +144,13 @@ class RobotCore:
             from runtime.comms.ground import GroundServices
             from runtime.comms.telemetry import GcsTelemetry
             self.radio = Radio(*mavlink)
-            self.telemetry = GcsTelemetry(self.radio, self.id, cfg.datum, armed=cfg.robot.armed)
+            self.telemetry = GcsTelemetry(self.radio, self.id, cfg.datum, armed=cfg.robot.armed, gps=cfg.gps.enabled)
             self.ground = GroundServices(self.port, self.radio)
         self.period = 1.0 / c.rate
+        self.mode = "auto"                       # the operator's: auto (takes tasks), hold (paused), rtl (goes home)
+        self.home: tuple[float, float] | None = None    # the first pose: where RTL drives
+        self._home_reached = False
+        self._fixes: Sequence = ()               # the GPS fixes of this cycle (telemetry)
         self.sensors = None                      # the base's sensors as last sensed
         self._truth: tuple[float, float, float] | None = None     # Sensed.pose, when the host gives one
         self.last_step: float | None = None
@@ -176,8 +180,11 @@ class RobotCore:
         self.last_step = now
         self.sensors = sensed.sensors
         self._truth = sensed.pose
+        self._fixes = sensed.fixes
         if sensed.pose is None:
             self.sensing.update(dt, sensed.odometry, sensed.fixes)
+        if self.home is None and self.pose() is not None:
+            self.home = tuple(float(v) for v in self.pose()[:2])
         if self._perceive is not None:
             self._perceive(self.pose(), getattr(self.sensors, "ranges", ()), now)
         self._peers(self._comms(now, inbox, tick=True))
@@ -268,7 +275,10 @@ class RobotCore:
         base; their progress goes back to the agent."""
         ex = self.executive
         guidance = self._guidance(now) if self._guidance is not None and self.node.armed else NONE
-        ex.sync(self.agent.commitments if self.node.armed else (), now, guidance)
+        commitments = self.agent.commitments if self.node.armed else ()
+        if self.mode == "rtl" and self.node.armed and self.home is not None:
+            commitments = (Commitment(Task(HOME_TASK, "goto", Goto(*self.home, None))),)    # stays there
+        ex.sync(commitments, now, guidance)
         ex.make_way = self.node.armed
         pose, sensors = self.pose(), self.sensors
         ex.peers = () if pose is None or self.base.ranging or not ex.idle else \
@@ -276,21 +286,48 @@ class RobotCore:
         (v, w), progress = ex.step(pose, sensors, now, guidance)
         out = []
         for p in progress:
+            if p.task == HOME_TASK:
+                if p.event == "arrived" and not self._home_reached:
+                    self._home_reached = True
+                    self.node.notices.append(Notice("returned to launch: at home", 5))
+                continue
             out += self.node.on_progress(p, now)
         self._peers(out)
-        return (v, w), progress
+        return (v, w), [p for p in progress if p.task != HOME_TASK]
 
     def _report(self, now: float, inbox: Inbox) -> None:
         if self.ground is None:
             return
         self.radio.present = inbox.ground_present
         commitments = self.agent.commitments
-        self.telemetry.armed = self.node.armed
-        self.telemetry.tick(now, self.pose(), self.velocity(), self.sensors,
-                            commitments[0].task_id if commitments else None)
+        tel = self.telemetry
+        tel.armed, tel.mode, tel.home = self.node.armed, self.mode, self.home
+        tel.busy = any(e.state == OPEN for e in self.node.table.listing())
+        tel.tick(now, self.pose(), self.velocity(), self.sensors, commitments[0].task_id if commitments else None,
+                 self._fixes)
         self.ground.report(now)
 
     # ------------------------------------------------------------------ requests from the ground services
+    def set_mode(self, mode: str, now: float) -> list:
+        """The operator's mode: "auto" takes tasks again, "hold" stops the robot and hands its tasks back to the
+        fleet, "rtl" hands them back and drives home.  Returns the messages for the peers."""
+        if mode not in MODES:
+            raise ValueError(f"mode {mode!r}: expected one of {', '.join(MODES)}")
+        if mode == self.mode:
+            return []
+        self.mode = mode
+        self._home_reached = False
+        self.log.info("mode %s", mode)
+        says = {"auto": "mode AUTO: taking tasks", "hold": "mode HOLD: stopped, tasks released",
+                "rtl": "mode RTL: tasks released, returning to launch"}[mode]
+        return self.node.set_paused(mode != "auto", now, says)
+
+    def stream_message(self, msg_id: int):
+        name = self.telemetry.stream_name(msg_id)
+        if name not in self.telemetry.streams:
+            return None
+        return self.telemetry.message(name, self.last_step or 0.0, self.pose(), self.velocity(), self.sensors)
+
     def request_fault_reset(self, now: float) -> bool:
         if not (self.base.latches_faults and getattr(self.sensors, "faults", ())):
             return False

@@ -106,6 +106,31 @@ class RobotPort:
         faults and reports some)."""
         return self._core.request_fault_reset(now)
 
+    # ------------------------------------------------------------------ the operator's mode, home and streams
+    @property
+    def mode(self) -> str:
+        """"auto" (takes tasks), "hold" (paused: stands, takes none) or "rtl" (drives to its home)."""
+        return self._core.mode
+
+    def set_mode(self, mode: str, now: float) -> list:
+        return self._core.set_mode(mode, now)
+
+    @property
+    def home(self) -> tuple[float, float] | None:
+        """Where the robot started (its first pose, fleet frame), where RTL drives it; None before a pose."""
+        return self._core.home
+
+    def message_interval(self, msg_id: int) -> int | None:
+        """A telemetry stream's interval (us; -1 off), None if the robot does not stream ``msg_id``."""
+        return self._core.telemetry.interval(msg_id)
+
+    def set_message_interval(self, msg_id: int, interval_us: float) -> bool:
+        return self._core.telemetry.set_interval(msg_id, interval_us)
+
+    def stream_message(self, msg_id: int):
+        """Telemetry stream ``msg_id`` as it stands now (REQUEST_MESSAGE), or None."""
+        return self._core.stream_message(msg_id)
+
     # ------------------------------------------------------------------ tunables
     @property
     def tunables(self):

@@ -52,7 +52,7 @@ class Daemon:
                                cfg.comms.gcs, signing_key=key,
                                heartbeat_timeout=cfg.comms.heartbeat_timeout, peer_loss=cfg.comms.peer_loss,
                                loss_burst=cfg.comms.loss_burst, loss_seed=cfg.comms.loss_seed,
-                               unsigned_gcs=cfg.comms.unsigned_gcs)
+                               unsigned_gcs=cfg.comms.unsigned_gcs, fleet=[p.id for p in cfg.comms.peers])
         self.link = link
         fp = base.footprint
         facts = BaseFacts(float(fp.radius), float(getattr(fp, "max_speed", 0.5)), bool(base.ranging),

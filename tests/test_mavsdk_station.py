@@ -53,15 +53,17 @@ class Stepper:
         self.thread.join(timeout=30)
 
 
-def _build(tmp_path):
-    """The unsigned two-robot fleet, lock-stepped, on free ports away from the block other SITL tests search first
+def _build(tmp_path, listed: bool = False):
+    """The two-robot fleet, lock-stepped, unsigned (``listed``: signed, taking unsigned ground-station frames from
+    127.0.0.1/32 as ``--unsigned-gcs`` sets it), on free ports away from the block other SITL tests search first
     (an unsigned robot takes any frame sent to its port); a block taken between the search and the bind: another."""
     from runtime.errors import InputError
 
     for attempt in range(3):
         path = shipped_fleet(tmp_path, "operator_4.yaml", ports_from=port_block(22600) + 40 * attempt,
                              robots=[{"id": rid, "start": [x, y, 0.0]} for rid, (x, y) in START.items()])
-        f = launcher.build(path, tmp_path / f"run{attempt}", signing=False)
+        f = launcher.build(path, tmp_path / f"run{attempt}", signing=listed,
+                           unsigned_gcs=["127.0.0.1/32"] if listed else None)
         try:
             return f, launcher.Lockstep(f)
         except InputError as e:
@@ -71,8 +73,8 @@ def _build(tmp_path):
 
 
 @pytest.fixture
-def fleet(tmp_path):
-    f, run = _build(tmp_path)
+def fleet(tmp_path, request):
+    f, run = _build(tmp_path, listed=getattr(request, "param", "unsigned") == "listed")
     stepper = Stepper(run)
     try:
         yield f, stepper
@@ -190,9 +192,11 @@ async def _progress(mission, out: list) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("rid", [1, 2])
+@pytest.mark.parametrize("rid, fleet", [(1, "unsigned"), (2, "listed")], indirect=["fleet"])
 def test_a_mavsdk_app_runs_a_fleet_mission_to_the_end(fleet, rid):
-    """The app works with whichever robot it connects to; the others' work counts in its progress."""
+    """The app works with whichever robot it connects to; the others' work counts in its progress.  Robot 1's fleet
+    is unsigned; robot 2's is signed and lists the app's network (comms.unsigned_gcs: 127.0.0.1/32), so the app's
+    unsigned frames are taken there (MAVSDK cannot sign; its system id 245 is no robot's of the fleet)."""
     from runtime import config as C
 
     f, stepper = fleet
@@ -201,6 +205,8 @@ def test_a_mavsdk_app_runs_a_fleet_mission_to_the_end(fleet, rid):
     seen = asyncio.run(asyncio.wait_for(app(f.robots[rid].udp_port, robot.datum), 120))
     assert stepper.error is None, stepper.error
     done_by = dict(stepper.run.daemons[rid].core.node.done_by)
+    link = stepper.run.daemons[rid].link
+    assert (link.counters.unsigned_gcs_taken > 0) == link.signing        # signed: the app's frames came unsigned
     # telemetry a MAVSDK app reads
     d = robot.datum
     e, n, _ = pymap3d.geodetic2enu(seen["position"].latitude_deg, seen["position"].longitude_deg, 0.0, d.lat, d.lon,

@@ -133,8 +133,8 @@ def net():
 def link_with():
     made = []
 
-    def make(nets=(), peers=(), key=KEY):
-        made.append(MavlinkLink(1, "127.0.0.1:0", peers, None, signing_key=key, unsigned_gcs=nets))
+    def make(nets=(), peers=(), key=KEY, fleet=()):
+        made.append(MavlinkLink(1, "127.0.0.1:0", peers, None, signing_key=key, unsigned_gcs=nets, fleet=fleet))
         return made[-1]
 
     yield make
@@ -169,20 +169,25 @@ def test_unsigned_requests_from_elsewhere_change_nothing_and_are_counted(link_wi
 
 
 def test_peer_traffic_stays_signed_whatever_the_list_says(link_with, net):
-    """From a listed network: an unsigned frame claiming a robot's system id (a peer's, or any id 1..250), an unsigned
-    agent message, an unsigned request from a peer's address, and a wrongly signed frame are all refused."""
+    """From a listed network: an unsigned frame claiming a fleet robot's system id (a peer's, or this robot's), an
+    unsigned agent message (even from an id outside the fleet), an unsigned request from a peer's address, and a
+    wrongly signed frame are all refused; a station on an id outside the fleet (MAVSDK's 245) is taken."""
     peer = net.sock()
-    link = link_with(["127.0.0.0/8"], peers=[f"127.0.0.1:{peer.getsockname()[1]}"])
+    link = link_with(["127.0.0.0/8"], peers=[f"127.0.0.1:{peer.getsockname()[1]}"], fleet=[2, 3])
     net.send(link, command_long(2))                   # a peer's system id
-    net.send(link, param_request_list(200))           # any robot id
+    net.send(link, param_request_list(1))             # this robot's own id
     net.send(link, robot_state(2))                    # an agent message
+    net.send(link, robot_state(245))                  # an agent message from an id outside the fleet
     net.send(link, command_long(255), sock=peer)      # a ground station's id from a peer's address
     c = link.counters
-    assert link.gcs_inbox == [] and c.unsigned_dropped == 4 and c.unsigned_gcs_taken == 0
+    assert link.gcs_inbox == [] and c.unsigned_dropped == 5 and c.unsigned_gcs_taken == 0
+    net.send(link, param_request_list(245))           # a MAVSDK app's default system id, outside the fleet
+    assert len(link.gcs_inbox) == 1 and c.unsigned_gcs_taken == 1
+    link.gcs_inbox.clear()
     net.send(link, command_long(255, OTHER_KEY))      # signed with another key: a bad signature, not unsigned
     net.send(link, command_long(2, OTHER_KEY))
     assert c.bad_signature_dropped == 2 and link.gcs_inbox == [] and link.poll(0.0) == []
-    assert c.agent_received == 0 and c.received == 0 and _reconciles(c)
+    assert c.agent_received == 0 and c.received == 1 and _reconciles(c)      # the one request from 245
 
 
 def _ipv6_loopback() -> bool:

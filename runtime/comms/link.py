@@ -32,9 +32,11 @@ frame are dropped and counted.  A refused frame cannot advance pymavlink's per-s
 :func:`signing_guard`).
 
 Ground stations that cannot sign (``unsigned_gcs``, the config's ``comms.unsigned_gcs``: networks in CIDR form): an
-unsigned frame from an address in one of those networks is taken if it is ground-station traffic: its system id is a
-ground station's (above ``MAX_ROBOT_ID``, so no robot's, peer or not) and its address is no peer's.  Anything else
-unsigned stays refused (``unsigned_dropped``) whatever the list says: peers always sign.  Unsigned frames taken this
+unsigned frame from an address in one of those networks is taken if it is ground-station traffic: a standard message
+whose system id is no robot's of this fleet (``fleet``: the configured peers, and this robot; QGroundControl and
+MAVProxy use 255, a MAVSDK app 245) from an address that is no peer's.  Anything else unsigned (a fleet robot's id,
+a robot's own MRTA message, a peer's address) stays refused (``unsigned_dropped``) whatever the list says: peers
+always sign.  Unsigned frames taken this
 way are counted in ``unsigned_gcs_taken``.  The robot signs everything it sends either way.
 
 Keys never come from the network: a SETUP_SIGNING (MAVProxy's ``signing setup``, a peer, anyone) is refused
@@ -322,7 +324,7 @@ class MavlinkLink:
                  signing_key: bytes | None = None, heartbeat_timeout: float = 3.0, *,
                  heartbeat_period: float = 1.0, wallclock: Callable[[], float] = time.time,
                  peer_loss: float = 0.0, loss_burst: float = 0.0, loss_seed: int | None = None,
-                 unsigned_gcs: Iterable[str] = ()):
+                 unsigned_gcs: Iterable[str] = (), fleet: Iterable[int] = ()):
         if not 1 <= int(robot_id) <= 250:
             raise InputError(f"robot id: expected 1..250, got {robot_id!r}")
         if signing_key is not None and len(signing_key) != 32:
@@ -356,6 +358,7 @@ class MavlinkLink:
         except ValueError as e:
             raise InputError(f"comms.unsigned_gcs: expected a network in CIDR form ({e})") from None
         self._unsigned_net = False        # the datagram being parsed comes from a network in unsigned_gcs
+        self._fleet = frozenset(int(r) for r in fleet) | {self.robot_id}    # system ids that must always sign
         if self.signing:
             s = self.mav.signing
             s.secret_key = bytes(signing_key)
@@ -590,6 +593,8 @@ class MavlinkLink:
                 self._gcs_seen[addr] = now
             return why, None
         agent = codec.from_mavlink(m)
+        if unsigned and agent is not None and agent.sender <= MAX_ROBOT_ID:
+            return "unsigned_dropped", None       # robots' messages always come signed
         if agent is None or agent.sender > MAX_ROBOT_ID:
             # a ground station's request: a standard message, or one of ours from a system id that is no robot's
             if addr is None:
@@ -609,10 +614,10 @@ class MavlinkLink:
     def _unsigned_refusal(self, m, addr) -> str | None:
         """Why an unsigned frame other than a HEARTBEAT (let through by ``_allow_unsigned`` only from an
         ``unsigned_gcs`` network) is refused, or None if it is ground-station traffic: a ground station's system id
-        (no robot's: peers always sign) from an address that is no peer's."""
+        (not this fleet's: its robots always sign; MAVSDK's default 245 is taken) from an address that is no peer's."""
         if self._badly_signed(m):
             return "bad_signature_dropped"
-        if not (self._unsigned_net and m.get_srcSystem() > MAX_ROBOT_ID
+        if not (self._unsigned_net and m.get_srcSystem() not in self._fleet
                 and not any(addr[:2] == p[:2] for p in self._peers)):
             return "unsigned_dropped"
         return None

@@ -201,7 +201,7 @@ def test_sys_status_motor_outputs_unhealthy_while_the_base_reports_faults():
         health = []
         for t, faults in enumerate([(), ("left_drive_silent",), ()]):
             tel.tick(float(t), (0.0, 0.0, 0.0), (0.0, 0.0), BaseSensors(faults=faults), None)
-            s = next(m for m in gcs.receive(4) if m.get_type() == "SYS_STATUS")
+            s = next(m for m in gcs.receive(6) if m.get_type() == "SYS_STATUS")   # a tick sends 6 now
             assert s.onboard_control_sensors_present & s.onboard_control_sensors_enabled & motor
             health.append(bool(s.onboard_control_sensors_health & motor))
         assert health == [True, False, True]

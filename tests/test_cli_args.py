@@ -99,8 +99,9 @@ def test_sitl_run_takes_good_options_as_they_are(tmp_path, no_fleet):
         cli.main(["sitl", "run", str(FLEET), "--speedup", "0.1", "--seed", "0", "--timeout", "1", "--run-dir",
                   str(run_dir), "--manifest", str(tmp_path / "a" / "b" / "m.json"), "--json", str(tmp_path / "r.json"),
                   "--peer-loss", "0.1", "--loss-burst", "2"])
-    fleet, rd, manifest, seed, signing, method, speedup, instance, peer_loss, loss_burst, key = no_fleet["args"]
-    assert (rd, seed, speedup, instance, peer_loss, loss_burst, key) == (str(run_dir), 0, 0.1, 0, 0.1, 2.0, None)
+    fleet, rd, manifest, seed, signing, method, speedup, instance, peer_loss, loss_burst, key, unsigned = no_fleet["args"]
+    assert (rd, seed, speedup, instance, peer_loss, loss_burst, key, unsigned) == (str(run_dir), 0, 0.1, 0, 0.1, 2.0,
+                                                                                   None, None)
     assert not list(tmp_path.iterdir())           # checked, not made (nor left a probe behind)
 
 
@@ -125,7 +126,7 @@ def test_sitl_run_takes_a_key_file_for_a_signed_fleet_only(tmp_path, capsys, no_
     assert err == "mrta: --key: expected a signed fleet, got --no-signing as well\n"
     with pytest.raises(Started):
         cli.main(["sitl", "run", str(FLEET), "--key", str(key)])
-    assert no_fleet["args"][-1] == str(key)
+    assert no_fleet["args"][-2] == str(key)
 
 
 def test_argument_errors_are_one_line(capsys):

@@ -12,6 +12,7 @@ from hypothesis import given, settings, strategies as st
 
 from runtime import config as C
 from runtime.config import ConfigError
+from runtime.errors import InputError
 from runtime.drivers.registry import BASES
 from sitl import fleet_config as FC
 
@@ -279,6 +280,7 @@ def _fleet(tmp_path, **change):
     ({"gcs": "127.0.0.1:99999"}, "gcs", "port in 1..65535"),
     ({"gcs": "127.0.0.1:0"}, "gcs", "port in 1..65535"),
     ({"robots": [{"id": 1, "start": [9.0, 0.0, 0.0]}]}, "robots[0].start", "inside the 10 x 10 m arena"),
+    ({"robots": [{"id": 1, "start": [0.0, 0.0, 1e300]}]}, "robots[0].start[2]", "a number in [-7, 7], got 1e+300"),
     ({"scenario": {"type": "formation", "positions": [[0, 1.5], [1.5, 0], [0, -1.5], [50, 0]]}},
      "scenario.positions[3]", "inside the 10 x 10 m arena"),
     ({"scenario": {"type": "mission", "tasks": [{"x": 0, "y": 0}, {"x": 1e6, "y": 0}]}},
@@ -403,3 +405,9 @@ def test_a_fleet_signing_key_is_found_beside_the_fleet_file_whatever_the_working
     path = _write(tmp_path, dict(data, signing_key="keys/none.key"), "fleet.yaml")
     with pytest.raises(ConfigError, match=r"fleet.yaml: signing_key: expected a path to an existing file relative"):
         FC.load_fleet(path)
+    (tmp_path / "keys" / "bad.key").write_text("abc\n")                 # there, but no key: the line names both files
+    path = _write(tmp_path, dict(data, signing_key="keys/bad.key"), "fleet.yaml")
+    with pytest.raises(InputError) as info:
+        FC.load_fleet(path)
+    assert str(info.value) == (f"{path}: signing_key {tmp_path / 'keys' / 'bad.key'}: expected "
+                               "64 hex characters (a 32-byte MAVLink signing key), got 3 characters")

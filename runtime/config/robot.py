@@ -12,7 +12,7 @@ from typing import Any, Literal, Optional
 
 from runtime.comms.networks import EXPECTED as NETWORK, parse_network
 from runtime.config.build import _build, _read_yaml, deep_merge, rng, union_field
-from runtime.config.world import MAX_HALF, Datum
+from runtime.config.world import POSE_RANGES, Datum
 
 
 def _bases():
@@ -52,8 +52,7 @@ class LocalizationConfig:
     # x, y (m), heading (rad) in the fleet frame where the operator placed the robot; null: from the first GPS fix
     # with heading unknown until the robot has moved.  x, y lie in the largest arena (|x|, |y| <= 50 km) and, with
     # planning.map, inside that map (checked at start-up); the heading within a little over a turn either way
-    initial_pose: Optional[tuple[float, float, float]] = field(default=None, metadata={"items": (
-        rng(-MAX_HALF, MAX_HALF), rng(-MAX_HALF, MAX_HALF), rng(-7, 7))})
+    initial_pose: Optional[tuple[float, float, float]] = field(default=None, metadata=POSE_RANGES)
 
 
 @dataclass(frozen=True)

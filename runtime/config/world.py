@@ -10,6 +10,8 @@ from runtime.config.build import ConfigError, load, rng
 MAX_CELLS = 4_000_000     # occupancy grid cells a world may need (each costs ~60 bytes while a planner is built)
 MAX_SIDE = 100_000        # m: the largest arena's side
 MAX_HALF = MAX_SIDE // 2  # m: |x|, |y| of a point in the largest arena (a pose or obstacle of any world)
+# field metadata of a pose (x, y, heading): x, y in the largest arena, the heading (rad) a little over a turn either way
+POSE_RANGES = {"items": (rng(-MAX_HALF, MAX_HALF), rng(-MAX_HALF, MAX_HALF), rng(-7, 7))}
 
 
 @dataclass(frozen=True)

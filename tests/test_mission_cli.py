@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, example, given, settings, strategies as st
 
 from runtime import cli
 from runtime.comms import dialect
@@ -271,3 +272,30 @@ def test_download_checks_its_output_path_before_asking_the_robot(capsys, tmp_pat
             assert veh.server.stats["received"] == 0
     finally:
         (tmp_path / "ro").chmod(0o700)
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(src=st.sampled_from([WPL, PLAN]), flips=st.lists(st.tuples(st.integers(0, 10**6), st.integers(0, 7)), max_size=4),
+       cut=st.integers(0, 10**6) | st.tuples(st.just("line end"), st.integers(0, 100)),
+       timeout=st.floats(allow_nan=True, allow_infinity=True) | st.sampled_from([0.1, 10.0, 3600.0]), clear=st.booleans())
+@example(src=WPL, flips=[], cut=("line end", 0), timeout=10.0, clear=False)          # cut to its header
+@example(src=WPL, flips=[], cut=("line end", 1), timeout=10.0, clear=False)          # cut after its home line
+def test_random_damaged_files_and_options_exit_2_with_one_line(capsys, tmp_path, src, flips, cut, timeout, clear):
+    """Bit-flipped or cut copies of the example files, random --timeout values and --clear: the upload never
+    raises, and with a TARGET that is no address it always ends with exit 2 and one line (the file, the option or
+    TARGET), before any socket is opened; only a file and options that pass every check get as far as TARGET."""
+    raw = bytearray(src.read_bytes())
+    for i, bit in flips:
+        raw[i % len(raw)] ^= 1 << bit
+    line_ends = [i + 1 for i, b in enumerate(raw) if b == ord("\n")]
+    if isinstance(cut, tuple):
+        end = line_ends[cut[1] % len(line_ends)] if line_ends else 0
+    else:
+        end = cut % (len(raw) + 1)
+    path = tmp_path / f"m{src.suffix}"
+    path.write_bytes(bytes(raw[:end]))
+    argv = ["upload", "robot", path, f"--timeout={timeout!r}"] + (["--clear"] if clear else [])
+    rc, out, err = mrta(capsys, *argv)
+    assert (rc, out) == (2, "") and err.startswith("mrta: ") and err.count("\n") == 1, err
+    if err.startswith("mrta: TARGET"):
+        assert bool(read_mission(path).items) != clear and 0.1 <= timeout <= 3600

@@ -299,3 +299,54 @@ def test_random_damaged_files_and_options_exit_2_with_one_line(capsys, tmp_path,
     assert (rc, out) == (2, "") and err.startswith("mrta: ") and err.count("\n") == 1, err
     if err.startswith("mrta: TARGET"):
         assert bool(read_mission(path).items) != clear and 0.1 <= timeout <= 3600
+
+
+class RobotOnUdp(UdpVehicle):
+    """A real robot core (its ground services: the mission server, the fleet's task table and the robot's own
+    report of an upload) behind the same loopback socket, stepped in sim time as datagrams come."""
+
+    def __init__(self):
+        from runtime import config as C
+        from runtime.comms.link import LinkCounters
+        from runtime.robot.core import RobotCore
+        from runtime.robot.ports import BaseFacts
+        super().__init__(sysid=1)
+        cfg = C.from_dict(C.RobotConfig, {"robot": {"id": 1}, "gps": {"enabled": False},
+                                          "planning": {"planner": "euclid"}}, "robot.yaml")
+        self.core = RobotCore(cfg, BaseFacts(radius=0.17), mavlink=(self.mav, self.mod, LinkCounters()))
+        self.stations: set = set()
+
+    def _run(self):
+        from runtime.drivers.base import BaseSensors
+        from runtime.robot.core import GCS, TO, Inbox, Sensed
+        now = 0.0
+        while not self._stop.is_set():
+            try:
+                data, addr = self.sock.recvfrom(65535)
+            except socket.timeout:
+                data = None
+            inbox = []
+            for m in (self.mav.parse_buffer(data) or []) if data else []:
+                self.stations.add(addr)
+                if m.get_type() == "HEARTBEAT":
+                    self._send(self.mav.heartbeat_encode(self.mod.MAV_TYPE_GROUND_ROVER,
+                                                         self.mod.MAV_AUTOPILOT_GENERIC, 0, 0, 0), addr)
+                else:
+                    inbox.append((m, addr))
+            now += 0.05
+            out = self.core.step(now, Sensed(pose=(0.0, 0.0, 0.0), sensors=BaseSensors()),
+                                 Inbox(ground=inbox, ground_present=bool(self.stations)))
+            for frame in out.frames:
+                if hasattr(frame[1], "pack"):                   # pymavlink messages; our dataclasses are left out
+                    for to in [frame[2]] if frame[0] == TO else sorted(self.stations) if frame[0] == GCS else []:
+                        self._send(frame[1], to)
+
+
+def test_upload_to_a_robot_core_reports_the_tasks_it_added(capsys):
+    with RobotOnUdp() as robot:
+        rc, out, err = mrta(capsys, "upload", robot.target, WPL)
+        assert (rc, err) == (0, "") and len(robot.core.port.listing()) == 6
+        assert out.strip() == f"uploaded 6 items to system 1 at {robot.target}: 6 new tasks, 0 already known"
+        rc, out, err = mrta(capsys, "upload", robot.target, WPL)
+        assert (rc, err) == (0, "") and len(robot.core.port.listing()) == 6
+        assert out.strip() == f"uploaded 6 items to system 1 at {robot.target}: 0 new tasks, 6 already known"

@@ -173,6 +173,9 @@ def test_a_file_over_the_size_cap_is_refused_without_being_read(tmp_path):
     with pytest.raises(InputError) as e:
         read_mission(huge)
     assert str(e.value) == f"{huge}: expected a mission file of at most {MAX_FILE_BYTES} bytes (1 MiB), got {64 << 30}"
+    with pytest.raises(InputError) as e:             # no size beforehand, endless: at most one byte over is read
+        read_mission("/dev/zero")
+    assert str(e.value) == f"/dev/zero: expected a mission file of at most {MAX_FILE_BYTES} bytes (1 MiB), got more"
     at_cap = tmp_path / "cap.waypoints"
     at_cap.write_bytes(b"QGC WPL 110\n" + b"#" * (MAX_FILE_BYTES - 13) + b"\n")
     assert read_mission(at_cap).items == []

@@ -31,6 +31,7 @@ import argparse
 import socket
 import sys
 import time
+from collections import deque
 from dataclasses import dataclass
 
 from runtime import argcheck
@@ -45,6 +46,7 @@ from runtime.log import get_logger
 POLL = 0.02                               # s: socket wait per loop turn
 MIN_TIMEOUT, MAX_TIMEOUT = 0.1, 3600.0    # s: --timeout (one exchange with a robot; an hour at most)
 REPORT_WAIT = 1.0                         # s: after MISSION_ACK, for the robot's report of the tasks added
+MAX_TEXTS = 64                            # STATUSTEXT lines kept (a robot also announces awards and arrivals)
 log = get_logger("comms.mission_cli")
 
 
@@ -69,7 +71,7 @@ class UdpTarget:
         self._next_heartbeat = -float("inf")
         self.keyless = key is None
         self.signed_peer = False                 # the robot signs its frames: a signed fleet
-        self.texts: list[str] = []               # STATUSTEXT lines from the robot, in order (single frames)
+        self.texts: deque[str] = deque(maxlen=MAX_TEXTS)   # the robot's last STATUSTEXT lines (single frames)
 
     def send(self, msg) -> None:
         if self.mav.signing.sign_outgoing:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from hypothesis import given, settings, strategies as st
 
 from runtime import config as C
 from runtime.comms import dialect
@@ -94,3 +95,27 @@ def test_task_kinds_refusals_name_the_param_they_name():
     assert M.parse_added_report(M.added_report(12, 3)) == (12, 3)
     assert M.parse_added_report(M.added_report(2, 1) + ", home item 0 skipped") == (2, 1)
     assert M.parse_added_report("mission: 1 task(s) added") is None
+
+
+VALUES = st.sampled_from([0.0, 1.0, -2.5, math.nan, math.inf, -math.inf]) | st.floats(width=32)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.fixed_dictionaries({k: VALUES for k in ("param1", "param2", "param3", "param4", "x", "y", "z")}))
+def test_any_legacy_item_values_get_an_answer_in_the_same_cycle(values):
+    """Whatever floats a legacy MISSION_ITEM carries, the upload ends with one MISSION_ACK in the cycle that brought
+    the item (never dropped and re-requested until the station gives up); it is taken only if x and y are finite
+    and nothing is infinite, and a refusal leaves the fleet's tasks as they were."""
+    s = Station()
+    replies, _ = s.upload_one(legacy(s, **values))
+    assert [m.get_type() for m in replies] == ["MISSION_ACK"] and not s.core.ground.mission.busy
+    finite_xy = math.isfinite(values["x"]) and math.isfinite(values["y"])
+    infinite = any(math.isinf(v) for k, v in values.items() if k not in ("x", "y"))
+    if replies[0].type == mod.MAV_MISSION_ACCEPTED:
+        assert finite_xy and not infinite and len(s.core.port.listing()) == 1
+    else:
+        assert s.core.port.listing() == []
+        if not finite_xy or infinite:
+            assert replies[0].type in (mod.MAV_MISSION_INVALID_PARAM5_X, mod.MAV_MISSION_INVALID_PARAM6_Y,
+                                       mod.MAV_MISSION_INVALID_PARAM7, *range(mod.MAV_MISSION_INVALID_PARAM1,
+                                                                              mod.MAV_MISSION_INVALID_PARAM4 + 1))

@@ -14,7 +14,7 @@ from typing import Any, Optional
 
 import runtime
 from runtime.config.build import ConfigError, load, parse_hostport, rng, union_field
-from runtime.config.world import check_inside, load_world
+from runtime.config.world import POSE_RANGES, check_inside, load_world
 from runtime.errors import InputError
 
 # The example configs shipped in the package (runtime/examples is the repository's configs/ directory)
@@ -47,7 +47,7 @@ def _scenarios():
 @dataclass(frozen=True)
 class FleetRobot:
     id: int = field(metadata=rng(1, 250))
-    start: tuple[float, float, float] = (0.0, 0.0, 0.0)   # x, y, yaw in the world frame
+    start: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0), metadata=POSE_RANGES)   # x, y, yaw
     robot: Optional[str] = None         # this robot's template (relative to the fleet file); null: the fleet's
 
 
@@ -96,6 +96,9 @@ def load_fleet(path: str | Path) -> FleetConfig:
                                 robots=robots,
                                 signing_key=resolve(fleet.signing_key, "signing_key") if fleet.signing_key else None)
     parse_hostport(fleet.gcs, str(path), "gcs")
+    if fleet.signing_key:
+        from runtime.comms.link import load_key
+        load_key(fleet.signing_key, f"{path}: signing_key")       # a key file, named with this file and key
     world = load_world(fleet.world)
     for i, r in enumerate(fleet.robots):
         check_inside(world, r.start, str(path), f"robots[{i}].start")

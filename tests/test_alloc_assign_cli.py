@@ -107,10 +107,11 @@ def test_missing_file_and_missing_world(tmp_path, capsys):
     assert err.count("\n") == 0 and "world.yaml" in err
 
 
-def test_bad_bid_timeout(tmp_path, capsys):
+@pytest.mark.parametrize("value", ["0", "-1", "3601", "1e308", "inf", "nan"])
+def test_bad_bid_timeout(tmp_path, capsys, value):
     p = write(tmp_path, {"costs": COSTS})
-    assert cli.main(["assign", str(p), "--bid-timeout", "0"]) == 2
-    assert "--bid-timeout" in capsys.readouterr().err
+    assert cli.main(["assign", str(p), "--bid-timeout", value]) == 2
+    assert capsys.readouterr().err == f"mrta: --bid-timeout: expected a number in (0, 3600], got {float(value)!r}\n"
 
 
 GOOD = json.dumps({"costs": COSTS, "robots": [[0, 0]], "tasks": [[1, 2]]})

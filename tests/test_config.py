@@ -12,6 +12,7 @@ from hypothesis import given, settings, strategies as st
 
 from runtime import config as C
 from runtime.config import ConfigError
+from runtime.errors import InputError
 from runtime.drivers.registry import BASES
 from sitl import fleet_config as FC
 
@@ -65,6 +66,10 @@ def _write(tmp_path, data, name="robot.yaml"):
         ({"gps": {"enabled": "yes"}}, "gps.enabled", "true/false"),
         ({"comms": {"peers": [{"id": 2}, {"address": "x"}]}}, "comms.peers[1].id", "required"),
         ({"localization": {"initial_pose": [1, 2]}}, "localization.initial_pose", "a list of 3 numbers"),
+        ({"localization": {"initial_pose": [1e300, 1e300, 0]}}, "localization.initial_pose[0]",
+         "a number in [-50000, 50000], got 1e+300"),
+        ({"localization": {"initial_pose": [0, -60000, 0]}}, "localization.initial_pose[1]", "[-50000, 50000]"),
+        ({"localization": {"initial_pose": [0, 0, 1e300]}}, "localization.initial_pose[2]", "[-7, 7]"),
         ({"datum": {"lat": 91}}, "datum.lat", "[-90, 90]"),
         ({"control": {"rate": float("nan")}}, "control.rate", "a number"),
     ],
@@ -275,6 +280,7 @@ def _fleet(tmp_path, **change):
     ({"gcs": "127.0.0.1:99999"}, "gcs", "port in 1..65535"),
     ({"gcs": "127.0.0.1:0"}, "gcs", "port in 1..65535"),
     ({"robots": [{"id": 1, "start": [9.0, 0.0, 0.0]}]}, "robots[0].start", "inside the 10 x 10 m arena"),
+    ({"robots": [{"id": 1, "start": [0.0, 0.0, 1e300]}]}, "robots[0].start[2]", "a number in [-7, 7], got 1e+300"),
     ({"scenario": {"type": "formation", "positions": [[0, 1.5], [1.5, 0], [0, -1.5], [50, 0]]}},
      "scenario.positions[3]", "inside the 10 x 10 m arena"),
     ({"scenario": {"type": "mission", "tasks": [{"x": 0, "y": 0}, {"x": 1e6, "y": 0}]}},
@@ -304,6 +310,26 @@ def test_a_world_too_large_for_its_grid_names_size_and_resolution(tmp_path):
     assert "size[0]: expected a number in [0.01, 100000]" in msg
 
 
+@pytest.mark.parametrize("obstacle, key, expected", [
+    ({"center": [0, 0], "size": [-1, -1]}, "obstacles[0].size[0]", "a number in (0, 100000], got -1.0"),
+    ({"center": [0, 0], "size": [0, 0]}, "obstacles[0].size[0]", "a number in (0, 100000], got 0.0"),
+    ({"center": [0, 0], "size": [1, 0]}, "obstacles[0].size[1]", "a number in (0, 100000], got 0.0"),
+    ({"center": [1e9, 1e9], "size": [1, 1]}, "obstacles[0].center[0]", "a number in [-50000, 50000], got 1000000000.0"),
+    ({"center": [7, 0], "size": [1, 1]}, "obstacles[0].center",
+     "a point inside the 10 x 10 m arena of {path} (|x| < 5, |y| < 5), got (7.0, 0.0)"),
+])
+def test_a_world_obstacle_that_cannot_be_is_refused_naming_it(tmp_path, capsys, obstacle, key, expected):
+    """In the world file, and from `mrta daemon --check` of a robot whose map it is (exit 2, one line)."""
+    from runtime.cli import main
+    path = _write(tmp_path, {"size": [10.0, 10.0], "obstacles": [{"center": [1, 1], "size": [1, 1]}, obstacle]},
+                  "map.yaml")
+    msg = _one_config_error(path, C.load_world)
+    key = key.replace("obstacles[0]", "obstacles[1]")
+    assert msg == f"{path}: {key}: expected {expected.format(path=path)}"
+    assert main(["daemon", str(_robot(tmp_path, planning={"map": "map.yaml"})), "--check"]) == 2
+    assert capsys.readouterr().err == f"mrta: {msg}\n"
+
+
 # --------------------------------------------------------------------------- what start-up checks (daemon --check)
 
 def _robot(tmp_path, **sections):
@@ -328,10 +354,15 @@ def _robot(tmp_path, **sections):
     ({"comms": {"signing_key": "/nonexistent/fleet.key"}}, "comms.signing_key", "signing key file not found"),
     ({"base": {"baudrate": -1}}, "base", "baud rate -1: expected one of"),
     ({"base": {"baudrate": 12345}}, "base", "baud rate 12345"),
+    ({"planning": {"map": "map.yaml"}, "localization": {"initial_pose": [6.0, 0.0, 0.0]}},
+     "localization.initial_pose", "a point inside the 10 x 10 m arena of"),
+    ({"localization": {"initial_pose": [1e300, 1e300, 0]}}, "localization.initial_pose[0]",
+     "expected a number in [-50000, 50000], got 1e+300"),
 ])
 def test_check_runs_every_start_up_check(tmp_path, capsys, sections, key, expected):
     """`mrta daemon CONFIG --check` refuses what the daemon would refuse, in one line naming file and key."""
     from runtime.cli import main
+    _write(tmp_path, {"size": [10.0, 10.0]}, "map.yaml")
     path = _robot(tmp_path, **sections)
     assert main(["daemon", str(path), "--check"]) == 2
     err = capsys.readouterr().err
@@ -374,3 +405,9 @@ def test_a_fleet_signing_key_is_found_beside_the_fleet_file_whatever_the_working
     path = _write(tmp_path, dict(data, signing_key="keys/none.key"), "fleet.yaml")
     with pytest.raises(ConfigError, match=r"fleet.yaml: signing_key: expected a path to an existing file relative"):
         FC.load_fleet(path)
+    (tmp_path / "keys" / "bad.key").write_text("abc\n")                 # there, but no key: the line names both files
+    path = _write(tmp_path, dict(data, signing_key="keys/bad.key"), "fleet.yaml")
+    with pytest.raises(InputError) as info:
+        FC.load_fleet(path)
+    assert str(info.value) == (f"{path}: signing_key {tmp_path / 'keys' / 'bad.key'}: expected "
+                               "64 hex characters (a 32-byte MAVLink signing key), got 3 characters")

@@ -14,8 +14,9 @@ from hypothesis import given, settings, strategies as st
 from pymavlink import mavwp
 
 from runtime.comms.mission import MissionItem
-from runtime.comms.mission_files import (MissionFile, format_wpl, parse_plan, parse_wpl, read_mission,
-                                         read_plan, read_wpl, write_wpl)
+from runtime.comms.mission import MAX_ITEMS
+from runtime.comms.mission_files import (MAX_FILE_BYTES, MissionFile, format_wpl, parse_plan, parse_wpl,
+                                         read_mission, read_plan, read_wpl, write_wpl)
 from runtime.errors import InputError
 
 MISSIONS = Path(__file__).resolve().parents[1] / "configs" / "missions"
@@ -135,11 +136,49 @@ GOOD_LINE = "1\t0\t3\t16\t0\t0\t0\t0\t33.5\t-84.5\t0\t1"
     ("QGC WPL 110\n1 0 3 16 0 0 0 0 91 2 3 1", "line 2: X: expected a latitude in -90..90, got 91.0"),
     ("QGC WPL 110\n1 0 3 16 0 0 0 0 1 inf 3 1", "line 2: Y: expected a longitude in -180..180, got inf"),
     ("QGC WPL 110\n1 0 1 16 0 0 0 0 1e6 0 0 1", "line 2: x 1000000.0 does not fit an int32 in frame 1"),
+    # the INDEX column counts up by one: a line lost from the middle, or repeated, is refused
+    (f"QGC WPL 110\n0 1 0 16 0 0 0 0 1 2 3 1\n{GOOD_LINE}\n3 0 3 16 0 0 0 0 1 2 3 1\n",
+     "line 4: INDEX: expected 2 (a line lost or repeated?), got 3"),
+    (f"QGC WPL 110\n{GOOD_LINE}\n# note\n{GOOD_LINE}\n", "line 4: INDEX: expected 2 (a line lost or repeated?), got 1"),
+    ("QGC WPL 110\n5 0 3 16 0 0 0 0 1 2 3 1", "line 2: INDEX: expected 0 (or 1 in a file without a home line), got 5"),
 ])
 def test_wpl_errors_are_one_line_naming_file_and_line(text, message):
     with pytest.raises(InputError) as e:
         parse_wpl(text, "mission.txt")
     assert str(e.value) == f"mission.txt: {message}"
+
+
+def _wpl_of(n: int, home: bool) -> str:
+    first = ["0\t1\t0\t16\t0\t0\t0\t0\t1\t2\t0\t1"] if home else []
+    return "\n".join(["QGC WPL 110", *first] + [f"{i + home}\t0\t3\t16\t0\t0\t0\t0\t33.5\t-84.5\t0\t1"
+                                                  for i in range(n)]) + "\n"
+
+
+@pytest.mark.parametrize("home", [False, True])
+def test_a_wpl_file_of_more_items_than_a_robot_takes_is_refused(home):
+    assert len(parse_wpl(_wpl_of(MAX_ITEMS, home)).items) == MAX_ITEMS
+    with pytest.raises(InputError) as e:
+        parse_wpl(_wpl_of(MAX_ITEMS + 1, home), "big.txt")
+    assert str(e.value) == (f"big.txt: line {MAX_ITEMS + 2 + home}: expected at most {MAX_ITEMS} items (what a robot "
+                            "takes), got more")
+    with pytest.raises(InputError, match=rf"^p: mission.items: expected at most {MAX_ITEMS} items .*, got 1001$"):
+        parse_plan(_plan("[" + ", ".join([SIMPLE] * (MAX_ITEMS + 1)) + "]"), "p")
+
+
+def test_a_file_over_the_size_cap_is_refused_without_being_read(tmp_path):
+    huge = tmp_path / "huge.waypoints"
+    with open(huge, "wb") as fh:                     # 64 GiB, sparse: reading it whole would not end in time
+        fh.write(b"QGC WPL 110\n")
+        fh.truncate(64 << 30)
+    with pytest.raises(InputError) as e:
+        read_mission(huge)
+    assert str(e.value) == f"{huge}: expected a mission file of at most {MAX_FILE_BYTES} bytes (1 MiB), got {64 << 30}"
+    with pytest.raises(InputError) as e:             # no size beforehand, endless: at most one byte over is read
+        read_mission("/dev/zero")
+    assert str(e.value) == f"/dev/zero: expected a mission file of at most {MAX_FILE_BYTES} bytes (1 MiB), got more"
+    at_cap = tmp_path / "cap.waypoints"
+    at_cap.write_bytes(b"QGC WPL 110\n" + b"#" * (MAX_FILE_BYTES - 13) + b"\n")
+    assert read_mission(at_cap).items == []
 
 
 def _plan(items='[]', extra=''):
@@ -228,3 +267,21 @@ def test_truncated_and_bit_flipped_files(path, data):
             assert all(it.check_encodable() is None for it in mf.items)
     finally:
         os.unlink(name)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.data())
+def test_lines_lost_from_a_wpl_file_are_refused_unless_they_were_its_last(data):
+    """WPL has no item count: losing the last lines leaves a shorter mission (the items before them, unchanged);
+    losing any other data line breaks the INDEX sequence and is refused naming the line after the gap."""
+    lines = WPL.read_text().splitlines()
+    whole = parse_wpl("\n".join(lines)).items
+    lost = data.draw(st.sets(st.integers(1, len(lines) - 1), min_size=1))
+    kept = [line for i, line in enumerate(lines) if i not in lost]
+    text = "\n".join(kept) + "\n"
+    rest = lost - {1}            # the home line (1) may go: the items' INDEX then starts at 1, as a file without one
+    if not rest or rest == set(range(min(rest), len(lines))):            # nothing more, or the last lines
+        assert parse_wpl(text).items == whole[:min(rest) - 2 if rest else len(whole)]
+        return
+    with pytest.raises(InputError, match=r"^f: line \d+: INDEX: expected "):
+        parse_wpl(text, "f")

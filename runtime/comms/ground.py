@@ -142,10 +142,13 @@ class GroundServices:
             xy = self._to_fleet(it)
             if xy is None:
                 return 2, f"{what}: frame {it.frame} not supported (global, LOCAL_NED or LOCAL_ENU)"
+            bad = M.check_task_values(it)
+            if bad:
+                return bad
             try:
                 kind.from_item(it.command, (it.param1, it.param2, it.param3, it.param4), *xy)
             except ValueError as e:
-                return 6, f"{what}: {e}"                # MAV_MISSION_INVALID_PARAM1
+                return M.param_result(str(e)), f"{what}: {e}"      # MAV_MISSION_INVALID_PARAM1..4
             why = self.port.refuse(pose, *xy)
             if why:
                 return 10, f"{what} refused: {why}"     # MAV_MISSION_INVALID_PARAM5_X
@@ -164,7 +167,7 @@ class GroundServices:
         if new:
             self._out += self.port.hand_in(new, now)
         home = ", home item 0 skipped" if self.mission.home_skipped else ""
-        self._text(6, f"mission: {len(new)} task(s) added, {len(items) - len(new)} already known{home}")
+        self._text(6, M.added_report(len(new), len(items) - len(new)) + home)
         return self._plan_id()
 
     def _on_clear(self, mission_type: int) -> None:

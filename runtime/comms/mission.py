@@ -46,6 +46,7 @@ is set on the wire only when the dialect has the field, and is always reported i
 from __future__ import annotations
 
 import math
+import re
 from collections import Counter
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, NamedTuple
@@ -64,6 +65,7 @@ RESULT_NAMES = {
     15: "MAV_MISSION_OPERATION_CANCELLED",
 }
 ACCEPTED, ERROR, UNSUPPORTED, NO_SPACE = 0, 1, 3, 4
+INVALID_PARAM1, INVALID_PARAM5_X, INVALID_PARAM6_Y, INVALID_PARAM7 = 6, 10, 11, 12   # PARAM2..4: 7..9
 INVALID_SEQUENCE, DENIED, CANCELLED = 13, 14, 15
 TIMEOUT = -1                   # MissionClient.result when the vehicle stopped answering
 
@@ -192,6 +194,46 @@ class MissionItem:
             target_system, target_component, self.seq, self.frame, self.command, int(bool(current)),
             int(bool(self.autocontinue)), self.param1, self.param2, self.param3, self.param4,
             encode_xy(self.x, self.frame), encode_xy(self.y, self.frame), self.z, self.mission_type)
+
+
+def check_task_values(item: MissionItem) -> tuple[int, str] | None:
+    """Values no task can work with, as ``(MAV_MISSION_RESULT, reason)``, else None: x or y NaN or infinite (a task
+    needs a position, and NaN, the protocol's "unset", gives none: MAV_MISSION_INVALID_PARAM5_X / PARAM6_Y); an
+    infinite param1..4 or z (MAV_MISSION_INVALID_PARAM1..4 / PARAM7).  NaN in param1..4 and z is the protocol's
+    "default" (common.xml: "NaN ... may be used in float ... params to indicate optional/default values"; QGC
+    sends NaN yaw in param4) and is left to the task kind.  A legacy MISSION_ITEM carries x, y as floats, so only
+    it can bring infinities; MISSION_ITEM_INT brings NaN as INT32_MAX."""
+    for code, name, v in ((INVALID_PARAM5_X, "x", item.x), (INVALID_PARAM6_Y, "y", item.y)):
+        if not math.isfinite(v):
+            return code, f"item {item.seq}: {name} {v!r}: expected a finite number (a task needs a position)"
+    checks = [(INVALID_PARAM1 + i, f"param{i + 1}", v) for i, v in enumerate(item.params[:4])]
+    for code, name, v in checks + [(INVALID_PARAM7, "z", item.z)]:
+        if math.isinf(v):
+            return code, f"item {item.seq}: {name} {v!r}: expected a finite number (or NaN: the default)"
+    return None
+
+
+def param_result(reason: str) -> int:
+    """MAV_MISSION_INVALID_PARAM1..4 for a task kind's refusal that starts with the param it names ("param2 (value):
+    ..."), else MAV_MISSION_INVALID_PARAM1."""
+    m = re.match(r"param([1-4])\b", reason)
+    return INVALID_PARAM1 + (int(m.group(1)) - 1 if m else 0)
+
+
+ADDED_REPORT = "mission: {new} task(s) added, {known} already known"
+_ADDED = re.compile(r"mission: (\d+) task\(s\) added, (\d+) already known(, .*)?")   # then a note, if any
+
+
+def added_report(new: int, known: int) -> str:
+    """The STATUSTEXT a robot sends when it has taken an upload: how many of its items were new tasks (the robot may
+    add a note after a comma, e.g. that it skipped a home item)."""
+    return ADDED_REPORT.format(new=new, known=known)
+
+
+def parse_added_report(text: str) -> tuple[int, int] | None:
+    """(new, already known) from a robot's :func:`added_report` line, or None if ``text`` is not one."""
+    m = _ADDED.fullmatch(text.strip())
+    return (int(m.group(1)), int(m.group(2))) if m else None
 
 
 class Reply(NamedTuple):

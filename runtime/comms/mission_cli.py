@@ -11,8 +11,19 @@ once a second, so a robot that answers whoever talks to it learns our address; w
 target system id is the first non-GCS HEARTBEAT heard from TARGET.  With ``--key`` every frame is signed
 (MAVLink 2, link id 0) and only frames signed with the same key are accepted.
 
+Missions are not wiped by accident: an upload of no items (a WPL file holding only its header, a .plan with no
+items) would withdraw the fleet's open tasks, so ``upload`` refuses a file without items unless ``--clear`` is
+given, which sends MISSION_CLEAR_ALL instead (FILE may then be left out).  After an accepted upload the tool says
+how many of the items the fleet took as new tasks, from the robot's report (its STATUSTEXT ``mission: N task(s)
+added, M already known``, :func:`~runtime.comms.mission.added_report`), which arrives with the MISSION_ACK.
+
+Limits, checked before the robot is asked anything: a mission file of at most 1 MiB and
+:data:`~runtime.comms.mission.MAX_ITEMS` items (:mod:`~runtime.comms.mission_files`); ``--timeout`` in
+[:data:`MIN_TIMEOUT`, :data:`MAX_TIMEOUT`] s; ``download FILE`` a file that can be written (its folder exists and
+takes new files, FILE is not a folder).
+
 Exit codes: 0 done; 1 the robot did not answer, or refused (one line on stderr); 2 bad input (file,
-key, address).  :func:`upload` and :func:`download` are the same for code (e.g. the SITL launcher).
+key, address).  :func:`upload`, :func:`clear` and :func:`download` are the same for code (e.g. the SITL launcher).
 """
 from __future__ import annotations
 
@@ -20,16 +31,22 @@ import argparse
 import socket
 import sys
 import time
-from pathlib import Path
+from collections import deque
+from dataclasses import dataclass
 
+from runtime import argcheck
 from runtime.comms import dialect, mission_files
 from runtime.comms.gcs import GCS_SYSTEM, HEARTBEAT_PERIOD, gcs_heartbeat, ground_mav
 from runtime.comms.link import MISSION_LINK, load_key, parse_address, signing_timestamp, was_signed
-from runtime.comms.mission import ACCEPTED, MISSION, TIMEOUT, MissionClient, MissionItem
+from runtime.comms.mission import (ACCEPTED, MISSION, TIMEOUT, MissionClient, MissionItem,
+                                   parse_added_report)
 from runtime.errors import InputError
 from runtime.log import get_logger
 
 POLL = 0.02                               # s: socket wait per loop turn
+MIN_TIMEOUT, MAX_TIMEOUT = 0.1, 3600.0    # s: --timeout (one exchange with a robot; an hour at most)
+REPORT_WAIT = 1.0                         # s: after MISSION_ACK, for the robot's report of the tasks added
+MAX_TEXTS = 64                            # STATUSTEXT lines kept (a robot also announces awards and arrivals)
 log = get_logger("comms.mission_cli")
 
 
@@ -54,6 +71,7 @@ class UdpTarget:
         self._next_heartbeat = -float("inf")
         self.keyless = key is None
         self.signed_peer = False                 # the robot signs its frames: a signed fleet
+        self.texts: deque[str] = deque(maxlen=MAX_TEXTS)   # the robot's last STATUSTEXT lines (single frames)
 
     def send(self, msg) -> None:
         if self.mav.signing.sign_outgoing:
@@ -93,9 +111,15 @@ class UdpTarget:
                 continue
             self.signed_peer |= was_signed(data)
             out += [m for m in msgs if m.get_type() != "BAD_DATA"]
+            self.texts += [_text(m) for m in msgs if m.get_type() == "STATUSTEXT"]
 
     def close(self) -> None:
         self.sock.close()
+
+
+def _text(m) -> str:
+    text = m.text if isinstance(m.text, str) else bytes(m.text).decode(errors="replace")
+    return text.split("\0", 1)[0]
 
 
 def find_system(link: UdpTarget, deadline: float) -> int:
@@ -170,23 +194,64 @@ def status(target: str, *, system: int | None = None, timeout: float = 10.0, key
         link.close()
 
 
-def _session(target: str, system: int | None, timeout: float, key: bytes | None, start) -> MissionClient:
+def _session(target: str, system: int | None, timeout: float, key: bytes | None, start, after=None):
+    """Run one transfer; ``after(link, client, deadline)`` (if given) then reads what else the robot sent."""
     deadline = time.monotonic() + float(timeout)
     link = UdpTarget(target, key)
     try:
         sysid = system if system is not None else find_system(link, deadline)
+        link.texts.clear()                   # from here on, lines about this transfer
         client = MissionClient(link.mav, sysid)
-        return run(link, client, start(client, time.monotonic()), deadline)
+        run(link, client, start(client, time.monotonic()), deadline)
+        return client if after is None else after(link, client, deadline)
     finally:
         link.close()
 
 
+@dataclass(frozen=True)
+class Uploaded:
+    """An accepted upload: the finished client (``plan_id``, ``target_system``) and what the robot reported of it,
+    ``new`` tasks the fleet added and ``known`` items it already had as tasks (both None: no report heard)."""
+    client: MissionClient
+    items: int
+    new: int | None
+    known: int | None
+
+
+def _added(link: UdpTarget, count: int) -> tuple[int, int] | None:
+    """The robot's report of an upload of ``count`` items (its numbers add up to ``count``), if it came."""
+    for text in reversed(link.texts):
+        report = parse_added_report(text)
+        if report is not None and sum(report) == count:
+            return report
+    return None
+
+
 def upload(target: str, items, *, system: int | None = None, timeout: float = 10.0,
-           key: bytes | None = None, mission_type: int = MISSION) -> MissionClient:
-    """Upload ``items`` to the robot at ``target``; the finished client (``plan_id``), or NoAnswer."""
+           key: bytes | None = None, mission_type: int = MISSION) -> Uploaded:
+    """Upload ``items`` (at least one: an upload of none would withdraw the fleet's open tasks, see :func:`clear`)
+    to the robot at ``target``; the result with the robot's report of the tasks added, or NoAnswer."""
     items = list(items)
+    if not items:
+        raise InputError("expected at least one mission item to upload (clear() withdraws the open tasks)")
+
+    def report(link: UdpTarget, client: MissionClient, deadline: float) -> Uploaded:
+        # the robot sends its report before the MISSION_ACK; wait a little if the datagrams were reordered
+        until = min(deadline, time.monotonic() + REPORT_WAIT)
+        while _added(link, len(items)) is None and time.monotonic() < until:
+            link.heartbeat(time.monotonic())
+            link.recv(POLL)
+        new, known = _added(link, len(items)) or (None, None)
+        return Uploaded(client, len(items), new, known)
+
     return _session(target, system, timeout, key,
-                    lambda c, now: c.start_upload(items, mission_type, now=now))
+                    lambda c, now: c.start_upload(items, mission_type, now=now), report)
+
+
+def clear(target: str, *, system: int | None = None, timeout: float = 10.0, key: bytes | None = None,
+          mission_type: int = MISSION) -> MissionClient:
+    """MISSION_CLEAR_ALL to the robot at ``target`` (the fleet withdraws its open tasks); the client, or NoAnswer."""
+    return _session(target, system, timeout, key, lambda c, now: c.start_clear(mission_type, now=now))
 
 
 def download(target: str, *, system: int | None = None, timeout: float = 10.0,
@@ -204,7 +269,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     ms = p.add_subparsers(dest="mission_command", metavar="ACTION", required=True)
     up = ms.add_parser("upload", help="upload a QGC WPL 110 (.waypoints/.txt) or QGC .plan file")
     up.add_argument("target", metavar="TARGET", help="the robot's MAVLink UDP address HOST:PORT")
-    up.add_argument("file", metavar="FILE", help="mission file (WPL 110 or .plan)")
+    up.add_argument("file", metavar="FILE", nargs="?",
+                    help="mission file (WPL 110 or .plan, at most 1 MiB and %d items)" % mission_files.MAX_ITEMS)
+    up.add_argument("--clear", action="store_true",
+                    help="withdraw the fleet's open tasks (MISSION_CLEAR_ALL); FILE, if given, must hold no items")
     down = ms.add_parser("download", help="print the robot's mission, or save it as WPL 110")
     down.add_argument("target", metavar="TARGET", help="the robot's MAVLink UDP address HOST:PORT")
     down.add_argument("file", metavar="FILE", nargs="?", help="write the items here (QGC WPL 110)")
@@ -213,7 +281,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     for q in (up, down, st):
         q.add_argument("--system", type=int, default=None,
                        help="target system id (default: from the robot's first HEARTBEAT)")
-        q.add_argument("--timeout", type=float, default=10.0, help="give up after S seconds (default 10)")
+        q.add_argument("--timeout", type=float, default=10.0,
+                       help=f"give up after S seconds ({MIN_TIMEOUT:g}..{MAX_TIMEOUT:g}, default 10)")
         q.add_argument("--key", metavar="FILE", default=None,
                        help="MAVLink 2 signing key file (64 hex characters)")
     up.set_defaults(func=_upload_main)
@@ -224,28 +293,43 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _common(args) -> dict:
     if args.system is not None and not 1 <= args.system <= 255:
         raise InputError(f"--system {args.system}: expected a system id 1..255")
-    if not args.timeout > 0:
-        raise InputError(f"--timeout {args.timeout}: expected a positive number of seconds")
+    argcheck.number(args.timeout, "--timeout", MIN_TIMEOUT, MAX_TIMEOUT)
     key = load_key(args.key) if args.key else None
     return {"system": args.system, "timeout": args.timeout, "key": key}
 
 
 def _upload_main(args) -> int:
-    mf = mission_files.read_mission(args.file)
+    if args.file is None and not args.clear:
+        raise InputError("upload: expected FILE, a mission file (or --clear to withdraw the fleet's open tasks)")
+    items = mission_files.read_mission(args.file).items if args.file is not None else []
+    if args.clear and items:
+        raise InputError(f"{args.file}: --clear withdraws the fleet's open tasks and uploads nothing: expected a "
+                         f"file with no items (or no FILE), got {len(items)}")
+    if not args.clear and not items:
+        raise InputError(f"{args.file}: expected at least one mission item, got none (an empty or cut mission "
+                         "file; uploading no items withdraws the fleet's open tasks: pass --clear to do that)")
     kw = _common(args)
     try:
-        client = upload(args.target, mf.items, **kw)
+        if args.clear:
+            client = clear(args.target, **kw)
+            print(f"cleared: system {client.target_system} at {args.target} accepted MISSION_CLEAR_ALL "
+                  "(the fleet withdraws its open tasks)")
+            return 0
+        up = upload(args.target, items, **kw)
     except NoAnswer as e:
         print(f"mrta: {e}", file=sys.stderr)
         return 1
-    print(f"uploaded {len(mf.items)} items to system {client.target_system} at {args.target}")
+    where = f"uploaded {up.items} items to system {up.client.target_system} at {args.target}"
+    if up.new is None:
+        print(f"{where}: accepted; the robot did not report how many were new tasks")
+    else:
+        print(f"{where}: {up.new} new tasks, {up.known} already known")
     return 0
 
 
 def _download_main(args) -> int:
     kw = _common(args)
-    if args.file and Path(args.file).is_dir():
-        raise InputError(f"{args.file}: expected a file name, got a directory")
+    argcheck.output_file(args.file, "FILE")
     try:
         items = download(args.target, **kw)
     except NoAnswer as e:

@@ -26,15 +26,23 @@ corridor scan, ...) is refused naming its index; ``mission.plannedHomePosition``
 
 Every error is an :class:`~runtime.errors.InputError` of one line naming the file and the line number or
 JSON key, e.g. ``mission.txt: line 4: expected 12 fields, got 9``.
+
+Damaged files: a file larger than :data:`MAX_FILE_BYTES` is refused before it is read whole, and one of more
+than :data:`MAX_ITEMS` items (what a robot takes) as soon as the parser meets item MAX_ITEMS + 1.  A WPL line
+cut short or that does not parse is refused naming it; the INDEX column must count up by one from the first
+data line (0, or 1 in a file without a home line), so a line lost from the middle or repeated is refused.  WPL
+has no item count and no end mark: a file cut exactly at a line end reads as the shorter mission it now holds,
+and one cut to its header holds none (``mrta mission upload`` refuses an empty mission unless ``--clear``).
 """
 from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from runtime.comms.mission import GLOBAL_FRAMES, MAV_CMD_DO_JUMP, MISSION, MissionItem
+from runtime.comms.mission import GLOBAL_FRAMES, MAV_CMD_DO_JUMP, MAX_ITEMS, MISSION, MissionItem
 from runtime.errors import InputError
 
 WPL_HEADER = "QGC WPL 110"
@@ -42,6 +50,7 @@ MAV_CMD_NAV_WAYPOINT = 16
 WPL_FIELDS = ("INDEX", "CURRENT_WP", "COORD_FRAME", "COMMAND", "PARAM1", "PARAM2", "PARAM3", "PARAM4",
               "X", "Y", "Z", "AUTOCONTINUE")
 _INT_FIELDS = {0: (0, 0xFFFF), 1: (0, 1), 2: (0, 0xFF), 3: (0, 0xFFFF), 11: (0, 1)}
+MAX_FILE_BYTES = 1 << 20      # a mission file (1 MiB; MAX_ITEMS WPL lines take about 100 kB)
 
 
 @dataclass(frozen=True)
@@ -70,8 +79,18 @@ def read_plan(path: str | Path) -> MissionFile:
 
 
 def _read_text(path: str | Path) -> str:
+    """The file's text; refused without reading it whole if it is larger than MAX_FILE_BYTES (its size first, then
+    at most one byte more is read, for a file whose size is not known beforehand, such as a pipe)."""
+    too_big = f"{path}: expected a mission file of at most {MAX_FILE_BYTES} bytes (1 MiB)"
     try:
-        return Path(path).read_text(encoding="utf-8")
+        with open(path, "rb") as fh:
+            size = os.fstat(fh.fileno()).st_size
+            if size > MAX_FILE_BYTES:
+                raise InputError(f"{too_big}, got {size}")
+            raw = fh.read(MAX_FILE_BYTES + 1)
+        if len(raw) > MAX_FILE_BYTES:
+            raise InputError(f"{too_big}, got more")
+        return raw.decode("utf-8")
     except FileNotFoundError:
         raise InputError(f"{path}: mission file not found") from None
     except UnicodeDecodeError as e:
@@ -91,11 +110,17 @@ def parse_wpl(text: str, name: str = "<wpl>") -> MissionFile:
         line = line.strip()
         if not line or line.startswith("#"):
             continue
-        rows.append((number, _wpl_row(line, f"{name}: line {number}")))
+        where = f"{name}: line {number}"
+        row = _wpl_row(line, where)
+        _check_index(rows, row[0], where)
+        rows.append((number, row))
     home = None
     if rows and rows[0][1][0] == 0 and rows[0][1][1] == 1 and rows[0][1][3] == MAV_CMD_NAV_WAYPOINT:
         f = rows.pop(0)[1]
         home = (f[8], f[9], f[10])
+    if len(rows) > MAX_ITEMS:
+        raise InputError(f"{name}: line {rows[MAX_ITEMS][0]}: expected at most {MAX_ITEMS} items (what a robot "
+                         "takes), got more")
     items = []
     for seq, (number, f) in enumerate(rows):
         p1 = f[4]
@@ -105,6 +130,18 @@ def parse_wpl(text: str, name: str = "<wpl>") -> MissionFile:
         _check_xy(item, f"{name}: line {number}", ("X", "Y"))
         items.append(item)
     return MissionFile(items, home)
+
+
+def _check_index(rows: list, index: int, where: str) -> None:
+    """A data line's INDEX counts up by one from the first (0, or 1 without a home line): a lost or repeated line
+    is refused; so is the line that would be item MAX_ITEMS + 2 (parse_wpl counts the items once home is known)."""
+    if not rows:
+        if index not in (0, 1):
+            raise InputError(f"{where}: INDEX: expected 0 (or 1 in a file without a home line), got {index}")
+    elif index != rows[-1][1][0] + 1:
+        raise InputError(f"{where}: INDEX: expected {rows[-1][1][0] + 1} (a line lost or repeated?), got {index}")
+    if len(rows) > MAX_ITEMS:
+        raise InputError(f"{where}: expected at most {MAX_ITEMS} items (what a robot takes), got more")
 
 
 def _wpl_row(line: str, where: str) -> list:
@@ -147,6 +184,9 @@ def parse_plan(text: str, name: str = "<plan>") -> MissionFile:
     raw = mission.get("items")
     if not isinstance(raw, list):
         raise InputError(f"{name}: mission.items: expected a list")
+    if len(raw) > MAX_ITEMS:
+        raise InputError(f"{name}: mission.items: expected at most {MAX_ITEMS} items (what a robot takes), "
+                         f"got {len(raw)}")
     items, jump_ids = [], {}
     for i, it in enumerate(raw):
         key = f"{name}: mission.items[{i}]"

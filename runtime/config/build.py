@@ -93,7 +93,8 @@ def short_repr(value: Any, limit: int = 60) -> str:
 
 
 def rng(lo: float | None = None, hi: float | None = None, **extra: Any) -> dict:
-    """Field metadata: numeric range, inclusive (``lo_open=True``: the low end excluded)."""
+    """Field metadata: numeric range, inclusive (``lo_open=True``: the low end excluded).  On a fixed-length tuple it
+    holds for every element, unless ``items`` gives one range per element."""
     return {"lo": lo, "hi": hi, **extra}
 
 
@@ -167,7 +168,8 @@ def _build(tp: Any, value: Any, file: str, key: str, meta: dict | None = None) -
             return tuple(_build(args[0], v, file, f"{key}[{i}]", meta) for i, v in enumerate(value))
         if len(value) != len(args):
             raise ConfigError(file, key, _type_name(tp), value)
-        return tuple(_build(a, v, file, f"{key}[{i}]", meta) for i, (a, v) in enumerate(zip(args, value)))
+        metas = (meta or {}).get("items") or (meta,) * len(args)
+        return tuple(_build(a, v, file, f"{key}[{i}]", m) for i, (a, v, m) in enumerate(zip(args, value, metas)))
     if dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
             raise ConfigError(file, key, "a mapping", value)

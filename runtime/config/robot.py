@@ -12,7 +12,7 @@ from typing import Any, Literal, Optional
 
 from runtime.comms.networks import EXPECTED as NETWORK, parse_network
 from runtime.config.build import _build, _read_yaml, deep_merge, rng, union_field
-from runtime.config.world import Datum
+from runtime.config.world import POSE_RANGES, Datum
 
 
 def _bases():
@@ -49,9 +49,10 @@ class LocalizationConfig:
     # distances of the last consistency_window fixes sum above chi^2(2 x window) at this probability; 0: off
     consistency_window: int = field(default=10, metadata=rng(0, 1000))     # GPS fixes
     consistency: float = field(default=0.9999, metadata=rng(0.5, 0.999999))
-    # x, y, heading in the fleet frame where the operator placed the robot; null: from the first GPS fix
-    # with heading unknown until the robot has moved
-    initial_pose: Optional[tuple[float, float, float]] = None
+    # x, y (m), heading (rad) in the fleet frame where the operator placed the robot; null: from the first GPS fix
+    # with heading unknown until the robot has moved.  x, y lie in the largest arena (|x|, |y| <= 50 km) and, with
+    # planning.map, inside that map (checked at start-up); the heading within a little over a turn either way
+    initial_pose: Optional[tuple[float, float, float]] = field(default=None, metadata=POSE_RANGES)
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,7 @@ start-up and `mrta daemon CONFIG --check` runs alone, without opening a device o
 * every address parses (``host:port``, port 1..65535; IPv6 as ``[::1]:port``) and resolves; a peer or ground
   station is a unicast address;
 * no peer is the robot itself, no peer id is listed twice;
-* the map file exists (relative to the config file) and loads;
+* the map file exists (relative to the config file) and loads, and ``localization.initial_pose`` lies inside it;
 * the signing key file loads;
 * the base driver accepts its options (e.g. a Create's baud rate): it is built, not opened.
 
@@ -17,7 +17,7 @@ import socket
 from pathlib import Path
 
 from runtime.config.build import ConfigError, parse_hostport
-from runtime.config.world import load_world
+from runtime.config.world import check_inside, load_world
 from runtime.errors import InputError
 
 
@@ -41,7 +41,9 @@ def validate(cfg) -> None:
         path = map_path(cfg)
         if not path.is_file():
             raise ConfigError(file, "planning.map", "a world YAML file (relative to this file)", cfg.planning.map)
-        load_world(path)
+        world = load_world(path)
+        if cfg.localization.initial_pose is not None:
+            check_inside(world, cfg.localization.initial_pose, file, "localization.initial_pose")
     if comms.signing_key is not None:
         from runtime.comms.link import load_key
         try:

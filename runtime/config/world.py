@@ -8,6 +8,10 @@ from pathlib import Path
 from runtime.config.build import ConfigError, load, rng
 
 MAX_CELLS = 4_000_000     # occupancy grid cells a world may need (each costs ~60 bytes while a planner is built)
+MAX_SIDE = 100_000        # m: the largest arena's side
+MAX_HALF = MAX_SIDE // 2  # m: |x|, |y| of a point in the largest arena (a pose or obstacle of any world)
+# field metadata of a pose (x, y, heading): x, y in the largest arena, the heading (rad) a little over a turn either way
+POSE_RANGES = {"items": (rng(-MAX_HALF, MAX_HALF), rng(-MAX_HALF, MAX_HALF), rng(-7, 7))}
 
 
 @dataclass(frozen=True)
@@ -20,16 +24,17 @@ class Datum:
 
 @dataclass(frozen=True)
 class Box:
-    """An axis-aligned (then yawed) box obstacle: centre and full size in metres."""
-    center: tuple[float, float]
-    size: tuple[float, float]
+    """An axis-aligned (then yawed) box obstacle: centre (inside the arena, see :func:`load_world`) and full size
+    in metres (each side > 0)."""
+    center: tuple[float, float] = field(metadata=rng(-MAX_HALF, MAX_HALF))
+    size: tuple[float, float] = field(metadata=rng(0, MAX_SIDE, lo_open=True))
     height: float = field(default=0.5, metadata=rng(0.01, 10))
     yaw: float = field(default=0.0, metadata=rng(-math.pi, math.pi))
 
 
 @dataclass(frozen=True)
 class WorldConfig:
-    size: tuple[float, float] = field(default=(10.0, 10.0), metadata=rng(0.01, 100_000))  # m, x by y, centred on 0
+    size: tuple[float, float] = field(default=(10.0, 10.0), metadata=rng(0.01, MAX_SIDE))  # m, x by y, centred on 0
     obstacles: tuple[Box, ...] = ()
     datum: Datum = Datum()
     walls: bool = True
@@ -43,6 +48,8 @@ def load_world(path: str | Path) -> WorldConfig:
     if nx * ny > MAX_CELLS:
         raise ConfigError(path, "size, resolution", f"at most {MAX_CELLS} occupancy grid cells (a coarser resolution "
                           f"or a smaller size), got {nx} x {ny} cells")
+    for i, box in enumerate(world.obstacles):
+        check_inside(world, box.center, str(path), f"obstacles[{i}].center")
     return world
 
 

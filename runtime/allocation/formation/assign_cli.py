@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from runtime import argcheck
 from runtime.allocation.formation.assignment import check_costs, hungarian, percent_error, straight_line_costs
 from runtime.allocation.formation.simulate import METHODS    # the registry's formation solvers, and hungarian
 from runtime.errors import InputError
@@ -23,6 +24,7 @@ MAX_COORD = 1e9          # m: |x|, |y| of a position (distances and their sums s
 MAX_COST = 1e30          # a cost (the agents' bids and prices travel as MAVLink floats, at most 3.4e38)
 MAX_AGENTS = 250         # robots a distributed method can run: MAVLink system ids 1..250
 MAX_POINTS = 4000        # robots (= tasks) given as positions: the cost matrix is n x n
+MAX_BID_TIMEOUT = 3600.0  # sim s: --bid-timeout (an agent waiting longer for bids has lost its peers)
 
 
 def _finite(v) -> bool:
@@ -100,8 +102,7 @@ def load_problem(path: str | Path) -> tuple[np.ndarray, list | None, list | None
 def run(args: argparse.Namespace) -> int:
     from runtime.allocation.formation.simulate import solve
 
-    if not (args.bid_timeout > 0 and math.isfinite(args.bid_timeout)):
-        raise InputError(f"--bid-timeout: expected a positive number of seconds, got {args.bid_timeout}")
+    argcheck.number(args.bid_timeout, "--bid-timeout", 0, MAX_BID_TIMEOUT, lo_open=True)
     costs, robots, tasks = load_problem(args.problem)
     if args.method != "hungarian" and len(costs) > MAX_AGENTS:
         raise InputError(f"{args.problem}: expected at most {MAX_AGENTS} robots for --method {args.method} (one "
@@ -126,6 +127,7 @@ def register(subparsers) -> None:
     p.add_argument("problem", help='JSON: {"costs": [[...]]} or {"robots": [[x, y]], "tasks": [[x, y]], "world"?}')
     p.add_argument("--method", choices=METHODS, default="auction",
                    help="auction (epsilon-scaling, exact; default), bs, rtma, or hungarian (centralised)")
-    p.add_argument("--bid-timeout", type=float, default=1.0, help="agents' bid timeout in sim seconds")
+    p.add_argument("--bid-timeout", type=float, default=1.0,
+                   help=f"agents' bid timeout in sim seconds (0 < S <= {MAX_BID_TIMEOUT:g}, default 1)")
     p.add_argument("--json", action="store_true", help='print {"assignment", "cost", "messages"} as JSON')
     p.set_defaults(func=run)

@@ -50,7 +50,6 @@ class FleetNode:
         self.pose: tuple[float, float] | None = None
         self.notices: list[Notice] = []
         self.events: list[TaskEvent] = []          # every agent event, for the run's trace
-        self.done_by: dict[int, tuple[int, ...]] = {}   # tasks this robot saw done: by whom
         self.holding: dict[int, tuple[int, ...]] = {}   # peer -> the tasks its last RobotState named
         self.positions: dict[int, tuple[float, float, float]] = {}   # peer -> (x, y, when) of its last RobotState
         self._last_state: tuple | None = None
@@ -90,8 +89,6 @@ class FleetNode:
             return []
         if isinstance(msg, TaskRecord):
             task, state = self.table.merge(msg)
-            if state == T_DONE:
-                self.done_by.setdefault(msg.task, self.holders(msg.task))     # who held it when it was done
             out = []
             if task is not None and state == OPEN:
                 out += self.agent.add_tasks([task], now)
@@ -130,13 +127,16 @@ class FleetNode:
         return tuple(sorted(who + [r for r, tasks in self.holding.items() if task_id in tasks]))
 
     def answer_table(self, dest: int) -> list[TaskRecord]:
-        """The table for a ground station: every task with the robots I believe hold it (a done task: those
-        that held it when it was done, as far as I know)."""
-        out = []
-        for r in self.table.records(dest):
-            who = self.holders(r.task) if r.state == OPEN else self.done_by.get(r.task, ())
-            out.append(replace(r, holders=tuple(sorted(who))[:8]))
-        return out
+        """The table for a ground station: every task with the robots I believe hold it (a task no longer open:
+        the robots that did it, as the replicated table says; none if it was never done or no robot that did it
+        has been heard yet)."""
+        return [replace(r, holders=self.holders(r.task)[:MAX_HELD]) if r.state == OPEN else r
+                for r in self.table.records(dest)]
+
+    @property
+    def done_by(self) -> dict[int, tuple[int, ...]]:
+        """Tasks the table knows to have been done, and by whom (replicated: the same on every robot)."""
+        return {tid: e.done_by for tid, e in self.table.entries.items() if e.done_by}
 
     def on_progress(self, p: Progress, now: float) -> list:
         if p.event == "arrived":
@@ -159,8 +159,7 @@ class FleetNode:
             self.events.append(ev)
             who = "+".join(f"R{r}" for r in ev.robots)
             if ev.what == DONE:
-                self.done_by[ev.task] = tuple(ev.robots)
-                out += self.table.mark(ev.task, T_DONE)
+                out += self.table.mark(ev.task, T_DONE, tuple(ev.robots))
                 self.notices.append(Notice(f"task {_tid(ev.task)} done by {who}", 5))
             elif ev.what == AWARDED:
                 self.notices.append(Notice(f"task {_tid(ev.task)} awarded to {who}", 6))

@@ -33,9 +33,9 @@ from typing import Callable, Mapping, Protocol, Sequence
 from runtime import tasks as T
 from runtime.allocation.agent import DONE, AgentContext, Method
 from runtime.allocation.bus import InMemoryBus
-from runtime.fleet.liveness import Silence
 from runtime.config.robot import CommsConfig, ControlConfig, Peer, PlanningConfig, RobotConfig, RobotIdentity
 from runtime.drivers.base import BaseSensors
+from runtime.fleet.liveness import Silence
 from runtime.robot.core import Inbox, Output, RobotCore, Sensed
 from runtime.robot.ports import BaseFacts
 from runtime.tasks import Commitment, Task

@@ -10,10 +10,11 @@ executor, on the in-memory bus in tests.
 
 Given its configured ``peers``, it takes messages only from them, and only fleet task ids (minted by a robot of
 the fleet, upper 16 bits); a task record that contradicts the table (same id, another command, frame,
-parameters or position) is dropped: a task's content never changes once entered, only its state.  Each drop is
+parameters or position) is dropped: a task's content never changes once entered, only its state and who did it
+(both merged as :mod:`runtime.fleet.table` says).  Each drop is
 counted in :attr:`FleetNode.dropped`.  So a robot drives only to tasks in its table, which only operator uploads
 and the replication of its peers' tables fill.  A record forged in a peer's name with a new id, or with a later
-state for a known task, cannot be told from the peer's own without signing (the fleet's default).
+state or another doer for a known task, cannot be told from the peer's own without signing (the fleet's default).
 """
 from __future__ import annotations
 

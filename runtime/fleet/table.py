@@ -15,7 +15,7 @@ join-semilattice, merged field by field:
   it done, the one the operator cleared did not yet) is cleared, as it would be had the news come first;
 * ``done_by`` is a set of robot ids, joined by union (the lowest :data:`MAX_BY` ids kept: the wire's eight).
 
-So :func:`join` is commutative, associative and idempotent, and any two robots that have merged the same records,
+So :meth:`Entry.join` is commutative, associative and idempotent, and any two robots that have merged the same records,
 in any order, with any duplicates, hold equal tables (tests/test_fleet_table.py checks it over random records).
 
 Anti-entropy: each robot's :class:`~runtime.messages.RobotState` carries the size and a CRC-32 of its table over

@@ -127,6 +127,14 @@ def test_a_robot_that_did_a_task_others_already_marked_done_still_tells_them():
     assert t.mark(fleet_task_id(1, 1), DONE, (2,)) == []
 
 
+def test_an_open_records_holders_are_a_belief_and_never_become_who_did_it():
+    t = TaskTable(1)
+    t.merge(record(2, 1, OPEN, (2, 3)))                 # an answer to a ground station, heard by a robot
+    assert t.done_by(fleet_task_id(1, 1)) == ()
+    t.merge(record(3, 1, DONE, (3,)))
+    assert t.done_by(fleet_task_id(1, 1)) == (3,)
+
+
 def test_records_carry_done_by_through_the_codec():
     from runtime.comms import codec, dialect
 

@@ -157,9 +157,10 @@ class TaskTable:
         return (e.command, e.frame) != (rec.command, rec.frame) or not all(map(_same_f32, mine, theirs))
 
     def merge(self, rec: TaskRecord) -> tuple[T.Task | None, int | None]:
-        """Merge a peer's record (its ``holders``: the robots that did the task).  Returns (the task if it is new
-        to me, its new state if that moved)."""
-        by = join_by((), rec.holders)
+        """Merge a peer's record (its ``holders``: the robots that did the task; of an open task they are a ground
+        station's answer, a belief, and never merged).  Returns (the task if it is new to me, its new state if that
+        moved)."""
+        by = join_by((), rec.holders) if rec.state != OPEN else ()
         e = self.entries.get(rec.task)
         if e is None:
             entry = Entry(rec.task, rec.command, rec.frame, (rec.param1, rec.param2, rec.param3, rec.param4),

@@ -14,8 +14,11 @@ Each control period (:meth:`Fleet.step`):
    ``on_output``;
 4. ``after_cycle(now)``; the motion advances one period; ``after_advance(now)``.
 
-Liveness is the daemon link's: a peer heard and then silent for ``heartbeat_timeout`` is reported lost to the core,
-once per silence; a peer never heard is the core's own ``comms.startup_grace`` rule.
+Liveness is the daemon's: each live robot sends a heartbeat to every peer once per ``heartbeat_period`` as its link
+does (on a bus of their own, with the same delay, jitter and loss, so the agents' bus draws what it always drew);
+a peer whose heartbeats are silent for ``heartbeat_timeout`` is reported to the core (:class:`Liveness`, the link's
+rule), which loses it once its messages have been silent as long (:mod:`runtime.fleet.liveness`); a peer never
+heard is the core's own ``comms.startup_grace`` rule.
 
 A robot's commitments can also be given instead of allocated (:func:`fixed_method`: the foraging calibration's fixed
 commitments), and ``bus=False`` runs robots that never talk (nothing is sent or delivered).
@@ -32,6 +35,7 @@ from runtime.allocation.agent import DONE, AgentContext, Method
 from runtime.allocation.bus import InMemoryBus
 from runtime.config.robot import CommsConfig, ControlConfig, Peer, PlanningConfig, RobotConfig, RobotIdentity
 from runtime.drivers.base import BaseSensors
+from runtime.fleet.liveness import Silence
 from runtime.robot.core import Inbox, Output, RobotCore, Sensed
 from runtime.robot.ports import BaseFacts
 from runtime.tasks import Commitment, Task
@@ -57,28 +61,30 @@ def robot_config(rid: int, ids: Sequence[int], options, *, speed: float = 0.25, 
                        allocation=options)
 
 
-class Liveness:
-    """The daemon link's peer timeout: a peer heard once and then silent for ``timeout`` is lost (once per
-    silence); hearing it again makes it live."""
+class Liveness(Silence):
+    """The daemon link's heartbeat timeout (:meth:`runtime.comms.link.MavlinkLink.peers_lost`): a peer heard once
+    and then silent for ``timeout`` is lost (once per silence); hearing it again makes it live."""
 
-    def __init__(self, peers: Sequence[int], timeout: float):
-        self.peers = frozenset(peers)
-        self.timeout = float(timeout)
-        self.heard: dict[int, float] = {}
-        self.lost: set[int] = set()
 
-    def hear(self, sender: int, now: float) -> None:
-        if sender in self.peers:
-            self.heard[sender] = now
-            self.lost.discard(sender)
+@dataclass(frozen=True)
+class Heartbeat:
+    """What a robot's link sends its peers once per ``heartbeat_period`` (the host's stand-in for a HEARTBEAT)."""
+    sender: int
+    dest: int = 0
 
-    def due(self, now: float) -> list[int]:
-        out = []
-        for peer, t in self.heard.items():
-            if peer not in self.lost and now - t > self.timeout:
-                self.lost.add(peer)
-                out.append(peer)
-        return out
+
+class Beats:
+    """A robot's link end for heartbeats: what it hears goes to its :class:`Liveness` only."""
+
+    def __init__(self, robot_id: int, liveness: Liveness):
+        self.robot_id, self.liveness = robot_id, liveness
+
+    def on_message(self, msg, now: float) -> list:
+        self.liveness.hear(msg.sender, now)
+        return []
+
+    def on_tick(self, now: float) -> list:
+        return []
 
 
 class Hosted:
@@ -107,7 +113,6 @@ class Hosted:
         return self.core.agent.commitments if self.core.node.armed else ()
 
     def on_message(self, msg, now: float) -> list:
-        self.liveness.hear(msg.sender, now)
         return self.core.receive(msg, now)
 
     def on_tick(self, now: float) -> list:        # the bus's own tick loop is not used: Fleet.step drives cores
@@ -293,7 +298,8 @@ class Fleet:
 
     def __init__(self, cores: Mapping[int, RobotCore], motion: Motion, *, period: float = 0.05,
                  delay: float = 0.01, jitter: float = 0.0, drop: float = 0.0, duplicate: float = 0.0, seed: int = 0,
-                 heartbeat_timeout: float = 3.0, bus: bool = True, profile: bool = False,
+                 heartbeat_timeout: float = 3.0, heartbeat_period: float = 1.0, bus: bool = True,
+                 profile: bool = False,
                  on_output: Callable[[int, Output, float], None] | None = None,
                  after_cycle: Callable[[float], None] | None = None,
                  after_advance: Callable[[float], None] | None = None):
@@ -302,6 +308,10 @@ class Fleet:
         self.period = float(period)
         self.talk = bool(bus)
         self.bus = InMemoryBus(dict(self.robots), delay=delay, jitter=jitter, drop=drop, duplicate=duplicate, seed=seed)
+        self.beats = InMemoryBus({r: Beats(r, h.liveness) for r, h in self.robots.items()}, delay=delay, jitter=jitter,
+                                 drop=drop, seed=seed + 0x5EED, down=self.bus.down)     # the links' heartbeats
+        self.heartbeat_period = float(heartbeat_period)
+        self._next_beat = dict.fromkeys(self.robots, 0.0)
         self.on_output, self.after_cycle, self.after_advance = on_output, after_cycle, after_advance
         self.steps = 0
         self.timing = Timing()
@@ -320,6 +330,7 @@ class Fleet:
         clock, timing, now = self._clock, self.timing, self.now
         t0 = clock()
         if self.talk:
+            self.beats.deliver(now)
             self.bus.deliver(now)
         t1 = clock()
         live = self.live()
@@ -328,8 +339,12 @@ class Fleet:
         for r in live:
             h = self.robots[r]
             pose, sensors = sensed[r]
+            if self.talk and now >= self._next_beat[r] - 1e-9:
+                self.beats.send([Heartbeat(r)], now)
+                nxt = self._next_beat[r] + self.heartbeat_period      # the link's schedule: on time, or from now
+                self._next_beat[r] = nxt if nxt > now else now + self.heartbeat_period
             out = h.core.step(now, Sensed(sensors=sensors, pose=pose),
-                              Inbox(lost=h.liveness.due(now), alive=h.liveness.heard))
+                              Inbox(lost=h.liveness.due(now), alive=h.liveness.alive(now)))
             self.motion.command(r, *out.command)
             if self.on_output is not None:
                 self.on_output(r, out, now)
@@ -361,6 +376,7 @@ class Fleet:
             if observe is not None:
                 observe(self)
         if self.talk:
+            self.beats.deliver(self.now)
             self.bus.deliver(self.now)        # what is due by now is heard now (the next step would, first thing)
         return self.now
 

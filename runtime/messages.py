@@ -152,7 +152,8 @@ class TaskRecord(Message):
     param4: float
     x: float
     y: float
-    holders: tuple[int, ...] = ()      # the sender's belief, in answers to a ground station
+    holders: RobotIds = ()      # a task no longer open: the robots that did it (replicated, runtime/fleet/table.py);
+    #                             an open one, in answers to a ground station: the robots the sender believes hold it
 
     def check(self) -> str | None:
         if self.state not in STATE_NAMES:

@@ -10,10 +10,11 @@ executor, on the in-memory bus in tests.
 
 Given its configured ``peers``, it takes messages only from them, and only fleet task ids (minted by a robot of
 the fleet, upper 16 bits); a task record that contradicts the table (same id, another command, frame,
-parameters or position) is dropped: a task's content never changes once entered, only its state.  Each drop is
+parameters or position) is dropped: a task's content never changes once entered, only its state and who did it
+(both merged as :mod:`runtime.fleet.table` says).  Each drop is
 counted in :attr:`FleetNode.dropped`.  So a robot drives only to tasks in its table, which only operator uploads
 and the replication of its peers' tables fill.  A record forged in a peer's name with a new id, or with a later
-state for a known task, cannot be told from the peer's own without signing (the fleet's default).
+state or another doer for a known task, cannot be told from the peer's own without signing (the fleet's default).
 """
 from __future__ import annotations
 
@@ -51,7 +52,6 @@ class FleetNode:
         self.pose: tuple[float, float] | None = None
         self.notices: list[Notice] = []
         self.events: list[TaskEvent] = []          # every agent event, for the run's trace
-        self.done_by: dict[int, tuple[int, ...]] = {}   # tasks this robot saw done: by whom
         self.holding: dict[int, tuple[int, ...]] = {}   # peer -> the tasks its last RobotState named
         self.positions: dict[int, tuple[float, float, float]] = {}   # peer -> (x, y, when) of its last RobotState
         self._last_state: tuple | None = None
@@ -101,8 +101,6 @@ class FleetNode:
             return []
         if isinstance(msg, TaskRecord):
             task, state = self.table.merge(msg)
-            if state == T_DONE:
-                self.done_by.setdefault(msg.task, self.holders(msg.task))     # who held it when it was done
             out = []
             if task is not None and state == OPEN:
                 out += self.agent.add_tasks([task], now)
@@ -141,13 +139,16 @@ class FleetNode:
         return tuple(sorted(who + [r for r, tasks in self.holding.items() if task_id in tasks]))
 
     def answer_table(self, dest: int) -> list[TaskRecord]:
-        """The table for a ground station: every task with the robots I believe hold it (a done task: those
-        that held it when it was done, as far as I know)."""
-        out = []
-        for r in self.table.records(dest):
-            who = self.holders(r.task) if r.state == OPEN else self.done_by.get(r.task, ())
-            out.append(replace(r, holders=tuple(sorted(who))[:8]))
-        return out
+        """The table for a ground station: every task with the robots I believe hold it (a task no longer open:
+        the robots that did it, as the replicated table says; none if it was never done or no robot that did it
+        has been heard yet)."""
+        return [replace(r, holders=self.holders(r.task)[:MAX_HELD]) if r.state == OPEN else r
+                for r in self.table.records(dest)]
+
+    @property
+    def done_by(self) -> dict[int, tuple[int, ...]]:
+        """Tasks the table knows to have been done, and by whom (replicated: the same on every robot)."""
+        return {tid: e.done_by for tid, e in self.table.entries.items() if e.done_by}
 
     def on_progress(self, p: Progress, now: float) -> list:
         if p.event == "arrived":
@@ -170,8 +171,7 @@ class FleetNode:
             self.events.append(ev)
             who = "+".join(f"R{r}" for r in ev.robots)
             if ev.what == DONE:
-                self.done_by[ev.task] = tuple(ev.robots)
-                out += self.table.mark(ev.task, T_DONE)
+                out += self.table.mark(ev.task, T_DONE, tuple(ev.robots))
                 self.notices.append(Notice(f"task {_tid(ev.task)} done by {who}", 5))
             elif ev.what == AWARDED:
                 self.notices.append(Notice(f"task {_tid(ev.task)} awarded to {who}", 6))

@@ -3,13 +3,28 @@
 Every task an operator hands to any robot is entered here with a fleet-unique id (``origin << 16 | n``),
 broadcast to every peer, and kept by all of them, so a task survives the robot that received it.  An
 entry is the mission item it came from (command, params, position in the fleet frame, the frame the
-operator used) and a state: open, done, withdrawn (cleared before it was done), cleared (done, then the
-mission was cleared).  States only move forward (a later state wins), so merging two tables in any order
-gives the same table: the replicas converge whatever the loss, duplication or order of messages.
+operator used), a state: open, done, withdrawn (cleared before it was done), cleared (done, then the
+mission was cleared), and the robots that did it (``done_by``, empty until a robot that did it says so).
 
-Anti-entropy: each robot's :class:`~runtime.messages.RobotState` carries the size and a CRC-32 of
-its table; a robot that sees a different digest asks that peer for its table (``TableRequest``, at most
-once per ``resync`` seconds per peer) and merges the answer.  Changes are also broadcast at once.
+The table is a state-based replicated data type: an entry's content never changes once minted (one robot mints
+each id; a record that contradicts it is refused by the node), and its two changing fields are each a
+join-semilattice, merged field by field:
+
+* ``state`` is two bits, done (1) and removed from the mission (2): open 0, done 1, withdrawn 2, cleared 3, and
+  the join is bitwise OR.  For ordered pairs that is the later state; done joined with withdrawn (one robot saw
+  it done, the one the operator cleared did not yet) is cleared, as it would be had the news come first;
+* ``done_by`` is a set of robot ids, joined by union (the lowest :data:`MAX_BY` ids kept: the wire's eight).
+
+So :meth:`Entry.join` is commutative, associative and idempotent, and any two robots that have merged the same records,
+in any order, with any duplicates, hold equal tables (tests/test_fleet_table.py checks it over random records).
+
+Anti-entropy: each robot's :class:`~runtime.messages.RobotState` carries the size and a CRC-32 of its table over
+every field that can differ (id, state, done_by); a robot that sees a different digest asks that peer for its
+table (``TableRequest``, at most once per ``resync`` seconds per peer) and merges the answer, whose records carry
+``done_by`` in ``holders``.  Changes are also broadcast at once.  Bound: once the last change is made and the
+peers' messages get through, two robots that hear each other hold equal tables within ``state_period + resync``
+(the next RobotState shows the difference, the request goes out unless one went within ``resync``) plus the
+delivery of one request and its answer: 3 s and a few delays with the defaults.
 """
 from __future__ import annotations
 
@@ -23,6 +38,19 @@ from runtime.messages import BROADCAST, CLEARED, DONE, OPEN, WITHDRAWN, TaskReco
 from runtime.log import get_logger
 
 MAX_PER_ORIGIN = 0xFFFF
+MAX_BY = 8                    # robots a record's ``holders`` carries (uint8[8] on the wire)
+
+
+def join_state(a: int, b: int) -> int:
+    """The join of two task states (bits: done 1, removed 2): the later of two ordered states; done and withdrawn
+    make cleared."""
+    return a | b
+
+
+def join_by(a: tuple[int, ...], b: tuple[int, ...]) -> tuple[int, ...]:
+    """The join of two ``done_by`` sets: their union, sorted, the lowest :data:`MAX_BY` ids kept (the lowest k of a
+    union is the lowest k of the union of the lowest k of each, so this stays a semilattice)."""
+    return tuple(sorted(set(a) | set(b)))[:MAX_BY]
 
 
 def _same_f32(a: float, b: float) -> bool:
@@ -43,6 +71,12 @@ class Entry:
     x: float
     y: float
     state: int = OPEN
+    done_by: tuple[int, ...] = ()
+
+    def join(self, state: int, done_by: tuple[int, ...]) -> "Entry":
+        """This entry with ``state`` and ``done_by`` merged in (itself if nothing moves)."""
+        s, by = join_state(self.state, state), join_by(self.done_by, done_by)
+        return self if (s, by) == (self.state, self.done_by) else replace(self, state=s, done_by=by)
 
     @property
     def task(self) -> T.Task:
@@ -55,7 +89,8 @@ class Entry:
         return self.state in (OPEN, DONE)
 
     def record(self, sender: int, dest: int = BROADCAST) -> TaskRecord:
-        return TaskRecord(sender, dest, self.id, self.command, self.frame, self.state, *self.params, self.x, self.y)
+        return TaskRecord(sender, dest, self.id, self.command, self.frame, self.state, *self.params, self.x, self.y,
+                          self.done_by)
 
 
 class TaskTable:
@@ -85,14 +120,18 @@ class TaskTable:
         self._digest = None
         return new, out
 
-    def mark(self, task_id: int, state: int) -> list:
-        """Move a task to ``state`` (done, withdrawn, cleared) if that is forward; the records to broadcast."""
+    def mark(self, task_id: int, state: int, by: tuple[int, ...] = ()) -> list:
+        """Join ``state`` (done, withdrawn, cleared) and, for a task done here, the robots that did it ``by`` into
+        a task; the record to broadcast if that moved it."""
         e = self.entries.get(task_id)
-        if e is None or state <= e.state:
+        if e is None:
             return []
-        self.entries[task_id] = replace(e, state=state)
+        moved = e.join(state, tuple(by))
+        if moved is e:
+            return []
+        self.entries[task_id] = moved
         self._digest = None
-        return [self.entries[task_id].record(self.robot_id)]
+        return [moved.record(self.robot_id)]
 
     def clear(self) -> tuple[list[int], list]:
         """The operator cleared the mission: open tasks are withdrawn, done ones cleared.  Returns the ids
@@ -118,11 +157,14 @@ class TaskTable:
         return (e.command, e.frame) != (rec.command, rec.frame) or not all(map(_same_f32, mine, theirs))
 
     def merge(self, rec: TaskRecord) -> tuple[T.Task | None, int | None]:
-        """Merge a peer's record.  Returns (the task if it is new to me, its new state if that moved)."""
+        """Merge a peer's record (its ``holders``: the robots that did the task; of an open task they are a ground
+        station's answer, a belief, and never merged).  Returns (the task if it is new to me, its new state if that
+        moved)."""
+        by = join_by((), rec.holders) if rec.state != OPEN else ()
         e = self.entries.get(rec.task)
         if e is None:
             entry = Entry(rec.task, rec.command, rec.frame, (rec.param1, rec.param2, rec.param3, rec.param4),
-                          rec.x, rec.y, rec.state)
+                          rec.x, rec.y, rec.state, by)
             try:
                 task = entry.task
             except (AttributeError, ValueError, TypeError) as exc:    # no kind takes it, or bad params
@@ -133,16 +175,18 @@ class TaskTable:
             self.entries[rec.task] = entry
             self._digest = None
             return task, rec.state
-        if rec.state > e.state:
-            self.entries[rec.task] = replace(e, state=rec.state)
-            self._digest = None
-            return None, rec.state
-        return None, None
+        moved = e.join(rec.state, by)
+        if moved is e:
+            return None, None
+        self.entries[rec.task] = moved
+        self._digest = None
+        return None, (moved.state if moved.state != e.state else None)
 
     @property
     def digest(self) -> int:
         if self._digest is None:
-            data = b"".join(tid.to_bytes(4, "little") + bytes([e.state]) for tid, e in sorted(self.entries.items()))
+            data = b"".join(tid.to_bytes(4, "little") + bytes([e.state, len(e.done_by), *e.done_by])
+                            for tid, e in sorted(self.entries.items()))
             self._digest = zlib.crc32(data)
         return self._digest
 
@@ -177,3 +221,7 @@ class TaskTable:
     def state(self, task_id: int) -> int | None:
         e = self.entries.get(task_id)
         return None if e is None else e.state
+
+    def done_by(self, task_id: int) -> tuple[int, ...]:
+        e = self.entries.get(task_id)
+        return () if e is None else e.done_by

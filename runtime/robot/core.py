@@ -51,8 +51,9 @@ class Inbox:
     """What arrived since the last cycle."""
     peers: Sequence = ()                 # decoded peer messages, in arrival order
     ground: Sequence = ()                # (pymavlink message, source address) from ground stations
-    lost: Sequence[int] = ()             # peers whose heartbeat timed out now
-    alive: Iterable[int] = ()            # peers heard so far (a peer never heard is lost after the start-up grace)
+    lost: Sequence[int] = ()             # peers whose heartbeats timed out now (lost once their messages have too)
+    alive: Iterable[int] = ()            # peers whose heartbeats were heard within the timeout (a peer never heard
+    #                                      is lost after the start-up grace)
     ground_present: bool = False         # a ground station is listening (telemetry counts what it sends)
 
 
@@ -113,6 +114,7 @@ class RobotCore:
         from runtime.allocation import registry
         from runtime.allocation.agent import AgentContext
         from runtime.execution.executive import ExecContext, Executive, Tunables
+        from runtime.fleet.liveness import PeerLiveness
         from runtime.fleet.node import FleetNode
         from runtime.planning.robot_planner import RobotPlanner, TravelEstimator
         from runtime.tasks import Profile
@@ -133,6 +135,7 @@ class RobotCore:
         self.agent = self.method.make(AgentContext(self.id, peers, self.estimator, cfg.allocation,
                                                    cfg.base if base_config is ... else base_config))
         self.node = FleetNode(self.id, self.agent, armed=cfg.robot.armed, peers=list(peers), state_period=state_period)
+        self.liveness = PeerLiveness(peers, cfg.comms.heartbeat_timeout)    # lost: no heartbeat and no message
         self.executive = Executive(ExecContext(self.planner, Tunables(c.cruise_speed, c.lookahead, c.max_turn_rate,
                                                                       c.goal_tolerance), self.log, radius,
                                                seed=self.id if seed is None else seed, robot_id=self.id))
@@ -198,6 +201,7 @@ class RobotCore:
         """One peer message at its own time, for hosts that deliver messages one by one (the in-memory bus);
         returns the messages to send at that time."""
         self.stats.agent_received += 1
+        self.liveness.hear(getattr(msg, "sender", None), now)
         out = self.node.on_message(msg, now)
         self.stats.agent_sent += len(out)
         return out
@@ -231,6 +235,8 @@ class RobotCore:
         node.begin(None if pose is None else (pose[0], pose[1]))
         out = []
         held, self._held_back = self._held_back, []
+        for msg in inbox.peers:
+            self.liveness.hear(getattr(msg, "sender", None), now)
         for msg in held + list(inbox.peers):
             if not tick and _for_agent(msg):
                 self._held_back.append(msg)           # service(): the agent hears it at the next step
@@ -238,9 +244,9 @@ class RobotCore:
             self.stats.agent_received += 1
             out += node.on_message(msg, now)
         if tick:
-            for lost in inbox.lost:
+            for lost in self.liveness.due(now, inbox.lost, inbox.alive):
                 self.stats.peers_lost.append(lost)
-                self.log.warning("peer %d lost (no heartbeat for %.1f s): re-auctioning its work",
+                self.log.warning("peer %d lost (no heartbeat and no message for %.1f s): re-auctioning its work",
                                  lost, self.cfg.comms.heartbeat_timeout)
                 out += node.on_peer_lost(lost, now)
             for lost in self._never_heard(now, inbox.alive):

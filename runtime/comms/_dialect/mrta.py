@@ -19214,7 +19214,7 @@ class MAVLink(object):
         param4                    : Item param4. (type:float)
         x                         : East in the fleet frame. [m] (type:double)
         y                         : North in the fleet frame. [m] (type:double)
-        holders                   : Robots the sender believes hold the task (filled in answers to a ground station); 0 after the last. (type:uint8_t)
+        holders                   : A task done (state 1 or 3): the robots that did it, replicated with the table. An open task, in answers to a ground station: the robots the sender believes hold it. 0 after the last. (type:uint8_t)
 
         """
         return MAVLink_mrta_task_record_message(target_system, task, command, frame, state, param1, param2, param3, param4, x, y, holders)
@@ -19236,7 +19236,7 @@ class MAVLink(object):
         param4                    : Item param4. (type:float)
         x                         : East in the fleet frame. [m] (type:double)
         y                         : North in the fleet frame. [m] (type:double)
-        holders                   : Robots the sender believes hold the task (filled in answers to a ground station); 0 after the last. (type:uint8_t)
+        holders                   : A task done (state 1 or 3): the robots that did it, replicated with the table. An open task, in answers to a ground station: the robots the sender believes hold it. 0 after the last. (type:uint8_t)
 
         """
         self.send(self.mrta_task_record_encode(target_system, task, command, frame, state, param1, param2, param3, param4, x, y, holders), force_mavlink1=force_mavlink1)
@@ -19253,7 +19253,7 @@ class MAVLink(object):
         x                         : East in the fleet frame (NaN: no pose). [m] (type:float)
         y                         : North in the fleet frame (NaN: no pose). [m] (type:float)
         known                     : Tasks in its table. (type:uint16_t)
-        digest                    : CRC-32 of its table (ids and states). (type:uint32_t)
+        digest                    : CRC-32 of its table (ids, states and who did each task). (type:uint32_t)
 
         """
         return MAVLink_mrta_robot_state_message(target_system, state, tasks, x, y, known, digest)
@@ -19270,7 +19270,7 @@ class MAVLink(object):
         x                         : East in the fleet frame (NaN: no pose). [m] (type:float)
         y                         : North in the fleet frame (NaN: no pose). [m] (type:float)
         known                     : Tasks in its table. (type:uint16_t)
-        digest                    : CRC-32 of its table (ids and states). (type:uint32_t)
+        digest                    : CRC-32 of its table (ids, states and who did each task). (type:uint32_t)
 
         """
         self.send(self.mrta_robot_state_encode(target_system, state, tasks, x, y, known, digest), force_mavlink1=force_mavlink1)

@@ -63,6 +63,7 @@ class Daemon:
 
     # ------------------------------------------------------------------ lifecycle
     def open(self, now: float) -> None:
+        self.core.prepare()               # before the base runs: its watchdogs start with it
         self.base.open(now)
         if self.gps is not None and hasattr(self.gps, "open"):
             self.gps.open(now)

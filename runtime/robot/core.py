@@ -164,6 +164,16 @@ class RobotCore:
         self._frames: list = []
         self._reset = False
 
+    def prepare(self) -> None:
+        """Import now what the first cycles would import on first use (the executors of the method's task kinds,
+        the planner's cost functions), so that no cycle of a running base waits on an import: a CiA 402 drive
+        faults when its master is silent for 0.3 s, and a loaded machine takes that long over scipy's imports."""
+        from runtime.execution import executor_class
+        from runtime.planning import costs  # noqa: F401
+
+        for kind in self.method.task_kinds:
+            executor_class(kind)
+
     # ------------------------------------------------------------------ views
     def locate(self, pose: tuple[float, float, float]) -> None:
         """A pose from outside the filter before the first cycle (a simulation's truth): the agent's first bids

@@ -174,6 +174,9 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
         if method not in registry.METHODS:
             raise C.ConfigError("--method", "", f"one of {'|'.join(registry.METHODS)}", method)
 
+    from runtime.comms import dialect
+    dialect.load()      # the MAVLink bindings (and their bytecode, in a fresh tree) before any device serves: a first
+    #                     compile of them in this process later would hold the emulators' threads for seconds
     from sitl.devices.nmea_gps import NmeaGpsDevice      # pybullet only once the configs are good
     from sitl.devices.registry import body_kind, make_device
     from sitl.world import World

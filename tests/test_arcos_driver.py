@@ -99,6 +99,25 @@ def test_a_wrong_reply_starts_again_at_sync0(rig):
     assert robot.got() == [P.sync(0)] and drv.stats.extra["sync_restarts"] == 1
 
 
+def test_a_late_answer_to_a_resent_sync_is_ignored_not_a_restart(rig):
+    """A round trip longer than SYNC_RETRY: SYNC0 went out twice; the first answer moves on to SYNC1 and the second,
+    late, answer to SYNC0 must not send the handshake back to SYNC0 (before, a steady delay livelocked it)."""
+    robot, drv = rig
+    drv.open(0.0)
+    drv.poll(0.3)                                     # no answer within SYNC_RETRY: SYNC0 again
+    assert robot.got() == [P.sync(0), P.sync(0)]
+    robot.send(b"\x00")
+    drv.poll(0.35)
+    assert robot.got() == [P.sync(1)]
+    robot.send(b"\x00")                              # the answer to the second SYNC0, late
+    drv.poll(0.36)
+    assert robot.got() == [] and drv.stats.extra["late_sync_replies"] == 1
+    assert drv.stats.extra["sync_restarts"] == 0
+    robot.send(b"\x01")
+    drv.poll(0.37)
+    assert robot.got() == [P.sync(2)]
+
+
 def test_sips_still_flowing_close_the_old_session_first(rig):
     robot, drv = rig
     drv.open(0.0)

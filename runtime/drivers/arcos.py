@@ -3,7 +3,8 @@
 A thin shell around :mod:`runtime.drivers.arcos_protocol`.  The link is any pyserial URL: the robot's
 serial port, a pty, or ``socket://host:8101`` (MobileSim's and our emulator's TCP port).  ``open`` only
 opens the link and sends SYNC0; :meth:`poll` carries the handshake on as ARIA's ``asyncConnectHandler``
-does (each SYNC answered with the same id, else back to SYNC0; SIPs still flowing from an earlier session:
+does (each SYNC answered with the same id, else back to SYNC0, though a late answer to a step already passed is
+ignored, so a round trip longer than the retry cannot livelock the handshake; SIPs still flowing from an earlier session:
 CLOSE and start again; no answer: the SYNC again, and CLOSE every third miss to dislodge a confused
 server), reads the name, class and subclass from the SYNC2 reply, then sends OPEN, ENABLE 1, SONAR and
 CONFIG.
@@ -78,6 +79,7 @@ class ArcosBase(MobileBase):
         self.want_sonar = bool(sonar)
         self.stats.extra.update({k: 0 for k in (
             "bad_count", "bad_sip", "bad_sonar", "other_packets", "handshakes", "sync_restarts", "sync_resends",
+            "late_sync_replies",
             "stale_sessions", "reconnects", "pulses", "motion_commands", "enable_requests")})
         self.link = SerialLink(port, baudrate, "ARCOS", self.log, self.stats.extra)
         self.parser = P.PacketParser()
@@ -175,6 +177,9 @@ class ArcosBase(MobileBase):
                 self._send(P.close(), now)
                 self._last_close = now
                 self._restart(now)
+            return
+        if pid < self._expect:                   # a late answer to a SYNC re-sent before its first answer came
+            x["late_sync_replies"] += 1          # (a round trip over SYNC_RETRY): that step is done, wait on
             return
         if pid != self._expect:
             x["sync_restarts"] += 1

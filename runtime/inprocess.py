@@ -17,7 +17,7 @@ Each control period (:meth:`Fleet.step`):
 Liveness is the daemon's: each live robot sends a heartbeat to every peer once per ``heartbeat_period`` as its link
 does (on a bus of their own, with the same delay, jitter and loss, so the agents' bus draws what it always drew);
 a peer whose heartbeats are silent for ``heartbeat_timeout`` is reported to the core (:class:`Liveness`, the link's
-rule), which loses it once its messages have been silent as long (:mod:`runtime.fleet.liveness`); a peer never
+rule), which loses it once its messages have been silent as long (:mod:`runtime.comms.liveness`); a peer never
 heard is the core's own ``comms.startup_grace`` rule.
 
 A robot's commitments can also be given instead of allocated (:func:`fixed_method`: the foraging calibration's fixed
@@ -35,7 +35,7 @@ from runtime.allocation.agent import DONE, AgentContext, Method
 from runtime.allocation.bus import InMemoryBus
 from runtime.config.robot import CommsConfig, ControlConfig, Peer, PlanningConfig, RobotConfig, RobotIdentity
 from runtime.drivers.base import BaseSensors
-from runtime.fleet.liveness import Silence
+from runtime.comms.liveness import Silence
 from runtime.robot.core import Inbox, Output, RobotCore, Sensed
 from runtime.robot.ports import BaseFacts
 from runtime.tasks import Commitment, Task

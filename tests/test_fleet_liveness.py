@@ -1,4 +1,4 @@
-"""Peer liveness (runtime/fleet/liveness.py): a peer is lost once neither its heartbeats nor its messages have been
+"""Peer liveness (runtime/comms/liveness.py): a peer is lost once neither its heartbeats nor its messages have been
 heard for the timeout, on the daemon's core and on the in-process host alike; a 10 % lossy radio no longer makes
 live peers lost, and a robot that really stops is still lost within the timeout."""
 from __future__ import annotations
@@ -7,7 +7,7 @@ import logging
 
 from runtime import config as C
 from runtime.drivers.base import BaseSensors
-from runtime.fleet.liveness import PeerLiveness, Silence
+from runtime.comms.liveness import PeerLiveness, Silence
 from runtime.inprocess import kinematic
 from runtime.messages import RobotState
 from runtime.robot.core import Inbox, RobotCore, Sensed

@@ -83,6 +83,7 @@ from typing import Callable, Iterable
 
 from runtime.comms import codec, dialect, udp
 from runtime.comms.networks import Networks
+from runtime.comms.liveness import Silence
 from runtime.errors import InputError
 from runtime.log import get_logger
 
@@ -386,8 +387,7 @@ class MavlinkLink:
         self.system_status = self.module.MAV_STATE_STANDBY
 
         self._next_heartbeat: float | None = None
-        self._last_seen: dict[int, float] = {}
-        self._lost: set[int] = set()
+        self._beats = Silence(None, self.heartbeat_timeout)     # peers' HEARTBEATs: the one liveness rule
         self._now = float("-inf")
         self.gcs_last_heartbeat: float | None = None
         self.gcs_inbox: list[tuple[object, tuple]] = []       # (pymavlink message, source address)
@@ -666,9 +666,9 @@ class MavlinkLink:
         elif not 1 <= src <= MAX_ROBOT_ID:
             return "ignored"
         else:
-            self._last_seen[src] = max(now, self._last_seen.get(src, now))
-            if src in self._lost:
-                self._lost.discard(src)
+            back = src in self._beats.lost
+            self._beats.hear(src, now)
+            if back:
                 self.log.info("peer %d is back", src)
         c.heartbeats += 1
         return None
@@ -677,16 +677,12 @@ class MavlinkLink:
     def peers_lost(self, now: float) -> list[int]:
         """Peers silent for more than ``heartbeat_timeout`` at ``now`` and not reported before."""
         self._now = max(self._now, now)
-        lost = sorted(p for p, t in self._last_seen.items()
-                      if p not in self._lost and now - t > self.heartbeat_timeout)
-        self._lost.update(lost)
-        return lost
+        return self._beats.due(now)
 
     @property
     def peers_alive(self) -> list[int]:
         """Peers heard within ``heartbeat_timeout`` of the latest ``now`` given to poll/peers_lost."""
-        return sorted(p for p, t in self._last_seen.items()
-                      if p not in self._lost and self._now - t <= self.heartbeat_timeout)
+        return self._beats.alive(self._now)
 
     def close(self) -> None:
         self.sock.close()

@@ -114,7 +114,7 @@ class RobotCore:
         from runtime.allocation import registry
         from runtime.allocation.agent import AgentContext
         from runtime.execution.executive import ExecContext, Executive, Tunables
-        from runtime.fleet.liveness import PeerLiveness
+        from runtime.comms.liveness import PeerLiveness
         from runtime.fleet.node import FleetNode
         from runtime.planning.robot_planner import RobotPlanner, TravelEstimator
         from runtime.tasks import Profile

@@ -24,16 +24,16 @@ from collections.abc import Iterable
 
 class Silence:
     """Peers heard once and then silent for more than ``timeout`` are due (once per silence); hearing one again
-    makes it live."""
+    makes it live.  ``peers`` None: any sender is a peer (the daemon's link hears robots by system id)."""
 
-    def __init__(self, peers: Iterable[int], timeout: float):
-        self.peers = frozenset(int(p) for p in peers)
+    def __init__(self, peers: Iterable[int] | None, timeout: float):
+        self.peers = None if peers is None else frozenset(int(p) for p in peers)
         self.timeout = float(timeout)
         self.heard: dict[int, float] = {}
         self.lost: set[int] = set()
 
     def hear(self, sender: int, now: float) -> None:
-        if sender in self.peers:
+        if self.peers is None or sender in self.peers:
             self.heard[sender] = max(now, self.heard.get(sender, now))
             self.lost.discard(sender)
 

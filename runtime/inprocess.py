@@ -30,12 +30,15 @@ import time
 from dataclasses import dataclass
 from typing import Callable, Mapping, Protocol, Sequence
 
+import numpy as np
+
 from runtime import tasks as T
 from runtime.allocation.agent import DONE, AgentContext, Method
 from runtime.allocation.bus import InMemoryBus
 from runtime.config.robot import CommsConfig, ControlConfig, Peer, PlanningConfig, RobotConfig, RobotIdentity
-from runtime.drivers.base import BaseSensors
 from runtime.comms.liveness import Silence
+from runtime.control.cspace import advance
+from runtime.drivers.base import BaseSensors
 from runtime.robot.core import Inbox, Output, RobotCore, Sensed
 from runtime.robot.ports import BaseFacts
 from runtime.tasks import Commitment, Task
@@ -206,7 +209,6 @@ class Discs:
     robot's disc stays where it stopped.  Senses nothing but the pose."""
 
     def __init__(self, starts: Mapping[int, Sequence[float]], radius: float, obstacles=()):
-        import numpy as np
         self.ids = sorted(int(r) for r in starts)
         self.index = {r: i for i, r in enumerate(self.ids)}
         self.radius = float(radius)
@@ -228,12 +230,10 @@ class Discs:
         self.command(robot, 0.0, 0.0)
 
     def advance(self, dt: float) -> None:
-        from runtime.control.cspace import advance
         self.move(advance(self.poses, self.v, self.w, dt))
 
     def move(self, proposed) -> None:
         """Every robot to its ``proposed`` pose (n, 3), contacts resolved as the class says."""
-        import numpy as np
         old = self.poses
         final = old.copy()
         final[:, 2] = proposed[:, 2]
@@ -262,7 +262,6 @@ class Discs:
     def _slide(self, start, want, discs):
         """``want`` pushed out of every disc it overlaps along the contact normal (at most 3 pushes); ``start``
         if it still overlaps one.  Returns (position, touched)."""
-        import numpy as np
         pos, touched = want.copy(), False
         for _ in range(3):
             gap = np.hypot(discs[:, 0] - pos[0], discs[:, 1] - pos[1]) - discs[:, 2] - self.radius

@@ -72,7 +72,8 @@ def test_ten_percent_message_loss_loses_and_doubles_no_weight(seed):
 
 
 @pytest.mark.slow
-@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=4, deadline=None, suppress_health_check=[HealthCheck.too_slow])   # 4 new seeds a run +
+# the 3 seeds that once failed (a run costs 5-6 s of CPU: the suite's budget, docs/benchmarks.md#tests)
 @given(st.integers(0, 10_000), st.sampled_from(["dr", "sr", "greedy"]), st.sampled_from(["M_NI", "NM_NI"]))
 @example(1071, "dr", "M_NI")        # a robot that left and then led the task stayed on its old leader's list
 @example(689, "dr", "M_NI")         # two candidates both led; the lower missed every LEADER_ALIVE, not the BID_REQUEST

@@ -67,10 +67,11 @@ def test_head_on_robots_avoiding_by_sonar_pass_each_other(offset):
 
 @pytest.mark.slow
 def test_eight_robots_on_one_object_keep_moving_weight():
-    """8 robots on one object 1.4 m from D for 30 min move weight in every 5 min: no permanent jam.  How much
+    """8 robots on one object 1.4 m from D for 20 min move weight in every 5 min: no permanent jam (a jam that
+    lasts shows in every window after it forms; 30 min, 6 windows, cost 70 s of the suite's 400).  How much
     they move beside one robot alone (the crowding the interference model learns) is measured, not asserted:
     `mrta experiment dr-calibration` (docs/foraging.md)."""
-    fr = ForagingRun(ForagingConfig(robots=8, method=None, time_limit=1800.0, fixed_object=(1.4, 0.0), seed=1,
+    fr = ForagingRun(ForagingConfig(robots=8, method=None, time_limit=1200.0, fixed_object=(1.4, 0.0), seed=1,
                                     delivery_reach=0.3))     # D a point, as when this was written
     marks = []
 
@@ -82,7 +83,7 @@ def test_eight_robots_on_one_object_keep_moving_weight():
     finally:
         fr.close()
     windows = [b - a for a, b in zip([0.0] + marks, marks)]
-    assert len(windows) == 6 and all(w > 0 for w in windows), windows
+    assert len(windows) == 4 and all(w > 0 for w in windows), windows
 
 
 def _moved(robots: int, distance: float = 1.4, seconds: float = 300.0, seed: int = 1) -> float:

@@ -49,6 +49,7 @@ class RplidarConfig:
     motor_pwm: int = field(default=P.DEFAULT_PWM, metadata=rng(0, P.MAX_PWM))
     stall_timeout: float = field(default=0.5, metadata=rng(0.05, 10.0))  # s without a node while scanning
     mount: tuple[float, float, float] = (0.0, 0.0, 0.0)                  # x, y (m), yaw (rad) on the robot
+    height: float = field(default=0.25, metadata=rng(0.0, 3.0))          # m above the floor (the SITL's beams)
 
 
 @dataclass(frozen=True)

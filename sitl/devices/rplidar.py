@@ -4,7 +4,8 @@ It answers GET_INFO and GET_HEALTH with a descriptor and the response, starts th
 FORCE_SCAN, stops it on STOP and RESET, and takes an A2's MOTOR_PWM (duty 0: the motor stops and so do the nodes).
 An A1's motor follows the host's DTR line, which a pty does not carry: the emulated A1's motor always runs.
 Nodes are produced at the model's sample rate of sim time, each a pybullet ray from the scanner's mounted pose on
-its body at that instant (:func:`sitl.sensing.raycast.cast_many`, one batch per :meth:`RplidarDevice.service`),
+its body at that instant (:func:`sitl.sensing.raycast.cast_many`), in batches every :data:`BATCH_PERIOD` (16 ms,
+the latency timer of an FTDI USB-serial adapter, which delivers a real scanner's bytes in such chunks),
 one revolution of :attr:`Model.samples` evenly spaced steps, angle 0 along the mount's heading and growing
 clockwise, the first step of each revolution with the start flag.  A hit nearer than the model's minimum or
 beyond its maximum range, or none, is a node with distance 0 and quality 0, as the scanner reports "no
@@ -36,9 +37,10 @@ from runtime.drivers import rplidar_protocol as P
 from runtime.log import get_logger
 from sitl.sensing import raycast
 
-LASER_Z = 0.25             # m above the floor: on top of a Pioneer (0.217 m) or a Create (0.09 m), below walls' 0.3 m
+LASER_Z = 0.25             # m above the floor: on top of a Pioneer (0.217 m), below the SITL walls' 0.3 m
 QUALITY = 15
 NOISE_REL = 0.002
+BATCH_PERIOD = 0.016       # s of sim time between batches of nodes (an FTDI USB-serial adapter's latency timer)
 
 
 @dataclass(frozen=True)
@@ -82,11 +84,12 @@ class RplidarDevice:
     @classmethod
     def from_config(cls, body, cfg, robot_id=None) -> "RplidarDevice":
         """The device for a ``sensors:`` entry ``cfg`` (:class:`runtime.drivers.rplidar.RplidarConfig`)."""
-        return cls(body, model=cfg.model, mount=tuple(cfg.mount), robot_id=robot_id,
+        return cls(body, model=cfg.model, mount=tuple(cfg.mount), z=cfg.height, robot_id=robot_id,
                    seed=0 if robot_id is None else int(robot_id))
 
     def __init__(self, body, model: str = "a1", mount: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                 z: float = LASER_Z, link=None, seed: int = 0, robot_id=None, noise_rel: float = NOISE_REL):
+                 z: float = LASER_Z, link=None, seed: int = 0, robot_id=None, noise_rel: float = NOISE_REL,
+                 batch_period: float = BATCH_PERIOD):
         if model not in MODELS:
             raise ValueError(f"rplidar model: expected one of {', '.join(MODELS)}, got {model!r}")
         if link is None:
@@ -96,6 +99,7 @@ class RplidarDevice:
         self.body, self.link, self.mount = body, link, tuple(float(v) for v in mount)
         self.z = float(z)
         self.noise_rel = float(noise_rel)
+        self.batch_period = float(batch_period)
         self.rng = np.random.default_rng([seed, 0x51DA])
         serial = bytes(np.random.default_rng([seed, 0xA1]).integers(0, 256, 16, dtype=np.uint8))
         self.info = P.DeviceInfo(self.model.model_id, self.model.firmware, self.model.hardware, serial)
@@ -109,6 +113,7 @@ class RplidarDevice:
         self._origin = raycast.mounted(raycast.laser(np.zeros(1)), self.mount)
         self._t0 = 0.0
         self._sent = 0
+        self._batch_at = 0.0
 
     @property
     def path(self) -> str:
@@ -135,11 +140,12 @@ class RplidarDevice:
         if self.scanning:
             if not self.motor_running:
                 self._t0, self._sent = now, 0            # the head stands still: no steps pass
-            else:
+            elif now - self._batch_at >= self.batch_period - 1e-9:
                 due = int((now - self._t0) * self.model.rate + 1e-9)
                 if due > self._sent:
                     out += self.nodes(self._sent, due)
                     self._sent = due
+                    self._batch_at = now
         return self._write(bytes(out)) if out else 0
 
     def beams(self, steps: np.ndarray) -> raycast.Beams:
@@ -179,7 +185,7 @@ class RplidarDevice:
         if cmd in (P.CMD_SCAN, P.CMD_FORCE_SCAN):
             if self.health.status == P.HEALTH_ERROR:
                 return b""
-            self.scanning, self._t0, self._sent = True, now, 0
+            self.scanning, self._t0, self._sent, self._batch_at = True, now, 0, now
             return P.descriptor(P.NODE_LEN, P.MODE_MULTIPLE, P.TYPE_SCAN)
         if cmd == P.CMD_GET_INFO:
             return P.descriptor(P.INFO_LEN, P.MODE_SINGLE, P.TYPE_INFO) + self.info.encode()

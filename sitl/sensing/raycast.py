@@ -103,7 +103,7 @@ def cast_many(sets: list[Beams], poses: list | None = None, kw: dict | None = No
     dy = np.concatenate([q[3] for q in parts])
     zs = np.concatenate([np.full(len(b.rays), float(b.z)) for b in sets])
     reach = np.concatenate([np.full(len(b.rays), float(b.max_range)) for b in sets])
-    own = np.concatenate([np.full(len(b.rays), b.body.body_id) for b in sets])
+    own = np.concatenate([np.full(len(b.rays), b.body.body_id, dtype=np.int64) for b in sets])
     total = len(ox)
     start = np.zeros(total)
     dist = reach.copy()
@@ -118,17 +118,15 @@ def cast_many(sets: list[Beams], poses: list | None = None, kw: dict | None = No
         for lo in range(0, len(todo), MAX_BATCH):
             hits += p.rayTestBatch(frm[lo:lo + MAX_BATCH].tolist(), to[lo:lo + MAX_BATCH].tolist(), **kw)
         cast_n += len(todo)
-        again = []
-        for k, h in zip(todo.tolist(), hits):
-            if h[0] < 0:
-                continue
-            d = start[k] + h[2] * (reach[k] - start[k])
-            if h[0] == own[k]:
-                start[k] = d + 1e-3
-                again.append(k)
-            else:
-                dist[k] = d
-        todo = np.asarray(again, dtype=int)
+        hit_id = np.array([h[0] for h in hits], dtype=np.int64)
+        frac = np.array([h[2] for h in hits], dtype=float)
+        hit = hit_id >= 0
+        k = todo[hit]
+        d = start[k] + frac[hit] * (reach[k] - start[k])
+        mine = hit_id[hit] == own[k]
+        dist[k[~mine]] = d[~mine]
+        start[k[mine]] = d[mine] + 1e-3          # hit its own body: start again just past the hit
+        todo = k[mine]
     out, lo = [], 0
     for b in sets:
         out.append(dist[lo:lo + len(b.rays)])

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 SYNC = 0xA5
 SYNC2 = 0x5A
@@ -60,6 +61,8 @@ HEALTH_NAMES = {HEALTH_GOOD: "good", HEALTH_WARNING: "warning", HEALTH_ERROR: "e
 # response types this module decodes -> (length, send mode) they must come with
 KNOWN_RESPONSES = {TYPE_INFO: (INFO_LEN, MODE_SINGLE), TYPE_HEALTH: (HEALTH_LEN, MODE_SINGLE),
                    TYPE_SCAN: (NODE_LEN, MODE_MULTIPLE)}
+_NODES = struct.Struct("<BHH")
+RUN_NODES = 512                  # nodes decoded per pass over the buffer
 LOCK_NODES = 3                   # good nodes in a row that (re)gain the node stream after a loss
 
 
@@ -163,8 +166,7 @@ class Health:
         return HEALTH_NAMES.get(self.status, f"status {self.status}")
 
 
-@dataclass(frozen=True)
-class Node:
+class Node(NamedTuple):
     """One measurement: ``angle`` degrees clockwise, ``distance`` mm (0: none), ``quality`` 0-63."""
     start: bool
     quality: int
@@ -306,16 +308,19 @@ class ResponseParser:
                 return pos
             self._locked = True
             self.stats.resyncs += 1
-        while n - pos >= NODE_LEN:
-            node = decode_node(buf, pos)
-            if node is None:
+        first, make = pos, Node._make
+        end = pos + min((n - pos) // NODE_LEN, RUN_NODES) * NODE_LEN        # bounded copies, whatever the input
+        for b0, word, dist in _NODES.iter_unpack(bytes(buf[pos:end])):   # decode_node, unrolled over the run
+            angle = word >> 1
+            if (b0 ^ (b0 >> 1)) & 1 == 0 or word & 1 == 0 or angle >= FULL_TURN_Q6:
                 self._locked = False
                 break
-            out.append(node)
-            self.stats.nodes += 1
-            self.stats.frames += 1
-            self.stats.good_bytes += NODE_LEN
+            out.append(make((b0 & 1 == 1, b0 >> 2, angle, dist)))
             pos += NODE_LEN
+        k = (pos - first) // NODE_LEN
+        self.stats.nodes += k
+        self.stats.frames += k
+        self.stats.good_bytes += pos - first
         return pos
 
 

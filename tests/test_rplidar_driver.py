@@ -6,6 +6,7 @@ import logging
 import math
 
 import pytest
+import serial
 
 from runtime import config as C
 from runtime.drivers import rplidar_protocol as P
@@ -132,17 +133,33 @@ def test_an_a2_whose_motor_is_off_sends_no_nodes(body):
         dev.close()
 
 
-def test_an_unhealthy_scanner_is_not_started(body, caplog):
+def test_a_protection_stop_is_reset_once_and_then_scans(body, caplog):
     dev = RplidarDevice(body, "a1")
     dev.health = P.Health(P.HEALTH_ERROR, 0x2A)
     drv = Rplidar(dev.path)
     try:
         drv.open(0.0)
         with caplog.at_level(logging.WARNING, logger="mrta.rplidar"):
-            scans, _ = run(dev, drv, 0.0, 0.5)
-        assert scans == [] and drv.state == "failed" and not dev.scanning
+            scans, _ = run(dev, drv, 0.0, 0.8)
+        assert scans and drv.usable and drv.resets == 1 and drv.health.status == P.HEALTH_GOOD
+        assert not [r for r in caplog.records if r.levelno >= logging.WARNING]
+    finally:
+        drv.close()
+        dev.close()
+
+
+def test_an_unhealthy_scanner_is_not_started(body, caplog):
+    dev = RplidarDevice(body, "a1")
+    dev.health = P.Health(P.HEALTH_ERROR, 0x2A)
+    dev.persistent_fault = True
+    drv = Rplidar(dev.path)
+    try:
+        drv.open(0.0)
+        with caplog.at_level(logging.WARNING, logger="mrta.rplidar"):
+            scans, _ = run(dev, drv, 0.0, 0.8)
+        assert scans == [] and drv.state == "failed" and not dev.scanning and drv.resets == 1
         assert [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING] == [
-            f"rplidar on {dev.path}: health error (code 42): not used"]
+            f"rplidar on {dev.path}: health error (code 42) after a reset: not used"]
     finally:
         drv.close()
         dev.close()
@@ -191,3 +208,25 @@ def test_a_closed_port_is_one_log_line_and_the_owner_lives(body, caplog):
 def test_a_port_that_does_not_open_names_it():
     with pytest.raises(InputError, match="rplidar port '/nonexistent/tty'"):
         Rplidar("/nonexistent/tty").open(0.0)
+
+
+def test_info_asked_during_a_scan_is_answered_when_it_stops(body):
+    dev = RplidarDevice(body, "a1")
+    host = P.ResponseParser()
+    try:
+        port = serial.serial_for_url(dev.path, 115200, timeout=0)
+        port.write(P.request(P.CMD_SCAN))
+        dev.service(0.005)
+        dev.service(0.1)
+        port.write(P.request(P.CMD_GET_INFO))
+        dev.service(0.2)
+        got = host.feed(port.read(65536))
+        assert got and all(isinstance(x, P.Node) for x in got)        # no info inside the node stream
+        port.write(P.request(P.CMD_STOP))
+        dev.service(0.205)
+        host.reset()
+        got = host.feed(port.read(65536))
+        assert [x for x in got if not isinstance(x, P.Node)] == [dev.info]
+        port.close()
+    finally:
+        dev.close()

@@ -8,7 +8,8 @@ gathered into full revolutions (:class:`Scan`, split at each start flag).
 
 What makes the robot stop using the scanner (:attr:`Rplidar.usable` False; one log line each, naming the port):
 
-* health ``error`` (protection stop): the scan is not started;
+* health ``error`` (protection stop) again after one RESET (the protocol's way out of a protection stop; the
+  SDK's clients do the same): the scan is not started;
 * no answer to a start-up request after :data:`REQUEST_TRIES` tries;
 * a stall: scanning, and no node for ``stall_timeout`` seconds (the motor stopped, the laser failed, the cable is
   out).  The driver sends STOP and SCAN again once a second; the scanner is usable again after its next full
@@ -35,6 +36,7 @@ from runtime.log import get_logger
 
 REQUEST_TIMEOUT = 0.5      # s for an answer to GET_INFO / GET_HEALTH / SCAN before asking again
 REQUEST_TRIES = 4          # then the scanner is given up
+RESET_WAIT = 0.05          # s after RESET before the next request (the protocol asks for at least 2 ms)
 RESTART_EVERY = 1.0        # s between STOP + SCAN while stalled
 MIN_SCAN_NODES = 5         # a "revolution" with fewer nodes (the one cut by a resynchronisation) is dropped
 
@@ -104,7 +106,8 @@ class Rplidar:
         self.info: P.DeviceInfo | None = None
         self.health: P.Health | None = None
         self.latest: Scan | None = None
-        self.state = "closed"          # closed | info | health | scan | scanning | failed | lost
+        self.state = "closed"          # closed | info | health | reset | scan | scanning | failed | lost
+        self.resets = 0
         self.stalled = False
         self.link = SerialLink(port, baudrate, "rplidar", self.log, self.stats.link, quiet=True)
         self._sent_at = 0.0
@@ -170,9 +173,16 @@ class Rplidar:
                 self._ask("health", P.CMD_GET_HEALTH, now)
             elif isinstance(item, P.Health) and self.state == "health":
                 self.health = item
+                if item.status == P.HEALTH_ERROR and self.resets == 0:
+                    self.log.debug("rplidar on %s: health error (code %d): RESET", self.port, item.error_code)
+                    self.resets += 1
+                    self.state, self._sent_at = "reset", now
+                    self._write(P.request(P.CMD_RESET))
+                    continue
                 if item.status == P.HEALTH_ERROR:
                     self.state = "failed"
-                    self.log.warning("rplidar on %s: health error (code %d): not used", self.port, item.error_code)
+                    self.log.warning("rplidar on %s: health error (code %d) after a reset: not used", self.port,
+                                     item.error_code)
                     return scans
                 if item.status == P.HEALTH_WARNING:
                     self.log.warning("rplidar on %s: health warning (code %d)", self.port, item.error_code)
@@ -204,6 +214,10 @@ class Rplidar:
             self._nodes.append(node)
 
     def _timers(self, now: float) -> None:
+        if self.state == "reset" and now - self._sent_at >= RESET_WAIT:
+            self.parser.reset()                      # whatever the core said while rebooting
+            self._ask("health", P.CMD_GET_HEALTH, now)
+            return
         if self.state in ("info", "health", "scan") and now - self._sent_at >= REQUEST_TIMEOUT:
             if self._tries >= REQUEST_TRIES:
                 self.log.warning("rplidar on %s: no answer to %s after %d tries: not used", self.port,

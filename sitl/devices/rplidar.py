@@ -2,6 +2,8 @@
 
 It answers GET_INFO and GET_HEALTH with a descriptor and the response, starts the node stream on SCAN or
 FORCE_SCAN, stops it on STOP and RESET, and takes an A2's MOTOR_PWM (duty 0: the motor stops and so do the nodes).
+GET_INFO and GET_HEALTH that arrive during a scan are held and answered once it stops, as the protocol's request
+cache does.
 An A1's motor follows the host's DTR line, which a pty does not carry: the emulated A1's motor always runs.
 Nodes are produced at the model's sample rate of sim time, each a pybullet ray from the scanner's mounted pose on
 its body at that instant (:func:`sitl.sensing.raycast.cast_many`), in batches every :data:`BATCH_PERIOD` (16 ms,
@@ -25,7 +27,8 @@ Numbers (the model's, with their source):
 * Quality 15 for a measurement (chosen; the stock clients keep any node with quality > 0 and distance > 0).
 
 Faults for tests: :attr:`RplidarDevice.health` (what GET_HEALTH reports; an ``error`` status also refuses SCAN, as
-the protection stop does) and :attr:`RplidarDevice.jammed` (the motor is held: no nodes while scanning).
+the protection stop does, until a RESET clears it, unless :attr:`RplidarDevice.persistent_fault`) and
+:attr:`RplidarDevice.jammed` (the motor is held: no nodes while scanning).
 """
 from __future__ import annotations
 
@@ -105,6 +108,7 @@ class RplidarDevice:
         self.info = P.DeviceInfo(self.model.model_id, self.model.firmware, self.model.hardware, serial)
         self.health = P.Health(P.HEALTH_GOOD, 0)
         self.jammed = False
+        self.persistent_fault = False         # a RESET does not clear a health error
         self.pwm = 0
         self.scanning = False
         self.parser = P.RequestParser()
@@ -114,6 +118,7 @@ class RplidarDevice:
         self._t0 = 0.0
         self._sent = 0
         self._batch_at = 0.0
+        self._cached: list[P.Request] = []
 
     @property
     def path(self) -> str:
@@ -181,6 +186,12 @@ class RplidarDevice:
         cmd = req.cmd
         if cmd in (P.CMD_STOP, P.CMD_RESET):
             self.scanning = False
+            if cmd == P.CMD_RESET and not self.persistent_fault:
+                self.health = P.Health(P.HEALTH_GOOD, 0)     # the core reboots out of a protection stop
+            cached, self._cached = self._cached, []
+            return b"".join(self._request(r, now) for r in cached)
+        if self.scanning and cmd in (P.CMD_GET_INFO, P.CMD_GET_HEALTH):
+            self._cached.append(req)         # the protocol stack holds it until the multiple response ends
             return b""
         if cmd in (P.CMD_SCAN, P.CMD_FORCE_SCAN):
             if self.health.status == P.HEALTH_ERROR:

@@ -70,6 +70,8 @@ def test_scans_match_the_arena_within_the_datasheet(body, model):
         bearings = dict(robot_ranges(scans[-1], (0.0, 0.0, 0.0)))
         ahead = min(bearings, key=abs)
         assert abs(bearings[ahead] - (HALF - X0)) < 0.03
+        left = dict(drv.ranges())                              # the same, as BaseSensors.ranges
+        assert abs(left[min(left, key=lambda b: abs(b - math.pi / 2))] - HALF) < 0.05
         assert drv.parser.stats.dropped_bytes == 0
     finally:
         drv.close()
@@ -112,7 +114,7 @@ def test_a_scanner_that_stops_is_reported_once_and_not_used_until_it_scans(body,
             _, t = run(dev, drv, t, 2.0)
         lines = [r for r in caplog.records if "no measurement" in r.getMessage()]
         assert len(lines) == 1 and lines[0].robot == 7 and dev.path in lines[0].getMessage()
-        assert not drv.usable and drv.stalled and drv.stats.stalls == 1
+        assert not drv.usable and drv.stalled and drv.stats.stalls == 1 and drv.ranges() == ()
         dev.jammed = False
         scans, _ = run(dev, drv, t, 1.5)
         assert drv.usable and scans and not drv.stalled

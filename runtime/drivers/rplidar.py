@@ -87,19 +87,21 @@ class Rplidar:
     """One scanner on one port; call :meth:`poll` with the time every cycle."""
 
     Config = RplidarConfig
+    kind = "laser"             # what the robot can offer (an allocation's sensor view)
 
     @classmethod
     def from_config(cls, cfg: RplidarConfig, robot_id=None) -> "Rplidar":
         return cls(cfg.port, baudrate=cfg.baudrate, model=cfg.model, motor_pwm=cfg.motor_pwm,
-                   stall_timeout=cfg.stall_timeout, robot_id=robot_id)
+                   stall_timeout=cfg.stall_timeout, mount=tuple(cfg.mount), robot_id=robot_id)
 
     def __init__(self, port: str, baudrate: int = 115200, model: str = "a1", motor_pwm: int = P.DEFAULT_PWM,
-                 stall_timeout: float = 0.5, robot_id=None):
+                 stall_timeout: float = 0.5, mount: tuple[float, float, float] = (0.0, 0.0, 0.0), robot_id=None):
         if model not in ("a1", "a2"):
             raise InputError(f"rplidar model: expected a1 or a2, got {model!r}")
         self.port, self.baudrate, self.model = port, baudrate, model
         self.motor_pwm = int(motor_pwm)
         self.stall_timeout = float(stall_timeout)
+        self.mount = tuple(float(v) for v in mount)
         self.log = get_logger("rplidar", robot_id)
         self.parser = P.ResponseParser()
         self.stats = RplidarStats()
@@ -120,6 +122,11 @@ class Rplidar:
     def usable(self) -> bool:
         """Scanning, not stalled, and a full revolution has arrived since it (re)started."""
         return self.state == "scanning" and not self.stalled and self.latest is not None
+
+    def ranges(self) -> tuple[tuple[float, float], ...]:
+        """The latest revolution as ``BaseSensors.ranges`` pairs (:func:`robot_ranges` at the mount); none while the
+        scanner is not usable, so a robot stops using a stalled, failed or lost scanner."""
+        return robot_ranges(self.latest, self.mount) if self.usable else ()
 
     def open(self, now: float = 0.0) -> None:
         """Open the port (InputError naming it if it does not open), start the motor, STOP, then GET_INFO."""

@@ -24,9 +24,10 @@ def _sparse(n: int) -> bool:
 
 class SerialLink:
     """The link of one driver.  ``what`` names the base in messages ("Create OI", "ARCOS"); ``counters`` is
-    the driver's ``stats.extra`` dict."""
+    the driver's ``stats.extra`` dict.  ``quiet=True`` logs failed reads and writes at DEBUG only (a driver that
+    says once, itself, what a lost link means)."""
 
-    def __init__(self, url: str, baudrate: int, what: str, log, counters: dict):
+    def __init__(self, url: str, baudrate: int, what: str, log, counters: dict, quiet: bool = False):
         self.url = url
         self.baudrate = baudrate
         self.what = what
@@ -36,6 +37,7 @@ class SerialLink:
             counters.setdefault(k, 0)
         self.ser = None
         self._failed_reads = 0
+        self._warn = log.debug if quiet else log.warning
 
     def open(self) -> None:
         try:
@@ -61,7 +63,7 @@ class SerialLink:
             if self._failed_reads >= LOST_AFTER:
                 raise DeviceLost(f"{self.what} port {self.url}: {self._failed_reads} reads in a row failed ({exc})")
             if _sparse(c["read_errors"]):
-                self.log.warning("read %s: %s", self.url, exc)
+                self._warn("read %s: %s", self.url, exc)
         else:
             self._failed_reads = 0
         data = b"".join(chunks)
@@ -76,7 +78,7 @@ class SerialLink:
         except (serial.SerialException, OSError) as exc:
             c["write_errors"] += 1
             if _sparse(c["write_errors"]):
-                self.log.warning("write %s: %s", self.url, exc)
+                self._warn("write %s: %s", self.url, exc)
             return False
         c["writes"] += 1
         c["bytes_out"] += len(data)
@@ -90,5 +92,5 @@ class SerialLink:
             try:
                 step()
             except Exception as exc:       # SerialException, OSError, termios.error (a vanished tty)
-                self.log.warning("close %s: %s", self.url, exc)
+                self._warn("close %s: %s", self.url, exc)
         self.ser = None

@@ -151,6 +151,7 @@ class SimPioneer3DX(GroundTruth):
         self._targets = (0.0, 0.0)
         self._contacts: list | None = None
         self.rays_cast = 0
+        self.sonar = raycast.Beams(self, _RAYS, SONAR_Z, SONAR_MAX_RANGE)   # the ring, mounted on this body
 
     # -------------------------------------------------------------- commands
     def set_wheel_speeds(self, left_mps: float, right_mps: float) -> None:
@@ -225,13 +226,13 @@ class SimPioneer3DX(GroundTruth):
     def sonar_ranges(self, sonars) -> dict[int, float]:
         """Range (m) each sonar in ``sonars`` measures now: the nearest hit of its rays within 5 m, from the
         transducer; 5 m when nothing echoes."""
-        sel = np.isin(_RAYS[:, 3], np.asarray(list(sonars), dtype=float))
-        rays = _RAYS[sel]
+        beams = self.sonar.select(sonars)
         out = {int(n): SONAR_MAX_RANGE for n in sonars}
-        if not len(rays):
+        if not len(beams.rays):
             return out
-        dist, n_cast = raycast.cast(rays, self.pose(), SONAR_Z, SONAR_MAX_RANGE, self.body_id, self._kw)
+        (dist,), n_cast = raycast.cast_many([beams])
         self.rays_cast += n_cast
+        rays = beams.rays
         for k, row in enumerate(rays):
             n = int(row[3])
             out[n] = min(out[n], float(dist[k]))

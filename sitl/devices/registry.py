@@ -26,6 +26,20 @@ DEVICES: dict[str, str] = {
     "cia402": "sitl.devices.cia402:Cia402Device",           # two CiA 402 drives on the socketcand hub
 }
 
+# Sensor emulators by ``sensors[].type`` (the keys of runtime.drivers.registry.SENSORS): ``from_config(body, cfg,
+# robot_id)`` on the robot's body, ``service(now)``, ``endpoint()`` and ``close()`` as a base's device.
+SENSOR_DEVICES: dict[str, str] = {
+    "rplidar": "sitl.devices.rplidar:RplidarDevice",        # RPLIDAR A1/A2 on a pty, beams from the world's ray casts
+}
+
+
+def make_sensor_device(cfg, body, robot_id: int):
+    """The emulator of ``sensors:`` entry ``cfg`` on ``body``, ready to serve."""
+    if cfg.type not in SENSOR_DEVICES:
+        raise InputError(f"sensors type {cfg.type!r}: expected one with a SITL device, one of "
+                         f"{', '.join(SENSOR_DEVICES)}")
+    return resolve(SENSOR_DEVICES[cfg.type]).from_config(body, cfg, robot_id)
+
 
 def device_class(type_name: str) -> type:
     """The emulator class of ``base.type`` ``type_name``."""

@@ -19,7 +19,8 @@ ROOT = Path(__file__).resolve().parents[1]
 TOP = {"runtime", "sitl"}
 MUST = ("runtime/comms/_dialect/mrta.py", "runtime/comms/_dialect/KEY", "runtime/comms/mrta.xml",
         "runtime/examples/fleets/create2_4.yaml", "runtime/examples/robots/create2.yaml",
-        "runtime/examples/worlds/arena_10m.yaml", "runtime/examples/missions/square_6.plan")
+        "runtime/examples/worlds/arena_10m.yaml", "runtime/examples/missions/square_6.plan",
+        "runtime/deploy/mrta-daemon@.service", "runtime/deploy/99-mrta-serial.rules")
 
 
 def build(out: Path) -> Path:

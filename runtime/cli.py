@@ -28,6 +28,7 @@ COMMANDS = {
     "mission": "runtime.comms.mission_cli",                  # mrta mission upload|download|status TARGET ...
     "key": "runtime.comms.key_cli",                          # mrta key FILE
     "init-robot": "runtime.deploy.init_robot",               # mrta init-robot DIR --base create2|pioneer|can
+    "schema": "runtime.config.schema_cli",                   # mrta schema robot|fleet|world
 }
 SIMULATOR = ("pybullet", "matplotlib")       # the [sitl] extra
 NEEDS_SIMULATOR = "the simulator is not installed: pip install 'mrta-runtime[sitl]'"

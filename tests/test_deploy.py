@@ -75,6 +75,17 @@ def test_init_robot_refuses_bad_input_in_one_line_and_writes_nothing(tmp_path, c
     assert not (tmp_path / "r").exists()
 
 
+def test_init_robot_prints_the_shipped_unit_and_rules(capsys):
+    assert main(["init-robot", "--print", "udev"]) == 0
+    assert capsys.readouterr().out == D.RULES.read_text()
+    assert main(["init-robot", "--print", "unit"]) == 0
+    out = capsys.readouterr().out
+    assert out == D.unit_text()
+    mrta = Path(sys.executable).parent / "mrta"
+    if mrta.is_file():                               # ExecStart names the mrta beside this Python
+        assert f"\nExecStart={mrta} -v daemon /etc/mrta/%i.yaml" in out
+
+
 def test_init_robot_without_dir_or_base_says_what_it_needs(capsys):
     assert main(["init-robot", "--base", "create2"]) == 2
     assert "expected DIR and --base" in capsys.readouterr().err
@@ -97,8 +108,9 @@ def test_unit_runs_the_daemon_as_a_dedicated_user_and_restarts_it_on_failure():
     assert keys["CacheDirectory"] == ["mrta"] and keys["StateDirectory"] == ["mrta"]
     assert keys["RestartPreventExitStatus"] == ["2"]          # a bad config waits for a person
     assert keys["ExecStart"] == [f"{D.UNIT_MRTA} -v daemon /etc/mrta/%i.yaml --stats ${{STATE_DIRECTORY}}/%i.json"]
-    # issue 31 adds the stop-the-base command; until then its line is a marked placeholder
-    assert "# PLACEHOLDER: issue 31" in D.UNIT.read_text() and "ExecStopPost" not in keys
+    # issue 31 adds the stop-the-base command; until it is merged its line is a marked placeholder
+    assert "PLACEHOLDER" in D.UNIT.read_text() and "ExecStopPost" not in keys
+    assert f"\n#ExecStopPost=-{D.UNIT_MRTA} stop-base /etc/mrta/%i.yaml\n" in D.UNIT.read_text()
 
 
 def _verify(unit_text: str, folder: Path) -> tuple[int, str]:
@@ -117,6 +129,7 @@ def test_unit_passes_systemd_analyze_verify(tmp_path):
     text = D.unit_text(str(mrta))
     assert f"ExecStart={mrta} -v daemon" in text
     assert _verify(text, tmp_path) == (0, "")
+    assert _verify(text.replace("\n#ExecStopPost=", "\nExecStopPost="), tmp_path) == (0, "")   # once uncommented
     # verify only warns (exit 0) on a key it does not know: the test reads its output, so it can fail
     code, out = _verify(text.replace("Restart=on-failure", "Restart=on-failures"), tmp_path)
     assert "Failed to parse service restart specifier" in out

@@ -213,6 +213,31 @@ def test_the_grammar_check_never_fails_otherwise_on_damaged_rules(data):
         pass
 
 
+def _udevadm_test(rules: dict[str, str], tmp_path: Path) -> list[str]:
+    """What udev's own parser says about ``rules`` (file name -> text): `udevadm test` reads them from
+    /run/udev/rules.d, here a tmpfs in a mount namespace of its own, so the machine's rules are untouched."""
+    for name, text in rules.items():
+        (tmp_path / name).write_text(text)
+    script = (f"mount -t tmpfs tmpfs /run/udev/rules.d && cp {tmp_path}/*.rules /run/udev/rules.d/ && "
+              "udevadm test --action=add /sys/class/tty/console")
+    out = subprocess.run(["unshare", "-m", "sh", "-c", script], capture_output=True, text=True, timeout=60)
+    if "Reading rules file: /run/udev/rules.d/" not in out.stdout + out.stderr:
+        pytest.skip(f"udevadm test in a private mount namespace did not run here: {out.stderr.strip()[-200:]}")
+    return [line for line in (out.stdout + out.stderr).splitlines() if line.startswith("/run/udev/rules.d/")]
+
+
+@pytest.mark.skipif(os.geteuid() != 0 or not (shutil.which("udevadm") and shutil.which("unshare"))
+                    or not Path("/run/udev/rules.d").is_dir() or not Path("/sys/class/tty/console").exists(),
+                    reason="needs root, udevadm (Debian: apt-get install udev), unshare and /sys/class/tty/console")
+def test_udevs_own_parser_takes_the_rules(tmp_path):
+    """udev 252 (Debian 12) has no `udevadm verify` (254); `udevadm test` parses every rules file it reads and names
+    the file and line of each rule it cannot take."""
+    broken = 'SUBSYSTEM=="tty", ATTRS{idVendor}="0403", SYMLINK+="mrta-x"\nSUBSYSTEM=="tty", SYMLNK+="mrta-y"\n'
+    said = _udevadm_test({"99-mrta-serial.rules": D.RULES.read_text(), "98-broken.rules": broken}, tmp_path)
+    assert said == ["/run/udev/rules.d/98-broken.rules:1 Invalid operator for ATTRS.",
+                    "/run/udev/rules.d/98-broken.rules:2 Invalid key 'SYMLNK'"]
+
+
 # --------------------------------------------------------------------------- the daemon as the unit runs it
 
 def _service_user():

@@ -75,6 +75,26 @@ def test_init_robot_refuses_bad_input_in_one_line_and_writes_nothing(tmp_path, c
     assert not (tmp_path / "r").exists()
 
 
+@settings(max_examples=50)
+@given(st.one_of(st.text(max_size=30), st.builds(lambda i, h, p: f"{i}={h}:{p}", st.integers(-5, 300),
+                                                 st.text(max_size=8), st.integers(-1, 70000))))
+def test_a_peer_argument_is_a_peer_or_one_line(text):
+    from runtime.config import ConfigError, from_dict
+    from runtime.config.robot import Peer
+    from runtime.errors import InputError
+
+    try:
+        peer = D._peer(text)
+        from_dict(Peer, peer, "robot.yaml")
+    except ConfigError as exc:
+        assert str(exc).startswith("robot.yaml: ") and "\n" not in str(exc)
+    except InputError as exc:
+        assert str(exc).startswith("--peer: expected ID=HOST:PORT")
+    else:
+        rid, _, address = text.partition("=")
+        assert (peer["id"], peer["address"]) == (int(rid), address)
+
+
 def test_init_robot_prints_the_shipped_unit_and_rules(capsys):
     assert main(["init-robot", "--print", "udev"]) == 0
     assert capsys.readouterr().out == D.RULES.read_text()

@@ -92,7 +92,8 @@ def robot_config(base: str, robot_id: int, name: str | None, peers: list[str], g
 
 def _peer(text: str) -> dict:
     rid, sep, address = text.partition("=")
-    if not sep or not rid.strip().isdigit():
+    rid = rid.strip()
+    if not sep or not (rid.isascii() and rid.isdigit()):
         raise InputError(f"--peer: expected ID=HOST:PORT, got {text!r}")
     return {"id": int(rid), "address": address}
 

@@ -124,11 +124,16 @@ def init_robot(where: str | Path, base: str, robot_id: int = 1, name: str | None
     else:
         write_key(key_path, fleet_key)
     example = BASES[base][0]
-    config.write_text(f"# {base} robot {robot_id}, written by mrta init-robot from the example "
-                      f"runtime/examples/robots/{example}\n# (its comments say what each key does); docs/deploy.md\n"
-                      + yaml.safe_dump(data, sort_keys=False))
-    readme.write_text(README.format(dir=where, base=base, id=robot_id, unit=UNIT.name, rules=RULES.name,
-                                    port=BASES[base][1]["base"].get("port", "can0 (SocketCAN)")))
+    for path, text in ((config, f"# {base} robot {robot_id}, written by mrta init-robot from the example "
+                                f"runtime/examples/robots/{example}\n# (its comments say what each key does); "
+                                "docs/deploy.md\n" + yaml.safe_dump(data, sort_keys=False)),
+                       (readme, README.format(dir=where, base=base, id=robot_id, unit=UNIT.name, rules=RULES.name,
+                                              port=BASES[base][1]["base"].get("port", "can0 (SocketCAN)")))):
+        try:
+            with open(path, "x") as fh:          # never over a file that appeared since the check above
+                fh.write(text)
+        except OSError as exc:
+            raise InputError(f"{path}: cannot write it ({exc.strerror})") from None
     validate_robot(load_robot(config))         # the files as written load as they were checked
     return [config, key_path, readme]
 

@@ -3,7 +3,8 @@ bindings and the example configs inside (docs/deploy.md).
 
     python benchmarks/wheel_contents.py [WHEEL]
 
-Without WHEEL it builds one from this checkout (pip wheel . --no-deps, into a temp dir).  Prints the top-level
+Without WHEEL it builds one from this checkout (pip wheel . --no-deps, into a temp dir) and also checks that every
+module in it is the checkout's.  Prints the top-level
 entries with their file counts, then each problem; exit 1 when there is one.
 """
 from __future__ import annotations
@@ -35,6 +36,18 @@ def tops(names: list[str]) -> Counter:
     return Counter("*.dist-info" if n.split("/")[0].endswith(".dist-info") else n.split("/")[0] for n in names)
 
 
+def stale(wheel: Path) -> list[str]:
+    """Modules of ``wheel`` that differ from this checkout's: setuptools copies into ``build/lib`` only what is
+    newer than the copy there, so a ``build/`` left by an earlier ``pip wheel`` can ship old code (seen here: a
+    wheel whose robot core predated the daemon it shipped with)."""
+    z = zipfile.ZipFile(wheel)
+    why = "(a stale build/ directory? rm -rf build and build again)"
+    mods = [n for n in z.namelist() if n.endswith(".py") and n.split("/")[0] in TOP]
+    return ([f"{n} is not in the checkout {why}" for n in mods if not (ROOT / n).is_file()]
+            + [f"{n} differs from the checkout's {why}" for n in mods
+               if (ROOT / n).is_file() and z.read(n) != (ROOT / n).read_bytes()])
+
+
 def problems(names: list[str]) -> list[str]:
     """What is wrong with a wheel holding ``names``."""
     out = [f"top-level {t!r}: expected only {sorted(TOP)} and the dist-info" for t in tops(names)
@@ -53,7 +66,7 @@ def main(argv: list[str]) -> int:
         print(f"{wheel.name}: {len(names)} files")
         for top, n in sorted(tops(names).items()):
             print(f"  {top:<24} {n:4d}")
-        found = problems(names)
+        found = problems(names) + ([] if argv else stale(wheel))
         for p in found:
             print(f"problem: {p}")
         return 1 if found else 0

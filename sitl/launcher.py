@@ -332,6 +332,8 @@ def print_summary(f: Fleet, res: dict, out=sys.stdout) -> None:
         print(f"event: {e}", file=out)
     if res.get("picture"):
         print(f"picture: {res['picture']}", file=out)
+    if res.get("recording"):
+        print(f"recording: {res['recording']}", file=out)
     print(f"verdict: {res['verdict']}", file=out)
 
 
@@ -378,7 +380,7 @@ class Lockstep:
     """The daemons inside this process on a simulated clock, with the operator: :meth:`step` runs one control
     cycle of physics, daemons and operator.  Deterministic for a given seed."""
 
-    def __init__(self, f: Fleet):
+    def __init__(self, f: Fleet, record: str | Path | None = None, live: tuple[str, int] | None = None):
         from runtime.daemon import Daemon
         from sitl.operator import Operator
 
@@ -388,6 +390,9 @@ class Lockstep:
         for r in f.robots.values():
             r.daemon = self.daemons[r.id] = Daemon(C.load_robot(r.config_path))
             r.daemon.open(self.clock.now())
+        self.recording = open_recording(f, record, live)
+        if self.recording is not None:
+            self.recording.attach(self.daemons)
         self.op = Operator(f)
         self.period = min(d.period for d in self.daemons.values())
         self.stopped = f.stopped                # robots whose daemon no longer runs (killed), kept on the Fleet
@@ -415,12 +420,16 @@ class Lockstep:
         f = self.f
         f.advance_to(f.world.t + self.period)
         self.clock.sleep_until(f.world.t)
+        if self.recording is not None:
+            self.recording.rec.stamp(f.world.t)
         for rid, d in self.daemons.items():
             if rid not in self.stopped:
                 d.step(self.clock.now())
         self.op.poll(f.world.t)
         scenario_actions(f, self.op, f.world.t, self.kill)
         self.op.record(f.world.t)
+        if self.recording is not None:
+            self.recording.step(f.world.t, self.op)
 
     def kill(self, rid: int) -> None:
         """Robot ``rid``'s daemon dies: it neither steps nor answers from now on (its body stays)."""
@@ -429,13 +438,42 @@ class Lockstep:
         self.op.robot_died(rid, self.f.world.t)
 
     def close(self) -> None:
-        self.op.close()
+        try:
+            if self.recording is not None:
+                self.recording.close(self.op.trace)
+        finally:
+            self.op.close()
 
 
-def run_lockstep(f: Fleet, timeout: float | None = None, progress=None, on_step=None) -> dict:
+def open_recording(f: Fleet, record, live: tuple[str, int] | None):
+    """The run's recording (``record``: a path, True for RUN_DIR/run.mcap, None or False for none) and live view,
+    or None; without foxglove-sdk (the [record] extra) a warning and no recording, unless the live view was asked
+    for (then an InputError)."""
+    from runtime.errors import InputError
+
+    if not record and live is None:
+        return None
+    from runtime.recording.recorder import RecordingUnavailable
+    from sitl.recording import FleetRecording
+
+    path = f.run_dir / "run.mcap" if record is True else Path(record) if record else None
+    try:
+        return FleetRecording(f, path, live)
+    except RecordingUnavailable as exc:
+        if live is not None:
+            raise InputError(f"--live: {exc}") from None
+        log.warning("%s: the run is not recorded", exc)
+        return None
+    except OSError as exc:
+        raise InputError(f"--live {live[0]}:{live[1]}: expected a free address to serve on ({exc})") from None
+
+
+def run_lockstep(f: Fleet, timeout: float | None = None, progress=None, on_step=None, record=True,
+                 live: tuple[str, int] | None = None) -> dict:
     """Daemons in this process on a simulated clock: deterministic for a given seed.
-    ``on_step(fleet)`` is called after every control cycle (tests attach observers there)."""
-    run = Lockstep(f)
+    ``on_step(fleet)`` is called after every control cycle (tests attach observers there).  ``record``: the run's
+    MCAP (True: RUN_DIR/run.mcap; a path; False: none); ``live``: serve it over the Foxglove WebSocket protocol."""
+    run = Lockstep(f, record, live)
     timeout = timeout or f.fleet.timeout
     wait = getattr(f.fleet.scenario, "wait", False)
     since, next_progress, ended = None, 0.0, None
@@ -448,9 +486,12 @@ def run_lockstep(f: Fleet, timeout: float | None = None, progress=None, on_step=
             if progress and f.world.t >= next_progress:
                 progress(f, run.op)
                 next_progress += 5.0
-        return finish(f, run.op, ended or "timeout")
+        res = finish(f, run.op, ended or "timeout")
     finally:
         run.close()
+    if run.recording is not None and run.recording.path is not None:
+        res["recording"] = str(run.recording.path)
+    return res
 
 
 def daemon_stats(f: Fleet) -> dict[int, dict]:

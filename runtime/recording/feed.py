@@ -1,0 +1,157 @@
+"""What one robot core did in a cycle, onto a :class:`~runtime.recording.recorder.Recorder`'s channels.
+
+A host calls :meth:`CoreFeed.cycle` after each :meth:`RobotCore.step <runtime.robot.core.RobotCore.step>` (and
+:meth:`CoreFeed.frames` after :meth:`RobotCore.service`) with the core's :class:`~runtime.robot.core.Output`.  The
+feed reads only what the core returned and its narrow state (pose, commitments, the fleet table, the lead
+executor's path); it changes nothing, so a recorded run is the run it would have been.
+
+Allocation events (``/allocation``): every message the robot sent its peers (bids, awards, prices, rounds, coalition
+offers ...) as ``sent`` with its type and fields, and with ``received`` those that reached it; ``committed`` and
+``released`` when a task enters or leaves the robot's commitments (with its partners: a coalition formed or left);
+``progress`` (arrived, done, failed); ``task`` when the robot's copy of the fleet table changes a task's state
+(handed in, done, withdrawn, cleared) or who did it; ``peer_lost``.  The ground-station STATUSTEXT lines go to
+``/log``.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+
+from runtime.messages import STATE_NAMES
+from runtime.robot.core import GCS, PEERS, TO
+
+
+def message_fields(msg) -> dict:
+    """A message dataclass's fields as plain data."""
+    if dataclasses.is_dataclass(msg):
+        return {f.name: getattr(msg, f.name) for f in dataclasses.fields(msg)}
+    return {}
+
+
+class CoreFeed:
+    """Records robot ``core``'s cycles on ``rec``.  ``received``: also the peers' messages that reached it (a fleet
+    recording has them as the senders' ``sent`` already)."""
+
+    def __init__(self, rec, core, *, received: bool = False):
+        self.rec = rec
+        self.core = core
+        self.id = core.id
+        self.received = received
+        self._path = None
+        self._bumpers = None
+        self._held: dict[int, tuple] = {}
+        self._table: dict[int, tuple] = {}
+        self._lost = 0
+
+    def cycle(self, now: float, out, inbox=None) -> None:
+        rec, core, rid = self.rec, self.core, self.id
+        pose = core.pose()
+        if pose is not None:
+            rec.pose(rid, now, pose)
+        rec.command(rid, now, *out.command)
+        lead = core.executive._lead()
+        path = None if lead is None else lead.follow.path
+        if path is not self._path:
+            self._path = path
+            rec.path(rid, now, path or ())
+        sensors = core.sensors
+        if sensors is not None:
+            ranges = getattr(sensors, "ranges", ())
+            if ranges:
+                rec.ranges(rid, now, ranges)
+            bump = (sensors.bump_left, sensors.bump_right, sensors.wheel_drop, tuple(getattr(sensors, "faults", ())))
+            if bump != self._bumpers:
+                self._bumpers = bump
+                rec.bumpers(rid, now, *bump)
+        self.frames(now, out, inbox)
+        for p in out.progress:
+            rec.event(now, rid, "progress", p.event, p.task, (rid,), {"detail": p.detail}, t=p.t)
+        self._commitments(now)
+        self._fleet_table(now)
+        lost = core.stats.peers_lost
+        for peer in lost[self._lost:]:
+            rec.event(now, rid, "peer_lost", "", None, (peer,))
+        self._lost = len(lost)
+        rec.check()
+
+    def frames(self, now: float, out, inbox=None) -> None:
+        """The messages of ``out`` (sent to peers) and, with ``received``, those of ``inbox``; STATUSTEXT to the
+        log."""
+        rec, rid = self.rec, self.id
+        if self.received and inbox is not None:
+            for msg in inbox.peers:
+                rec.event(now, rid, "received", type(msg).__name__, getattr(msg, "task", None),
+                          (getattr(msg, "sender", 0),), message_fields(msg))
+        for frame in out.frames:
+            if frame[0] == PEERS:
+                msg = frame[1]
+                rec.event(now, rid, "sent", type(msg).__name__, getattr(msg, "task", None), (rid,),
+                          message_fields(msg))
+            elif frame[0] in (GCS, TO) and getattr(frame[1], "get_type", lambda: "")() == "STATUSTEXT":
+                text = frame[1].text
+                text = text.decode(errors="replace") if isinstance(text, bytes) else str(text)
+                rec.text(now, logging.INFO, f"statustext robot={rid}", text.rstrip("\0"))
+
+    def _commitments(self, now: float) -> None:
+        held = {c.task_id: (tuple(c.partners), c.role) for c in self.core.agent.commitments}
+        if held == self._held:
+            return
+        for tid, (partners, role) in held.items():
+            if self._held.get(tid) != (partners, role):
+                self.rec.event(now, self.id, "committed", role, tid, (self.id, *partners), {"kind": self._kind(tid)})
+        for tid in self._held.keys() - held.keys():
+            self.rec.event(now, self.id, "released", "", tid, (self.id,))
+        self._held = held
+
+    def _kind(self, tid: int) -> str:
+        c = next((c for c in self.core.agent.commitments if c.task_id == tid), None)
+        return "" if c is None else c.task.kind
+
+    def _fleet_table(self, now: float) -> None:
+        entries = self.core.node.table.entries
+        if len(entries) == len(self._table) and all(
+                self._table.get(tid) == (e.state, e.done_by) for tid, e in entries.items()):
+            return
+        for tid, e in entries.items():
+            if self._table.get(tid) != (e.state, e.done_by):
+                self._table[tid] = (e.state, e.done_by)
+                self.rec.event(now, self.id, "task", STATE_NAMES.get(e.state, str(e.state)), tid, e.done_by,
+                               {"x": e.x, "y": e.y, "command": e.command})
+
+
+class LogTap(logging.Handler):
+    """Every record of the runtime's loggers (``mrta.*``) onto ``rec``'s ``/log``, at the recording's time, with
+    the robot id the record carries.  While attached, the ``mrta`` logger passes INFO records (the recording wants
+    them) and the handlers that were there print only what they printed before."""
+
+    def __init__(self, rec, level: int = logging.INFO):
+        super().__init__(level)
+        self.rec = rec
+        self._restore: list = []
+
+    def attach(self) -> "LogTap":
+        logger = logging.getLogger("mrta")
+        effective = logger.getEffectiveLevel()
+        if effective > self.level:
+            for h in logging.getLogger().handlers:         # what stderr showed, it still shows
+                if h.level < effective:
+                    self._restore.append((h, h.level))
+                    h.setLevel(effective)
+            self._restore.append((logger, logger.level))
+            logger.setLevel(self.level)
+        logger.addHandler(self)
+        return self
+
+    def detach(self) -> None:
+        logging.getLogger("mrta").removeHandler(self)
+        for thing, level in reversed(self._restore):
+            thing.setLevel(level)
+        self._restore = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            self.rec.text(self.rec.ns / 1e9 if not self.rec.wall else 0.0, record.levelno,
+                          f"{record.name} robot={getattr(record, 'robot', '-')}", record.getMessage(),
+                          record.pathname, record.lineno)
+        except Exception:       # a log line must never stop the robot
+            self.handleError(record)

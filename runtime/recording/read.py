@@ -1,0 +1,108 @@
+"""Reading a recording back with the ``mcap`` reader, also one whose writer was killed (no summary, a chunk cut
+short): every record up to the first one that is not whole is read, and the recording says it ended early.
+
+``read_messages(path)`` gives the file's metadata and its messages in file order, decoded: JSON channels as dicts,
+Foxglove's well-known (protobuf) schemas by ``mcap-protobuf-support``; poses also as ``(x, y, yaw)``.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from runtime.errors import InputError
+
+
+@dataclass
+class Message:
+    topic: str
+    schema: str
+    ns: int                  # log time, ns
+    data: object             # dict (JSON channels) or the decoded protobuf message
+
+    @property
+    def pose(self) -> tuple[float, float, float]:
+        """(x, y, yaw) of a ``foxglove.PoseInFrame``."""
+        p = self.data.pose
+        q = p.orientation
+        return p.position.x, p.position.y, 2.0 * math.atan2(q.z, q.w)
+
+
+@dataclass
+class Recording:
+    source: str
+    messages: list[Message] = field(default_factory=list)
+    metadata: dict[str, dict] = field(default_factory=dict)
+    channels: dict[str, str] = field(default_factory=dict)      # topic -> schema name
+    truncated: str | None = None      # why the file ended early (a killed writer), None if whole
+
+
+def _unavailable() -> InputError:
+    return InputError("reading a recording needs mcap and mcap-protobuf-support: pip install 'mrta-runtime[record]'")
+
+
+def read_messages(path: str | Path, topics=None, decode: bool = True) -> Recording:
+    """The recording at ``path``: metadata and messages (only ``topics`` if given), decoded unless ``decode`` is
+    False (then ``data`` is the raw bytes).  A file that is not MCAP is an InputError naming it."""
+    try:
+        from mcap.records import Channel, Message as McapMessage, Metadata, Schema
+        from mcap.stream_reader import StreamReader
+        from mcap_protobuf.decoder import DecoderFactory
+    except ImportError:
+        raise _unavailable() from None
+    source = str(path)
+    out = Recording(source)
+    schemas: dict[int, object] = {}
+    chans: dict[int, object] = {}
+    decoders: dict[int, object] = {}
+    factory = DecoderFactory()
+    wanted = None if topics is None else set(topics)
+    try:
+        fh = open(path, "rb")
+    except OSError as exc:
+        raise InputError(f"{source}: expected a recording (MCAP) that can be read ({exc.strerror})") from None
+    with fh:
+        reader = StreamReader(fh, skip_magic=False)
+        records = iter(reader.records)
+        while True:
+            try:
+                rec = next(records)
+            except StopIteration:
+                break
+            except Exception as exc:        # a record cut short (struct, zstd, lz4 errors), bad magic
+                if not out.messages and not schemas and not out.metadata:
+                    raise InputError(f"{source}: expected an MCAP recording ({type(exc).__name__}: {exc})") from None
+                out.truncated = f"{type(exc).__name__}: {exc}"
+                break
+            if isinstance(rec, Schema):
+                schemas[rec.id] = rec
+            elif isinstance(rec, Channel):
+                chans[rec.id] = rec
+                sch = schemas.get(rec.schema_id)
+                out.channels[rec.topic] = sch.name if sch is not None else ""
+            elif isinstance(rec, Metadata):
+                out.metadata[rec.name] = dict(rec.metadata)
+            elif isinstance(rec, McapMessage):
+                ch = chans.get(rec.channel_id)
+                if ch is None or (wanted is not None and ch.topic not in wanted):
+                    continue
+                sch = schemas.get(ch.schema_id)
+                data: object = rec.data
+                if decode:
+                    if ch.message_encoding == "json":
+                        data = json.loads(rec.data)
+                    else:
+                        dec = decoders.get(ch.id)
+                        if dec is None:
+                            dec = decoders[ch.id] = factory.decoder_for(ch.message_encoding, sch)
+                        data = dec(rec.data) if dec is not None else rec.data
+                out.messages.append(Message(ch.topic, sch.name if sch is not None else "", rec.log_time, data))
+    if not schemas and not out.messages and not out.metadata and out.truncated is None:
+        try:
+            size = Path(path).stat().st_size
+        except OSError:
+            size = 0
+        if size == 0:
+            raise InputError(f"{source}: expected an MCAP recording, the file is empty")
+    return out

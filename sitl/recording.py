@@ -46,12 +46,12 @@ class FleetRecording:
 
     def attach(self, daemons: dict) -> None:
         """A feed on each daemon's core (its cycles and messages) and a tap on its link (raw MAVLink frames)."""
-        from runtime.recording.feed import CoreFeed
+        from runtime.recording.feed import CoreFeed, link_tap
 
         for rid, d in daemons.items():
-            d.feed = CoreFeed(self.rec, d.core)
+            d.feed = CoreFeed(self.rec, d.core, stats=d.snapshot)
             if self.rec.mavlink and hasattr(d.link, "tap"):
-                d.link.tap = _frame_tap(self.rec, rid)
+                d.link.tap = link_tap(self.rec, rid)
 
     def step(self, t: float, op) -> None:
         """After a control cycle: the bodies' true poses, the operator's new events, the world when tasks
@@ -94,12 +94,6 @@ class FleetRecording:
         finally:
             self.tap.detach()
             self.rec.close()
-
-
-def _frame_tap(rec, rid: int):
-    def tap(direction: str, data: bytes, addr, now: float) -> None:
-        rec.frame(rid, now, direction, data, addr)
-    return tap
 
 
 def trace_from_mcap(path: str | Path) -> RunTrace:

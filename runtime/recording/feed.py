@@ -20,6 +20,8 @@ import logging
 from runtime.messages import STATE_NAMES
 from runtime.robot.core import GCS, PEERS, TO
 
+FLUSH_PERIOD = 2.0        # wall s between a daemon recording's chunk flushes: what a killed daemon loses at most
+
 
 def message_fields(msg) -> dict:
     """A message dataclass's fields as plain data."""
@@ -32,8 +34,11 @@ class CoreFeed:
     """Records robot ``core``'s cycles on ``rec``.  ``received``: also the peers' messages that reached it (a fleet
     recording has them as the senders' ``sent`` already)."""
 
-    def __init__(self, rec, core, *, received: bool = False):
+    def __init__(self, rec, core, *, received: bool = False, stats=None, stats_period: float = 1.0):
         self.rec = rec
+        self.stats = stats                  # () -> the host's status snapshot, recorded every stats_period s
+        self.stats_period = stats_period
+        self._next_stats = None
         self.core = core
         self.id = core.id
         self.received = received
@@ -72,6 +77,9 @@ class CoreFeed:
         for peer in lost[self._lost:]:
             rec.event(now, rid, "peer_lost", "", None, (peer,))
         self._lost = len(lost)
+        if self.stats is not None and (self._next_stats is None or now >= self._next_stats):
+            self._next_stats = now + self.stats_period
+            rec.stats(rid, now, self.stats())
         rec.check()
 
     def frames(self, now: float, out, inbox=None) -> None:
@@ -155,3 +163,37 @@ class LogTap(logging.Handler):
                           record.pathname, record.lineno)
         except Exception:       # a log line must never stop the robot
             self.handleError(record)
+
+
+def link_tap(rec, rid: int):
+    """A link's ``tap``: its raw MAVLink datagrams onto ``/robot_{rid}/mavlink``."""
+    def tap(direction: str, data: bytes, addr, now: float) -> None:
+        rec.frame(rid, now, direction, data, addr)
+    return tap
+
+
+class Recording:
+    """One daemon's recording (``mrta daemon --record/--live``): the recorder, the feed on the core, the log tap
+    and (``mavlink``) the link's tap.  :meth:`close` finishes the file."""
+
+    def __init__(self, rec, tap: LogTap):
+        self.rec = rec
+        self.tap = tap
+
+    @classmethod
+    def of_daemon(cls, daemon, path, *, wall: bool = True, limit: int | None = None, rotate: bool = False,
+                  live=None, mavlink: bool = False) -> "Recording":
+        from runtime.recording.recorder import Recorder
+
+        rec = Recorder(path, wall=wall, limit=limit, rotate=rotate, live=live, mavlink=mavlink, robot_id=daemon.id,
+                       name=f"mrta robot {daemon.id}", flush_period=FLUSH_PERIOD)
+        rec.metadata("robot", {"id": str(daemon.id), "base": daemon.cfg.base.type,
+                               "allocation": daemon.cfg.allocation.method, "clock": "system" if wall else "sim"})
+        daemon.feed = CoreFeed(rec, daemon.core, received=True, stats=daemon.snapshot)
+        if mavlink:
+            daemon.link.tap = link_tap(rec, daemon.id)
+        return cls(rec, LogTap(rec).attach())
+
+    def close(self) -> None:
+        self.tap.detach()
+        self.rec.close()

@@ -36,6 +36,7 @@ TOPICS = {                          # topic (robot topics: {id} is the robot id)
     "/allocation": "mrta.AllocationEvent",             # messages sent and received, commitments, progress, tasks
     "/log": "foxglove.Log",                            # every log record and the STATUSTEXT lines
     "/robot_{id}/mavlink": "mrta.MavlinkFrame",        # raw MAVLink frames of the robot's link (optional)
+    "/robot_{id}/stats": "mrta.RobotStats",            # the daemon's status snapshot (counters), every second
 }
 
 _ANY = {"type": "object", "additionalProperties": True}
@@ -56,6 +57,9 @@ SCHEMAS = {
                                                      "state, the operator's event"},
         "robots": {"type": "array", "items": {"type": "integer"}},
         "fields": _ANY}},
+    "mrta.RobotStats": {"type": "object", "title": "mrta.RobotStats", "description": "the daemon's status snapshot: "
+                        "cycles, messages sent and received, drops by reason, the link's counters",
+                        "additionalProperties": True},
     "mrta.MavlinkFrame": {"type": "object", "title": "mrta.MavlinkFrame", "properties": {
         "robot": {"type": "integer"}, "direction": {"type": "string", "description": "tx | rx"},
         "address": {"type": "string"}, "frame": {"type": "string", "description": "the datagram, hex"}}},
@@ -123,7 +127,8 @@ class Recorder:
 
     def __init__(self, path: str | Path | None = None, *, wall: bool = False, limit: int | None = None,
                  rotate: bool = False, live: tuple[str, int] | None = None, mavlink: bool = False,
-                 chunk_size: int = CHUNK, name: str = "mrta", robot_id: int | str | None = None):
+                 chunk_size: int = CHUNK, name: str = "mrta", robot_id: int | str | None = None,
+                 flush_period: float | None = None):
         fx = _fx()
         self.fx = fx
         self.m = fx.messages
@@ -133,6 +138,8 @@ class Recorder:
         self.rotate = rotate
         self.mavlink = mavlink
         self.chunk_size = chunk_size
+        self.flush_period = flush_period      # wall s between chunk flushes: a killed recorder loses at most this
+        self._next_flush = time.monotonic() + (flush_period or 0.0)
         self.ctx = fx.Context()
         self.target = None if path is None else Path(path)
         self.files: list[Path] = []          # every file written, in order
@@ -181,7 +188,10 @@ class Recorder:
             self._file = None
             self.stopped = f"{f.path}: {f.error.strerror or f.error}"
             self.log.warning("recording stopped: %s (the robot runs on)", self.stopped)
-        elif self.limit is not None and f.bytes >= self.limit:
+        elif self.flush_period is not None and time.monotonic() >= self._next_flush:
+            self._next_flush = time.monotonic() + self.flush_period
+            self._writer.flush()
+        if self._file is not None and self.limit is not None and self._file.bytes >= self.limit:
             self._close_file()
             self._file = None
             if self.rotate:
@@ -306,6 +316,9 @@ class Recorder:
         self._json(self._robot(rid, "bumpers"), {"robot": rid, "left": bool(left), "right": bool(right),
                                                  "wheel_drop": bool(wheel_drop), "faults": list(faults)},
                    self.stamp(now))
+
+    def stats(self, rid: int, now: float, snapshot: dict) -> None:
+        self._json(self._robot(rid, "stats"), snapshot, self.stamp(now))
 
     def event(self, now: float, robot: int, event: str, message: str = "", task: int | None = None,
               robots=(), fields: dict | None = None, t: float | None = None) -> None:

@@ -18,6 +18,7 @@ import dataclasses
 import logging
 
 from runtime.messages import STATE_NAMES
+from runtime.recording.recorder import recoverable
 from runtime.robot.core import GCS, PEERS, TO
 
 FLUSH_PERIOD = 2.0        # wall s between a daemon recording's chunk flushes: what a killed daemon loses at most
@@ -49,6 +50,24 @@ class CoreFeed:
         self._lost = 0
 
     def cycle(self, now: float, out, inbox=None) -> None:
+        """One control cycle's output (``out``, and the ``inbox`` it answered).  A failing recording ends with one
+        warning line; the cycle goes on."""
+        self._guarded(self._cycle, now, out, inbox)
+
+    def frames(self, now: float, out, inbox=None) -> None:
+        """The messages of ``out`` (sent to peers) and, with ``received``, those of ``inbox``; STATUSTEXT to the
+        log."""
+        self._guarded(self._frames, now, out, inbox)
+
+    def _guarded(self, record, *args) -> None:
+        try:
+            record(*args)
+        except BaseException as exc:
+            if not recoverable(exc):
+                raise
+            self.rec.fail(exc)
+
+    def _cycle(self, now: float, out, inbox) -> None:
         rec, core, rid = self.rec, self.core, self.id
         pose = core.pose()
         if pose is not None:
@@ -68,7 +87,7 @@ class CoreFeed:
             if bump != self._bumpers:
                 self._bumpers = bump
                 rec.bumpers(rid, now, *bump)
-        self.frames(now, out, inbox)
+        self._frames(now, out, inbox)
         for p in out.progress:
             rec.event(now, rid, "progress", p.event, p.task, (rid,), {"detail": p.detail}, t=p.t)
         self._commitments(now)
@@ -82,9 +101,7 @@ class CoreFeed:
             rec.stats(rid, now, self.stats())
         rec.check()
 
-    def frames(self, now: float, out, inbox=None) -> None:
-        """The messages of ``out`` (sent to peers) and, with ``received``, those of ``inbox``; STATUSTEXT to the
-        log."""
+    def _frames(self, now: float, out, inbox) -> None:
         rec, rid = self.rec, self.id
         if self.received and inbox is not None:
             for msg in inbox.peers:

@@ -36,10 +36,20 @@ class Recording:
     metadata: dict[str, dict] = field(default_factory=dict)
     channels: dict[str, str] = field(default_factory=dict)      # topic -> schema name
     truncated: str | None = None      # why the file ended early (a killed writer), None if whole
+    dropped: int = 0                  # messages that would not decode (left out)
 
 
 def _unavailable() -> InputError:
     return InputError("reading a recording needs mcap and mcap-protobuf-support: pip install 'mrta-runtime[record]'")
+
+
+def _decode(data: bytes, ch, sch, decoders: dict, factory):
+    if ch.message_encoding == "json":
+        return json.loads(data)
+    if ch.id not in decoders:
+        decoders[ch.id] = factory.decoder_for(ch.message_encoding, sch)
+    dec = decoders[ch.id]
+    return dec(data) if dec is not None else data
 
 
 def read_messages(path: str | Path, topics=None, decode: bool = True) -> Recording:
@@ -90,19 +100,10 @@ def read_messages(path: str | Path, topics=None, decode: bool = True) -> Recordi
                 sch = schemas.get(ch.schema_id)
                 data: object = rec.data
                 if decode:
-                    if ch.message_encoding == "json":
-                        data = json.loads(rec.data)
-                    else:
-                        dec = decoders.get(ch.id)
-                        if dec is None:
-                            dec = decoders[ch.id] = factory.decoder_for(ch.message_encoding, sch)
-                        data = dec(rec.data) if dec is not None else rec.data
+                    try:
+                        data = _decode(rec.data, ch, sch, decoders, factory)
+                    except Exception:         # a JSON or protobuf payload that does not parse: counted, left out
+                        out.dropped += 1
+                        continue
                 out.messages.append(Message(ch.topic, sch.name if sch is not None else "", rec.log_time, data))
-    if not schemas and not out.messages and not out.metadata and out.truncated is None:
-        try:
-            size = Path(path).stat().st_size
-        except OSError:
-            size = 0
-        if size == 0:
-            raise InputError(f"{source}: expected an MCAP recording, the file is empty")
     return out

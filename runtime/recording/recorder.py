@@ -83,12 +83,14 @@ def _fx():
 
 class _File:
     """The MCAP writer's file: counts the bytes written; a write the disk refuses is kept as ``error`` and not
-    raised (the writer lives in Rust, inside the host's control cycle)."""
+    raised (the writer lives in Rust, inside the host's control cycle).  After an error the file's position goes
+    on as if the writes had landed (the writer checks it), until :meth:`Recorder.check` closes the recording."""
 
     def __init__(self, path: Path):
         self.path = path
         self.fh = open(path, "wb")
         self.bytes = 0
+        self.pos = 0
         self.error: OSError | None = None
 
     def write(self, data) -> int:
@@ -98,13 +100,21 @@ class _File:
                 self.bytes += len(data)
             except OSError as exc:
                 self.error = exc
+        self.pos += len(data)
         return len(data)
 
     def seek(self, offset: int, whence: int = 0) -> int:
-        return self.fh.seek(offset, whence)
+        if self.error is None:
+            try:
+                self.pos = self.fh.seek(offset, whence)
+                return self.pos
+            except OSError as exc:
+                self.error = exc
+        self.pos = offset if whence == 0 else self.pos + offset if whence == 1 else self.pos
+        return self.pos
 
     def tell(self) -> int:
-        return self.fh.tell()
+        return self.pos
 
     def flush(self) -> None:
         if self.error is None:
@@ -204,6 +214,22 @@ class Recorder:
     def flush(self) -> None:
         if self._writer is not None:
             self._writer.flush()
+
+    def fail(self, exc: BaseException) -> None:
+        """The writer itself failed (an error, or a panic in the Rust library): end the file recording with one
+        warning line."""
+        if self._file is None:
+            return
+        path = self._file.path
+        self._file.error = self._file.error or OSError(str(exc))
+        try:
+            self._close_file()
+        except BaseException as again:       # the library's panic on the way out: the file is what it is
+            if not recoverable(again):
+                raise
+        self._file = None
+        self.stopped = f"{path}: {type(exc).__name__}: {exc}"
+        self.log.warning("recording stopped: %s (the robot runs on)", self.stopped)
 
     def metadata(self, name: str, data: dict) -> None:
         """A metadata record (string values; others as JSON), in this file and every later one."""
@@ -389,6 +415,12 @@ class Recorder:
                                        billboard=True, font_size=14.0, scale_invariant=True,
                                        color=colour(rgb), text=f"{label} {state}")]))
         self.channel("/world", TOPICS["/world"]).log(m.SceneUpdate(entities=entities), log_time=ns)
+
+
+def recoverable(exc: BaseException) -> bool:
+    """An error the recording may end on while the robot runs on: an Exception, or a panic in the Rust library
+    (pyo3's PanicException is a BaseException); never a signal's or the interpreter's own."""
+    return isinstance(exc, Exception) or type(exc).__name__ == "PanicException"
 
 
 def _plain(v):

@@ -85,7 +85,8 @@ def _task_name(tid: int) -> str:
     return f"{tid} ({tid >> 16}.{tid & 0xFFFF})"
 
 
-def print_summary(s: dict, out=sys.stdout) -> None:
+def print_summary(s: dict, out=None) -> None:
+    out = sys.stdout if out is None else out
     p = lambda *a: print(*a, file=out)       # noqa: E731
     p(f"{s['source']}: {s['messages']} messages on {len(s['channels'])} channels, up to t = {s['end']:.2f} s"
       + (f"; the file ends early ({s['truncated']}): read up to its last whole chunk" if s["truncated"] else ""))

@@ -407,3 +407,34 @@ def test_the_shipped_foxglove_layout_is_the_one_the_code_builds():
     topics = json.loads(shipped)["content"]["items"][0]["content"]["items"][0]["content"]["config"]["topics"]
     known = {t.replace("{id}", "1") for t in TOPICS}
     assert {t for t in topics if t.startswith("/robot_1/") or not t.startswith("/robot_")} <= known
+
+
+def test_the_feed_records_an_in_process_fleet_doing_its_tasks(tmp_path):
+    """Three robot cores on the in-process host (no physics, no sockets), each fed to one recording: every task
+    done shows as committed by its doer, done in the tables, and on the world scene."""
+    import math
+
+    from runtime.inprocess import kinematic
+    from runtime.recording.feed import CoreFeed
+    from runtime.tasks.goto import Goto
+
+    f = kinematic({1: (0.0, 0.0, 0.0), 2: (2.0, 0.0, math.pi), 3: (0.0, 2.0, 0.0)}, "auction")
+    rec = Recorder(tmp_path / "fleet.mcap")
+    feeds = {rid: CoreFeed(rec, h.core, scene=rid == 1) for rid, h in f.robots.items()}
+    f.on_output = lambda rid, out, now: feeds[rid].cycle(now, out)
+    ids = f.hand_in(1, [Goto(1.0, 1.0, hold=1.0), Goto(-1.0, 0.5, hold=1.0), Goto(0.5, 2.5, hold=1.0)])
+    f.run(120.0, stop=lambda fl: set(fl.done()) == set(ids))
+    rec.close()
+    assert set(f.done()) == set(ids)
+    by = _by_topic(read_messages(tmp_path / "fleet.mcap"))
+    events = [m.data for m in by["/allocation"]]
+    for tid, doers in f.done().items():
+        assert {(e["robot"], e["task"]) for e in events if e["event"] == "committed"} >= {(r, tid) for r in doers}
+        assert any(e["event"] == "task" and e["task"] == tid and e["message"] == "done"
+                   and set(e["robots"]) == set(doers) for e in events)
+        assert any(e["event"] == "progress" and e["task"] == tid and e["message"] == "arrived" for e in events)
+    last = by["/world"][-1].data
+    states = {ent.id: dict((kv.key, kv.value) for kv in ent.metadata)["state"] for ent in last.entities
+              if ent.id.startswith("task_")}
+    assert states == {f"task_{tid}": "done" for tid in ids}
+    assert len(by["/robot_2/pose"]) == len(by["/robot_2/command"]) > 0

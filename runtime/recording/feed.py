@@ -35,8 +35,11 @@ class CoreFeed:
     """Records robot ``core``'s cycles on ``rec``.  ``received``: also the peers' messages that reached it (a fleet
     recording has them as the senders' ``sent`` already)."""
 
-    def __init__(self, rec, core, *, received: bool = False, stats=None, stats_period: float = 1.0):
+    def __init__(self, rec, core, *, received: bool = False, stats=None, stats_period: float = 1.0,
+                 scene: bool = False):
         self.rec = rec
+        self.scene = scene                  # draw /world (the robot's map and its table's tasks): a robot's own
+        #                                     recording; a fleet's host draws the world itself
         self.stats = stats                  # () -> the host's status snapshot, recorded every stats_period s
         self.stats_period = stats_period
         self._next_stats = None
@@ -47,6 +50,7 @@ class CoreFeed:
         self._bumpers = None
         self._held: dict[int, tuple] = {}
         self._table: dict[int, tuple] = {}
+        self._drawn = False
         self._lost = 0
 
     def cycle(self, now: float, out, inbox=None) -> None:
@@ -135,13 +139,19 @@ class CoreFeed:
     def _fleet_table(self, now: float) -> None:
         entries = self.core.node.table.entries
         if len(entries) == len(self._table) and all(
-                self._table.get(tid) == (e.state, e.done_by) for tid, e in entries.items()):
+                self._table.get(tid) == (e.state, e.done_by) for tid, e in entries.items()) and \
+                (self._drawn or not self.scene):
             return
+        self._drawn = True
         for tid, e in entries.items():
             if self._table.get(tid) != (e.state, e.done_by):
                 self._table[tid] = (e.state, e.done_by)
                 self.rec.event(now, self.id, "task", STATE_NAMES.get(e.state, str(e.state)), tid, e.done_by,
                                {"x": e.x, "y": e.y, "command": e.command})
+        if self.scene:
+            self.rec.scene(now, self.core.planner.world,
+                           [(tid, e.x, e.y, f"{tid >> 16}.{tid & 0xFFFF}", STATE_NAMES.get(e.state, "?"))
+                            for tid, e in entries.items()])
 
 
 class LogTap(logging.Handler):
@@ -206,7 +216,7 @@ class Recording:
                        name=f"mrta robot {daemon.id}", flush_period=FLUSH_PERIOD)
         rec.metadata("robot", {"id": str(daemon.id), "base": daemon.cfg.base.type,
                                "allocation": daemon.cfg.allocation.method, "clock": "system" if wall else "sim"})
-        daemon.feed = CoreFeed(rec, daemon.core, received=True, stats=daemon.snapshot)
+        daemon.feed = CoreFeed(rec, daemon.core, received=True, stats=daemon.snapshot, scene=True)
         if mavlink:
             daemon.link.tap = link_tap(rec, daemon.id)
         return cls(rec, LogTap(rec).attach())

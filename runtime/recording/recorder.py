@@ -370,52 +370,46 @@ class Recorder:
                                                      "frame": bytes(data).hex()}, self.stamp(now))
 
     def scene(self, now: float, world, tasks=()) -> None:
-        """The world as scene entities: the arena's floor and walls, the obstacles, and ``tasks`` as
-        ``(id, x, y, label, state)`` places coloured by state (:data:`TASK_COLOURS`)."""
+        """The world (a WorldConfig, or None: no map) as scene entities: the arena's floor and walls, the
+        obstacles, and ``tasks`` as ``(id, x, y, label, state)`` places coloured by state (:data:`TASK_COLOURS`)."""
         ns = self.stamp(now)
         m = self.m
         ts = self._ts(ns)
-
-        def colour(rgb, a=1.0):
-            return m.Color(r=rgb[0], g=rgb[1], b=rgb[2], a=a)
-
-        def cube(x, y, yaw, sx, sy, sz, rgb, a=1.0):
-            p = self._pose(x, y, yaw, sz / 2.0)
-            return m.CubePrimitive(pose=p, size=m.Vector3(x=float(sx), y=float(sy), z=float(sz)), color=colour(rgb, a))
-
-        sx, sy = world.size
-        grey = (0.55, 0.55, 0.6)
-        arena = [cube(0.0, 0.0, 0.0, sx, sy, 0.01, (0.92, 0.92, 0.92), 0.6)]
-        if getattr(world, "walls", False):
-            arena += [cube(0.0, sy / 2, 0.0, sx, 0.05, 0.3, grey), cube(0.0, -sy / 2, 0.0, sx, 0.05, 0.3, grey),
-                      cube(sx / 2, 0.0, 0.0, 0.05, sy, 0.3, grey), cube(-sx / 2, 0.0, 0.0, 0.05, sy, 0.3, grey)]
-        obstacles = []
-        for ob in world.obstacles:
-            size = getattr(ob, "size", None)
-            if size is not None:
-                obstacles.append(cube(ob.center[0], ob.center[1], getattr(ob, "yaw", 0.0), size[0], size[1],
-                                      float(getattr(ob, "height", 0.4)), (0.35, 0.35, 0.4)))
-            else:           # a round obstacle
-                r = float(getattr(ob, "radius", 0.2))
-                obstacles.append(m.CylinderPrimitive(pose=self._pose(ob.center[0], ob.center[1], 0.0),
-                                                     size=m.Vector3(x=2 * r, y=2 * r, z=0.4), bottom_scale=1.0,
-                                                     top_scale=1.0, color=colour((0.35, 0.35, 0.4))))
-        entities = [m.SceneEntity(timestamp=ts, frame_id=WORLD, id="arena", cubes=arena),
-                    m.SceneEntity(timestamp=ts, frame_id=WORLD, id="obstacles", cubes=[o for o in obstacles
-                                  if isinstance(o, m.CubePrimitive)],
-                                  cylinders=[o for o in obstacles if not isinstance(o, m.CubePrimitive)])]
+        entities = [] if world is None else self._arena(world, ts)
         for tid, x, y, label, state in tasks:
             rgb = TASK_COLOURS.get(state, (0.8, 0.2, 0.8))
             entities.append(m.SceneEntity(
                 timestamp=ts, frame_id=WORLD, id=f"task_{tid}",
                 metadata=[m.KeyValuePair(key="state", value=state), m.KeyValuePair(key="task", value=str(tid))],
                 cylinders=[m.CylinderPrimitive(pose=self._pose(x, y, 0.0), size=m.Vector3(x=0.3, y=0.3, z=0.05),
-                                               bottom_scale=1.0, top_scale=1.0, color=colour(rgb, 0.8))],
-                texts=[m.TextPrimitive(pose=self._pose(x, y, 0.0, 0.3),
-                                       billboard=True, font_size=14.0, scale_invariant=True,
-                                       color=colour(rgb), text=f"{label} {state}")]))
+                                               bottom_scale=1.0, top_scale=1.0, color=self._colour(rgb, 0.8))],
+                texts=[m.TextPrimitive(pose=self._pose(x, y, 0.0, 0.3), billboard=True, font_size=14.0,
+                                       scale_invariant=True, color=self._colour(rgb), text=f"{label} {state}")]))
         self.channel("/world", TOPICS["/world"]).log(m.SceneUpdate(entities=entities), log_time=ns)
 
+    def _colour(self, rgb, a: float = 1.0):
+        return self.m.Color(r=rgb[0], g=rgb[1], b=rgb[2], a=a)
+
+    def _cube(self, x, y, yaw, sx, sy, sz, rgb, a: float = 1.0):
+        m = self.m
+        return m.CubePrimitive(pose=self._pose(x, y, yaw, sz / 2.0), size=m.Vector3(x=float(sx), y=float(sy),
+                                                                                      z=float(sz)),
+                               color=self._colour(rgb, a))
+
+    def _arena(self, world, ts) -> list:
+        """The floor, the walls (when the world has them) and the box obstacles."""
+        m, cube = self.m, self._cube
+        sx, sy = world.size
+        grey = (0.55, 0.55, 0.6)
+        arena = [cube(0.0, 0.0, 0.0, sx, sy, 0.01, (0.92, 0.92, 0.92), 0.6)]
+        if getattr(world, "walls", False):
+            arena += [cube(0.0, sy / 2, 0.0, sx, 0.05, 0.3, grey), cube(0.0, -sy / 2, 0.0, sx, 0.05, 0.3, grey),
+                      cube(sx / 2, 0.0, 0.0, 0.05, sy, 0.3, grey), cube(-sx / 2, 0.0, 0.0, 0.05, sy, 0.3, grey)]
+        obstacles = [cube(ob.center[0], ob.center[1], getattr(ob, "yaw", 0.0), ob.size[0], ob.size[1],
+                          float(getattr(ob, "height", 0.4)), (0.35, 0.35, 0.4))
+                     for ob in world.obstacles if getattr(ob, "size", None) is not None]
+        return [m.SceneEntity(timestamp=ts, frame_id=WORLD, id="arena", cubes=arena),
+                m.SceneEntity(timestamp=ts, frame_id=WORLD, id="obstacles", cubes=obstacles)]
 
 def recoverable(exc: BaseException) -> bool:
     """An error the recording may end on while the robot runs on: an Exception, or a panic in the Rust library

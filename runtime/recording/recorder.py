@@ -158,6 +158,7 @@ class Recorder:
         self._writer = None
         self._last_ns = 0
         self._channels: dict[str, object] = {}
+        self._by_robot: dict[tuple[int, str], object] = {}
         self._metadata: list[tuple[str, dict]] = []
         self.server = None
         if self.target is not None:
@@ -283,8 +284,11 @@ class Recorder:
         return ch
 
     def _robot(self, rid: int, topic: str):
-        name = f"/robot_{{id}}/{topic}"
-        return self.channel(name.replace("{id}", str(rid)), TOPICS[name])
+        ch = self._by_robot.get((rid, topic))
+        if ch is None:
+            name = f"/robot_{{id}}/{topic}"
+            ch = self._by_robot[(rid, topic)] = self.channel(name.replace("{id}", str(rid)), TOPICS[name])
+        return ch
 
     def _json(self, ch, data: dict, ns: int) -> None:
         try:
@@ -325,7 +329,11 @@ class Recorder:
                                      log_time=ns)
 
     def command(self, rid: int, now: float, v: float, w: float) -> None:
-        self._json(self._robot(rid, "command"), {"robot": rid, "v": v, "w": w}, self.stamp(now))
+        v, w = float(v), float(w)
+        if math.isfinite(v) and math.isfinite(w):      # every cycle: the JSON written out by hand
+            self._robot(rid, "command").log(f'{{"robot":{int(rid)},"v":{v!r},"w":{w!r}}}', log_time=self.stamp(now))
+        else:
+            self._json(self._robot(rid, "command"), {"robot": rid, "v": v, "w": w}, self.stamp(now))
 
     def ranges(self, rid: int, now: float, ranges) -> None:
         """``(bearing, distance)`` pairs in the robot's frame, as points in ``robot_{rid}``."""
@@ -364,10 +372,13 @@ class Recorder:
             m.Log(timestamp=self._ts(ns), level=level, message=text, name=name, file=file, line=line), log_time=ns)
 
     def frame(self, rid: int, now: float, direction: str, data: bytes, address=None) -> None:
+        """One raw MAVLink datagram of robot ``rid``'s link (``direction`` "tx" or "rx"; ``address`` (host, port)).
+        The JSON is written out by hand: this runs for every datagram."""
         if self.mavlink:
-            self._json(self._robot(rid, "mavlink"), {"robot": rid, "direction": direction,
-                                                     "address": "" if address is None else f"{address[0]}:{address[1]}",
-                                                     "frame": bytes(data).hex()}, self.stamp(now))
+            addr = "" if address is None else f"{address[0]}:{int(address[1])}"
+            self._robot(rid, "mavlink").log(
+                f'{{"robot":{int(rid)},"direction":"{"rx" if direction == "rx" else "tx"}",'
+                f'"address":{json.dumps(addr)},"frame":"{bytes(data).hex()}"}}', log_time=self.stamp(now))
 
     def scene(self, now: float, world, tasks=()) -> None:
         """The world (a WorldConfig, or None: no map) as scene entities: the arena's floor and walls, the

@@ -438,3 +438,19 @@ def test_the_feed_records_an_in_process_fleet_doing_its_tasks(tmp_path):
               if ent.id.startswith("task_")}
     assert states == {f"task_{tid}": "done" for tid in ids}
     assert len(by["/robot_2/pose"]) == len(by["/robot_2/command"]) > 0
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["daemon", "robot.yaml", "--live", "nohost"], "--live: expected HOST:PORT"),
+    (["daemon", "robot.yaml", "--record", "x.mcap", "--record-limit", "0"], "--record-limit: expected a number > 0"),
+    (["daemon", "robot.yaml", "--record", "/no/such/folder/x.mcap"], "--record /no/such/folder/x.mcap: expected"),
+    (["sitl", "run", "create2_4", "--live", "127.0.0.1:99999"], "--live: expected HOST:PORT"),
+    (["log", "summary", "missing.mcap"], "missing.mcap: expected a recording"),
+])
+def test_bad_recording_options_are_one_line_and_exit_2(argv, says, capsys, tmp_path, monkeypatch):
+    from runtime import cli
+
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and says in err[0], err

@@ -119,13 +119,17 @@ def trace_from_mcap(path: str | Path) -> RunTrace:
     except (KeyError, TypeError, ValueError) as exc:
         raise InputError(f"{source}: trace metadata: expected the run's world, robots and tasks ({exc})") from None
     for m in recording.messages:
-        if m.topic.endswith("/truth"):
-            rid = int(m.topic.split("/")[1][len("robot_"):])
+        if m.kind == "truth" and m.is_pose:
+            rid = m.robot
             if rid in tr.robots:
                 x, y, yaw = m.pose
                 tr.robots[rid].add(m.ns / 1e9, x, y, yaw)
-        elif m.topic == "/allocation" and m.data.get("event") == "operator":
+        elif m.topic == "/allocation" and isinstance(m.data, dict) and m.data.get("event") == "operator":
             d = m.data
-            tr.events.append(TraceEvent(float(d["t"]), d["task"], tuple(d["robots"]), d["message"],
-                                        d["fields"].get("detail", "")))
+            try:
+                tr.events.append(TraceEvent(float(d["t"]), d["task"], tuple(int(r) for r in d["robots"]),
+                                            str(d["message"]), str(d["fields"].get("detail", ""))))
+            except (KeyError, TypeError, ValueError, AttributeError) as exc:
+                raise InputError(f"{source}: /allocation at {m.ns} ns: expected an operator event "
+                                 f"(t, task, robots, message, fields; {exc!r})") from None
     return tr

@@ -22,6 +22,23 @@ class Message:
     data: object             # dict (JSON channels) or the decoded protobuf message
 
     @property
+    def robot(self) -> int | None:
+        """N of a ``/robot_N/...`` topic, else None."""
+        parts = self.topic.split("/")
+        if len(parts) == 3 and parts[1].startswith("robot_") and parts[1][6:].isdigit():
+            return int(parts[1][6:])
+        return None
+
+    @property
+    def kind(self) -> str:
+        """The last part of the topic (``pose`` of ``/robot_1/pose``)."""
+        return self.topic.rsplit("/", 1)[-1]
+
+    @property
+    def is_pose(self) -> bool:
+        return self.schema == "foxglove.PoseInFrame" and not isinstance(self.data, (bytes, dict))
+
+    @property
     def pose(self) -> tuple[float, float, float]:
         """(x, y, yaw) of a ``foxglove.PoseInFrame``."""
         p = self.data.pose
@@ -73,7 +90,7 @@ def read_messages(path: str | Path, topics=None, decode: bool = True) -> Recordi
     except OSError as exc:
         raise InputError(f"{source}: expected a recording (MCAP) that can be read ({exc.strerror})") from None
     with fh:
-        reader = StreamReader(fh, skip_magic=False)
+        reader = StreamReader(fh, skip_magic=False, validate_crcs=True)   # a flipped bit ends the read
         records = iter(reader.records)
         while True:
             try:

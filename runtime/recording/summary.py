@@ -34,51 +34,64 @@ def summarize(path) -> dict:
     open_holds: dict[tuple[int, int], tuple[float, tuple]] = {}
     last_pose: dict[int, tuple] = {}
     end = 0.0
+    skipped = 0
     for m in rec.messages:
-        t = m.ns / 1e9
-        end = max(end, t)
-        parts = m.topic.split("/")
-        if len(parts) == 3 and parts[1].startswith("robot_") and parts[2] == "pose":
-            rid = int(parts[1][6:])
-            r = robots[rid]
-            r["poses"] += 1
-            r["first"] = t if r["first"] is None else r["first"]
-            r["last"] = t
-            x, y, _ = m.pose
-            if rid in last_pose:
-                r["moved"] += math.hypot(x - last_pose[rid][0], y - last_pose[rid][1])
-            last_pose[rid] = (x, y)
-        elif len(parts) == 3 and parts[2] == "stats":
-            robots[int(parts[1][6:])]["stats"] = m.data
-        elif m.topic == "/allocation":
-            d = m.data
-            rid, ev, task = d.get("robot", 0), d.get("event"), d.get("task")
-            when = float(d.get("t", t))
-            if ev in ("sent", "received"):
-                robots[rid][ev][d.get("message", "?")] += 1
-            elif ev == "committed" and task is not None:
-                if (rid, task) not in open_holds:
-                    open_holds[(rid, task)] = (when, tuple(d.get("robots", ())))
-                if len(d.get("robots", ())) > 1:
-                    tasks[task]["coalitions"].add(tuple(sorted(d["robots"])))
-            elif ev == "released" and task is not None and (rid, task) in open_holds:
-                t0, _ = open_holds.pop((rid, task))
-                tasks[task]["held"].append((rid, t0, when))
-            elif ev == "progress" and task is not None:
-                tasks[task]["progress"].append((when, rid, d.get("message", "")))
-            elif ev == "task" and task is not None:
-                states = tasks[task]["states"]
-                entry = (d.get("message", ""), tuple(d.get("robots", ())))
-                if not states or states[-1][1:] != entry:
-                    states.append((when, *entry))
-            elif ev == "peer_lost":
-                robots[rid]["lost_peers"] += [(when, p) for p in d.get("robots", ())]
+        try:
+            end = _one(m, end, robots, tasks, open_holds, last_pose)
+        except (KeyError, TypeError, ValueError, AttributeError):      # a message not of the shape written
+            skipped += 1
     for (rid, task), (t0, _) in open_holds.items():
         tasks[task]["held"].append((rid, t0, None))
     return {"source": rec.source, "truncated": rec.truncated, "end": end, "channels": rec.channels,
-            "metadata": rec.metadata, "messages": len(rec.messages),
+            "metadata": rec.metadata, "messages": len(rec.messages), "skipped": skipped + rec.dropped,
             "robots": {k: robots[k] for k in sorted(robots) if k != 0},
             "tasks": {k: tasks[k] for k in sorted(tasks)}}
+
+
+def _one(m, end: float, robots, tasks, open_holds, last_pose) -> float:
+    """One message into the summary's tallies; returns the latest time seen."""
+    t = m.ns / 1e9
+    end = max(end, t)
+    rid = m.robot
+    if rid is not None and m.kind == "pose" and m.is_pose:
+        r = robots[rid]
+        r["poses"] += 1
+        r["first"] = t if r["first"] is None else r["first"]
+        r["last"] = t
+        x, y, _ = m.pose
+        if rid in last_pose:
+            r["moved"] += math.hypot(x - last_pose[rid][0], y - last_pose[rid][1])
+        last_pose[rid] = (x, y)
+    elif rid is not None and m.kind == "stats" and isinstance(m.data, dict):
+        robots[rid]["stats"] = m.data
+    elif m.topic == "/allocation" and isinstance(m.data, dict):
+        d = m.data
+        rid, ev, task = d.get("robot", 0), d.get("event"), d.get("task")
+        robots_of = d.get("robots", ())
+        if not isinstance(rid, int) or not (task is None or isinstance(task, int)) or \
+                not all(isinstance(r, int) for r in robots_of):
+            raise TypeError("robot, task and robots must be integers")
+        when = float(d.get("t", t))
+        if ev in ("sent", "received"):
+            robots[rid][ev][d.get("message", "?")] += 1
+        elif ev == "committed" and task is not None:
+            if (rid, task) not in open_holds:
+                open_holds[(rid, task)] = (when, tuple(d.get("robots", ())))
+            if len(d.get("robots", ())) > 1:
+                tasks[task]["coalitions"].add(tuple(sorted(d["robots"])))
+        elif ev == "released" and task is not None and (rid, task) in open_holds:
+            t0, _ = open_holds.pop((rid, task))
+            tasks[task]["held"].append((rid, t0, when))
+        elif ev == "progress" and task is not None:
+            tasks[task]["progress"].append((when, rid, d.get("message", "")))
+        elif ev == "task" and task is not None:
+            states = tasks[task]["states"]
+            entry = (d.get("message", ""), tuple(d.get("robots", ())))
+            if not states or states[-1][1:] != entry:
+                states.append((when, *entry))
+        elif ev == "peer_lost":
+            robots[rid]["lost_peers"] += [(when, p) for p in d.get("robots", ())]
+    return end
 
 
 def _task_name(tid: int) -> str:
@@ -89,6 +102,7 @@ def print_summary(s: dict, out=None) -> None:
     out = sys.stdout if out is None else out
     p = lambda *a: print(*a, file=out)       # noqa: E731
     p(f"{s['source']}: {s['messages']} messages on {len(s['channels'])} channels, up to t = {s['end']:.2f} s"
+      + (f"; {s['skipped']} not understood" if s["skipped"] else "")
       + (f"; the file ends early ({s['truncated']}): read up to its last whole chunk" if s["truncated"] else ""))
     for rid, r in s["robots"].items():
         span = "no poses" if r["first"] is None else \

@@ -104,4 +104,5 @@ def _recording(args, daemon: D.Daemon, wall: bool):
     except RecordingUnavailable as exc:
         raise InputError(f"--record: {exc}") from None
     except OSError as exc:
-        raise InputError(f"--live {args.live}: expected a free address to serve on ({exc})") from None
+        raise InputError(f"--record {args.record}: expected a file that can be written ({exc.strerror or exc})") \
+            from None

@@ -465,7 +465,7 @@ def open_recording(f: Fleet, record, live: tuple[str, int] | None):
         log.warning("%s: the run is not recorded", exc)
         return None
     except OSError as exc:
-        raise InputError(f"--live {live[0]}:{live[1]}: expected a free address to serve on ({exc})") from None
+        raise InputError(f"{path}: expected a recording file that can be written ({exc.strerror or exc})") from None
 
 
 def run_lockstep(f: Fleet, timeout: float | None = None, progress=None, on_step=None, record=False,

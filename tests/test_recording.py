@@ -460,3 +460,13 @@ def test_bad_recording_options_are_one_line_and_exit_2(argv, says, capsys, tmp_p
     assert cli.main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and says in err[0], err
+
+
+def test_a_live_address_in_use_is_one_line_and_the_file_is_closed(tmp_path):
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        with pytest.raises(InputError, match=f"--live 127.0.0.1:{port}: expected an address free to serve on"):
+            Recorder(tmp_path / "x.mcap", live=("127.0.0.1", port))
+    assert read_messages(tmp_path / "x.mcap").truncated is None          # closed: a whole (empty) recording

@@ -20,6 +20,7 @@ import struct
 import time
 from pathlib import Path
 
+from runtime.errors import InputError
 from runtime.log import get_logger
 
 WORLD = "world"                     # the fixed frame every pose is in
@@ -165,7 +166,11 @@ class Recorder:
             self._open(self.target)
         if live is not None:
             host, port = live
-            self.server = fx.start_server(name=name, host=host, port=port, context=self.ctx)
+            try:
+                self.server = fx.start_server(name=name, host=host, port=port, context=self.ctx)
+            except RuntimeError as exc:          # foxglove's FoxgloveError: the address is taken or unknown
+                self.close()
+                raise InputError(f"--live {host}:{port}: expected an address free to serve on ({exc})") from None
         self.stamp(0.0)
 
     # ------------------------------------------------------------------ sinks

@@ -24,7 +24,7 @@ from runtime.errors import InputError  # noqa: E402
 from runtime.recording import summary  # noqa: E402
 from runtime.recording.read import read_messages  # noqa: E402
 from runtime.recording.recorder import TOPICS, Recorder  # noqa: E402
-from tests.sitl_util import shipped_fleet  # noqa: E402
+from tests.sitl_util import worker_fleet  # noqa: E402
 
 ROBOT_TOPICS = ("pose", "truth", "command", "path", "bumpers", "mavlink", "stats")
 SUBPROTOCOL = "foxglove.sdk.v1"        # what foxglove-sdk 0.30's server speaks (the successor of foxglove.websocket.v1)
@@ -121,7 +121,7 @@ def recorded_run(tmp) -> dict:
                 time.sleep(0.02)
             seen["mid_run"] = (f.world.t, len(client.got))
 
-    f = launcher.build(shipped_fleet(tmp, "create2_4.yaml"), tmp / "run")
+    f = launcher.build(worker_fleet(tmp, "create2_4.yaml", seed=1), tmp / "run")
     try:
         res = launcher.run_lockstep(f, record=True, live=("127.0.0.1", port), on_step=on_step)
         cycles = {rid: r.daemon.stats.cycles for rid, r in f.robots.items()}
@@ -368,7 +368,7 @@ def test_a_killed_daemon_leaves_a_readable_recording(tmp_path):
 
     from tests.sitl_util import ROOT, devices_only
 
-    world, robots = devices_only(shipped_fleet(tmp_path, "create2_4.yaml"), tmp_path)
+    world, robots = devices_only(worker_fleet(tmp_path, "create2_4.yaml", seed=1), tmp_path)   # ports of its own
     daemon = None
     out = tmp_path / "robot_1.mcap"
     try:

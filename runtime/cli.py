@@ -29,6 +29,7 @@ COMMANDS = {
     "key": "runtime.comms.key_cli",                          # mrta key FILE
     "init-robot": "runtime.deploy.init_robot",               # mrta init-robot DIR --base create2|pioneer|can
     "schema": "runtime.config.schema_cli",                   # mrta schema robot|fleet|world
+    "log": "runtime.recording.summary",                      # mrta log summary FILE.mcap
 }
 SIMULATOR = ("pybullet", "matplotlib")       # the [sitl] extra
 NEEDS_SIMULATOR = "the simulator is not installed: pip install 'mrta-runtime[sitl]'"

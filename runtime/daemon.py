@@ -59,6 +59,7 @@ class Daemon:
                           bool(base.latches_faults))
         self.core = RobotCore(cfg, facts, mavlink=(link.mav, link.module, link.counters))
         self.period = self.core.period
+        self.feed = None                  # a recording's CoreFeed (runtime.recording.feed): told every cycle
         self._mode()
 
     # ------------------------------------------------------------------ lifecycle
@@ -93,16 +94,23 @@ class Daemon:
         fixes = self.gps.poll(now) if self.gps is not None else ()
         peers = link.poll(now)
         lost = link.peers_lost(now)
-        out = self.core.step(now, Sensed(odometry, fixes, base.sensors), self._inbox(peers, lost))
+        inbox = self._inbox(peers, lost)
+        out = self.core.step(now, Sensed(odometry, fixes, base.sensors), inbox)
         if out.reset_faults:
             base.reset_faults(now)
         base.set_velocity(*out.command, now)
         self._send(out, now)
+        if self.feed is not None:
+            self.feed.cycle(now, out, inbox)
 
     def service(self, now: float) -> None:
         """Messages only, no control cycle: peers' task tables and ground-station requests (a SITL operator
         hands tasks in before the first cycle this way).  Peer messages for the agent wait for the next step."""
-        self._send(self.core.service(now, self._inbox(self.link.poll(now), ())), now)
+        inbox = self._inbox(self.link.poll(now), ())
+        out = self.core.service(now, inbox)
+        self._send(out, now)
+        if self.feed is not None:
+            self.feed.frames(now, out, inbox)
 
     def _inbox(self, peers: list, lost: list) -> Inbox:
         link = self.link

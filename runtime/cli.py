@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from runtime.errors import InputError
@@ -134,6 +135,16 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:          # `mrta log summary F | head`: the reader left; say nothing more (Python's
+        _quiet_stdout()              # own advice: point stdout at devnull so the exit flush does not raise again)
+        return 141                   # 128 + SIGPIPE, what a shell reports for a command cut off by a pipe
+
+
+def _quiet_stdout() -> None:
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except (OSError, ValueError):    # stdout already closed, or not a real file (a test's capture)
+        pass
 
 
 if __name__ == "__main__":

@@ -242,12 +242,15 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
 def fleet_key(fleet: FC.FleetConfig, key: str | Path | None, signing: bool, run_dir: Path) -> tuple[Path | None, bool]:
     """(the key file the robots sign with, whether it was made for this run): ``key`` (``--key``, checked: an
     InputError naming it if it is missing or not a key), else the fleet's ``signing_key`` (resolved against the
-    fleet file), else with ``signing`` a fresh key in ``run_dir``; (None, False) for an unsigned fleet."""
+    fleet file), else with ``signing`` a fresh key in ``run_dir``; (None, False) for an unsigned fleet: without
+    ``signing`` (``--no-signing``) the fleet's ``signing_key`` is not used either (the command line wins)."""
     from runtime.comms.link import load_key, new_key
 
     if key is not None:
         load_key(key, "--key")
         return Path(key).resolve(), False
+    if not signing:
+        return None, False
     if fleet.signing_key:
         return Path(fleet.signing_key).resolve(), False
     if signing:

@@ -36,6 +36,9 @@ class SignalledInsideAParser:
     def open(self, now: float) -> None:
         pass
 
+    def start_guard(self) -> None:
+        pass
+
     def step(self, now: float) -> None:
         self.stats.cycles += 1
         if self.stats.cycles == 1:

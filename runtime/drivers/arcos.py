@@ -128,6 +128,14 @@ class ArcosBase(MobileBase):
         self.state = "closed"
         self.sensors.mode = "closed"
 
+    def stop_bytes(self) -> tuple[bytes, bytes]:
+        """VEL 0 and RVEL 0; for a dead daemon then STOP and CLOSE (the server ends the session, motors stopped).
+        The robot's own watchdog stops it anyway, after its watchdog time (2 s on a P3-DX)."""
+        return P.vel(0) + P.rvel(0), P.vel(0) + P.rvel(0) + P.stop() + P.close()
+
+    def port_fd(self) -> int | None:
+        return self.link.fileno()
+
     # ------------------------------------------------------------------ polling
     def _read(self, now: float) -> bool:
         fresh = False

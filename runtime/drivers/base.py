@@ -233,6 +233,20 @@ class MobileBase(abc.ABC):
     def _link_ok(self, counter: str) -> None:
         self._failures[counter] = 0
 
+    # ------------------------------------------------------------------ stopping from outside the daemon
+    guard: float | None = None   # s of daemon silence before its stop guard stops the base; None: no guard
+
+    def stop_bytes(self) -> tuple[bytes, bytes] | None:
+        """What stops the base when written on its port by someone else than this driver (the stop guard,
+        ``mrta stop-base``): ``(pause, final)``, the stop for a frozen daemon that may wake up and the one for a
+        dead daemon; None for a base that cannot be stopped that way (it stops by its own watchdog).  A base that
+        has them has a :class:`~runtime.drivers.serial_link.SerialLink` as ``link`` (``mrta stop-base`` opens it)."""
+        return None
+
+    def port_fd(self) -> int | None:
+        """The open port's file descriptor, for the stop guard; None when it has none."""
+        return None
+
     def reset_faults(self, now: float) -> bool:
         """Ask the base to clear the faults it reports in ``sensors.faults`` and drive again (the operator's
         request; it may take a few polls).  True if a reset was started; a base without resettable faults

@@ -1,0 +1,134 @@
+"""A base whose daemon dies (SIGKILL) or freezes (SIGSTOP) mid-drive stands still within a stated bound, on every
+base: a Create by its stop guard (the OI has no watchdog), a Pioneer by its ARCOS watchdog (2 s; over TCP a kill
+also closes the connection, which ends the session at once), a CAN base by its drives' heartbeat consumer (3
+heartbeat periods, 0.3 s).  The daemon is ``tests/stop_rig.py``'s child: the base loop of ``mrta daemon`` with its
+stop guard, in a process of its own."""
+from __future__ import annotations
+
+import signal
+
+import pytest
+
+from tests.stop_rig import StopRig
+
+# (base, signal, bound in s: the mechanism's own time; the assertion allows LOAD_SLACK more for a loaded machine)
+CASES = [
+    ("create_pty", signal.SIGKILL, 0.05),    # the guard sees the heartbeat pipe close
+    ("create_pty", signal.SIGSTOP, 0.5),     # the guard's bound (base.guard)
+    ("arcos_pty", signal.SIGKILL, 2.0),      # the robot's watchdog
+    ("arcos_tcp", signal.SIGKILL, 0.05),     # the connection closes: the server ends the session
+    ("arcos_tcp", signal.SIGSTOP, 2.0),
+    ("cia402", signal.SIGKILL, 0.3),         # the drives' heartbeat consumer
+    ("cia402", signal.SIGSTOP, 0.3),
+]
+LOAD_SLACK = 3.0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind, sig, bound", CASES, ids=[f"{k}-{s.name}" for k, s, _ in CASES])
+def test_the_body_stands_still_after_its_daemon_dies_or_freezes(kind, sig, bound):
+    rig = StopRig(kind)
+    try:
+        took = rig.standstill_after(sig)
+        assert took is not None, f"{kind}: still moving 10 s after {sig.name}"
+        assert took < bound + LOAD_SLACK, (kind, sig.name, took)
+        assert rig.stays_still(0.3)
+        assert not rig.errors, rig.errors
+    finally:
+        err = rig.close()
+    assert "Traceback" not in err, err
+    if kind == "create_pty":                                   # one line per episode
+        assert err.count("daemon silent") == (sig == signal.SIGSTOP), err
+        assert err.count("daemon gone") == 1, err              # (a frozen child is killed at the end)
+
+
+def test_the_daemon_beats_its_guard_and_a_silent_or_closed_pipe_stops_the_create():
+    """The daemon's own wiring, in this process: ``start_guard`` starts the guard on the base's port, each step
+    beats it; a daemon that stops stepping has its Create stopped within the bound, one that drives again moves
+    it again; a pipe closed without goodbye (what the kernel does for a dead daemon) leaves the OI in Passive."""
+    import time
+
+    from runtime import config as C
+    from runtime.daemon import Daemon
+    from sitl.devices.create_oi import CreateOIDevice
+    from tests.fakes import FakeBody
+
+    body = FakeBody()
+    dev = CreateOIDevice(body)
+    cfg = C.from_dict(C.RobotConfig, {"base": {"port": dev.path, "guard": 0.2}, "gps": {"enabled": False},
+                                      "comms": {"listen": "127.0.0.1:0", "gcs": None},
+                                      "localization": {"initial_pose": [0, 0, 0]}})
+    d = Daemon(cfg)
+    t0 = time.monotonic()
+
+    def serve(seconds, drive=False):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            now = time.monotonic() - t0
+            dev.service(now)
+            if drive:
+                d.step(now)
+                d.base.set_velocity(0.2, 0.0, now)
+            time.sleep(0.01)
+
+    try:
+        d.open(0.0)
+        d.start_guard()
+        assert d.guard is not None and d.guard.proc.poll() is None
+        serve(0.5, drive=True)
+        assert body.cmd != (0.0, 0.0)
+        serve(1.0)                                  # frozen: no steps, no beats
+        assert body.cmd == (0.0, 0.0) and dev.mode_name == "safe"
+        serve(0.3, drive=True)                      # awake again: it drives
+        assert body.cmd != (0.0, 0.0)
+        d.guard.close(goodbye=False)                # the pipe's end as at a death
+        serve(0.3)
+        assert body.cmd == (0.0, 0.0) and dev.mode_name == "passive"
+    finally:
+        d.close()
+        dev.close()
+
+
+@pytest.mark.parametrize("base, expected", [
+    ("create_oi", bytes([145, 0, 0, 0, 0, 128])),                  # Drive Direct 0 0, Start (Passive)
+    ("arcos", None),
+])
+def test_stop_base_writes_the_final_stop_on_the_port(tmp_path, capsys, base, expected):
+    """`mrta stop-base ROBOT.yaml` (systemd's ExecStopPost) writes the base's final stop once and exits 0."""
+    import os
+    import tty
+
+    import yaml
+
+    from runtime.cli import main
+    from runtime.drivers import arcos_protocol as A
+
+    if expected is None:
+        expected = A.vel(0) + A.rvel(0) + A.stop() + A.close()
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    try:
+        path = tmp_path / "robot.yaml"
+        path.write_text(yaml.safe_dump({"base": {"type": base, "port": os.ttyname(slave)}}))
+        assert main(["stop-base", str(path)]) == 0
+        os.set_blocking(master, False)
+        assert os.read(master, 100) == expected
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert "sent the" in capsys.readouterr().out
+
+
+def test_stop_base_on_a_can_base_sends_nothing_and_a_bad_port_is_one_line(tmp_path, capsys):
+    import yaml
+
+    from runtime.cli import main
+
+    path = tmp_path / "can.yaml"
+    path.write_text(yaml.safe_dump({"base": {"type": "cia402", "interface": "virtual", "channel": "x"}}))
+    assert main(["stop-base", str(path)]) == 0
+    assert "nothing sent" in capsys.readouterr().out
+    path.write_text(yaml.safe_dump({"base": {"type": "create_oi", "port": "/dev/no-such-create"}}))
+    assert main(["stop-base", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "/dev/no-such-create" in err

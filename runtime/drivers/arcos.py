@@ -78,7 +78,7 @@ class ArcosBase(MobileBase):
         self.port = port
         self.want_sonar = bool(sonar)
         self.stats.extra.update({k: 0 for k in (
-            "bad_count", "bad_sip", "bad_sonar", "other_packets", "handshakes", "sync_restarts", "sync_resends",
+            "bad_count", "stale_headers", "bad_sip", "bad_sonar", "other_packets", "handshakes", "sync_restarts", "sync_resends",
             "late_sync_replies",
             "stale_sessions", "reconnects", "pulses", "motion_commands", "enable_requests")})
         self.link = SerialLink(port, baudrate, "ARCOS", self.log, self.stats.extra)
@@ -368,6 +368,7 @@ class ArcosBase(MobileBase):
         self.stats.bad_checksum = p.bad_checksum
         self.stats.dropped_bytes = p.dropped_bytes
         self.stats.extra["bad_count"] = p.bad_count
+        self.stats.extra["stale_headers"] = p.stale_headers
 
 
 def arcos_footprint(params: P.RobotParams = P.P3DX_SH, max_speed: float | None = None) -> Footprint:

@@ -8,6 +8,8 @@ and logged sparingly; :data:`runtime.drivers.base.LOST_AFTER` reads in a row tha
 """
 from __future__ import annotations
 
+import socket
+
 import serial
 
 from runtime.drivers.base import LOST_AFTER, DeviceLost

@@ -74,3 +74,48 @@ def test_a_stray_header_with_a_long_count_does_not_hold_back_the_good_packets_af
     assert p.feed(b"\x12\xfa\xfb\xfa" + good) == [good[3:-2]]          # count 0xFA: 253 bytes it would wait for
     assert p.stale_headers == 1 and p.pending == 0 and p.dropped_bytes == 4
     assert p.feed(b"\xfa\xfb\xfa\x00\x01") == [] and p.pending == 5      # nothing after it yet: it may be real
+
+
+class _StillBody:
+    def pose(self):
+        return (3.0, -2.0, 0.0)
+
+    def velocity(self):
+        return (0.0, 0.0)
+
+
+@pytest.mark.parametrize("mode", ["garbage", "silent"])
+def test_a_gps_that_babbles_or_goes_silent_is_one_outage_and_its_fixes_return(mode, caplog):
+    """10 s of garbage or silence from the receiver: no fix comes from it, what it sent is counted, one line opens
+    the outage and one closes it, and the first fix after clean bytes comes within one epoch (0.2 s)."""
+    from runtime.config import Datum
+    from runtime.drivers.nmea_gps import NmeaGps
+    from sitl.devices.nmea_gps import NmeaGpsDevice
+
+    link = Babbler(open_pty(), seed=5, flood=200)
+    dev = NmeaGpsDevice(_StillBody(), Datum(), link=link)
+    gps = NmeaGps(dev.path)
+    during = first_after = None
+    try:
+        with caplog.at_level(logging.INFO):
+            for k in range(1, 22 * 20 + 1):            # 22 s: 2 clean, 10 babbling or silent, 10 clean
+                t = k * 0.05
+                link.mode = mode if 2.0 <= t < 12.0 else "clean"
+                dev.service(t)
+                fixes = gps.poll(t)
+                if 2.3 <= t < 12.0 and fixes:
+                    during = t
+                if t >= 12.0 and fixes and first_after is None:
+                    first_after = t - 12.0
+    finally:
+        gps.close()
+        dev.close()
+    print(f"gps {mode}: first fix {first_after} s after clean bytes")
+    assert during is None and first_after is not None and first_after <= 0.25
+    assert gps.stats.outages == 1
+    if mode == "garbage":
+        assert gps.stats.dropped_bytes > 10_000
+    text = caplog.text
+    assert "Traceback" not in text
+    assert text.count("no gps fix") == 1 and text.count("gps fixes again") == 1, text
+    assert len([r for r in caplog.records if r.name == gps.log.logger.name]) == 2, text

@@ -3,6 +3,7 @@ through it on a simulated clock, for the garbage and silence tests (``tests/test
 from __future__ import annotations
 
 import random
+import time
 
 
 class Babbler:
@@ -39,18 +40,21 @@ class Episode:
 
     ``stopped_after``: seconds from the spell's start until the body's wheels stood still (None: never);
     ``recovered_after``: seconds from the spell's end until the driver decoded fresh odometry and the wheels turned
-    again (None: not within ``after``)."""
+    again (None: not within ``after``).  ``wall``: run no faster than the wall clock."""
 
     def __init__(self, drv, dev, body, link: Babbler, moving, mode: str, before=2.0, spell=10.0, after=10.0,
-                 dt=0.005, period=0.05):
+                 dt=0.005, period=0.05, wall=False):
         self.stopped_after = self.recovered_after = None
         self.moved_during = False
         t, k, fresh_since_clean = 0.0, 0, False
         end = before + spell + after
         every = round(period / dt)
+        w0 = time.monotonic()
         while t < end - 1e-9:
             k += 1
             t = k * dt
+            if wall:                                   # the simulated clock kept to the wall clock (TCP links)
+                time.sleep(max(0.0, w0 + t - time.monotonic()))
             link.mode = mode if before <= t < before + spell else "clean"
             body.step(dt)
             dev.service(t)

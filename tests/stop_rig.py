@@ -8,6 +8,7 @@ thread every 5 ms of wall time on a kinematic body; :meth:`StopRig.standstill_af
 how long the body's wheels take to stand still."""
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import signal
@@ -19,8 +20,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 PERIOD = 0.005
-# base kind -> (how the robot stops when its daemon dies, the bound the tests hold it to, s)
 BASES = ("create_pty", "arcos_pty", "arcos_tcp", "cia402")
+_channels = itertools.count(100 + os.getpid() % 1000 * 10)    # CAN channel numbers on the shared hub
 
 
 def _emulator(kind: str):
@@ -45,7 +46,7 @@ def _emulator(kind: str):
     from sitl.devices.cia402 import Cia402Device
     from tests.can_util import WheelBody
     body = WheelBody()
-    dev = Cia402Device(body, Cia402Config(), robot_id=os.getpid() % 1000 + 100)
+    dev = Cia402Device(body, Cia402Config(), robot_id=next(_channels))
     return dev, body, {"type": "cia402", **dev.endpoint()}, lambda: body.rates == [0.0, 0.0]
 
 
@@ -96,6 +97,15 @@ class StopRig:
         os.kill(self.child.pid, sig)
         return self.wait(self.still, still_timeout)
 
+    def signal_when_moving(self, sig: int, moving_timeout: float = 20.0) -> float:
+        """Wait until the child drives the body, then send it ``sig``; the time it was sent."""
+        if self.wait(lambda: not self.still(), moving_timeout) is None:
+            raise AssertionError(f"the body never moved: {self.errors}")
+        time.sleep(0.2)
+        self.stopped_child = True
+        os.kill(self.child.pid, sig)
+        return time.monotonic()
+
     def stays_still(self, seconds: float) -> bool:
         t0 = time.monotonic()
         while time.monotonic() - t0 < seconds:
@@ -103,6 +113,18 @@ class StopRig:
                 return False
             time.sleep(PERIOD)
         return True
+
+    @staticmethod
+    def standstill_all(rigs: list["StopRig"], sigs: list[int], still_timeout: float = 10.0) -> list[float | None]:
+        """:meth:`standstill_after` for several rigs at once (their children run side by side)."""
+        sent = [r.signal_when_moving(sig) for r, sig in zip(rigs, sigs)]
+        took: list[float | None] = [None] * len(rigs)
+        while time.monotonic() - max(sent) < still_timeout and None in took:
+            for i, r in enumerate(rigs):
+                if took[i] is None and r.still():
+                    took[i] = time.monotonic() - sent[i]
+            time.sleep(PERIOD)
+        return took
 
     def close(self) -> str:
         """Kill the child (wakes a frozen one first), stop the emulator; the child's stderr."""

@@ -12,6 +12,7 @@ from runtime.drivers.create_oi import CreateOI
 from sitl.devices.arcos import ArcosDevice
 from sitl.devices.create_oi import CreateOIDevice
 from sitl.devices.pty_link import open_pty
+from sitl.devices.tcp_link import open_tcp
 from tests.arcos_util import FakePioneer
 from tests.babble_util import Babbler, Episode
 from tests.fakes import FakeBody
@@ -65,6 +66,34 @@ def test_a_base_that_babbles_or_goes_silent_stops_and_recovers_by_itself(make, m
         assert drv.stats.dropped_bytes > 0 or drv.stats.bad_checksum > 0
     driver = [r for r in caplog.records if r.name == drv.log.logger.name]
     assert len(driver) < 20, text                                # nothing per frame
+
+
+@pytest.mark.slow
+def test_a_pioneer_over_tcp_that_babbles_stops_and_recovers_on_the_wall_clock(caplog):
+    """The same over TCP (MobileSim's and the emulator's port), on the wall clock: 3.5 s of garbage (longer than the
+    driver's 3 s SIP timeout, so it hands-shakes again through it), then 3 s clean."""
+    mode = "garbage"
+    body = FakePioneer()
+    link = Babbler(open_tcp(18301), seed=7)
+    dev = ArcosDevice(body, link=link)
+    drv = ArcosBase(dev.path, watchdog=WATCHDOG)
+    try:
+        drv.open(0.0)
+        with caplog.at_level(logging.INFO):
+            ep = Episode(drv, dev, body, link, lambda: body.wheel_rates() != (0.0, 0.0), mode, before=1.0, spell=3.5,
+                         after=3.0, wall=True)
+    finally:
+        drv.close()
+        dev.close()
+    print(f"arcos tcp {mode}: stood still after {ep.stopped_after} s, drove again {ep.recovered_after} s after "
+          f"clean bytes returned")
+    assert ep.stopped_after is not None and not ep.moved_during
+    assert ep.stopped_after <= WATCHDOG + 1.0 + 1.0, ep.stopped_after            # + 1 s for a loaded machine
+    assert ep.recovered_after is not None, "did not drive again within 3 s of clean bytes"
+    text = caplog.text
+    assert "Traceback" not in text
+    assert text.count("no valid input from the base") == 1 and text.count("valid input from the base again") == 1
+    assert len([r for r in caplog.records if r.name == drv.log.logger.name]) < 20, text
 
 
 def test_a_stray_header_with_a_long_count_does_not_hold_back_the_good_packets_after_it():

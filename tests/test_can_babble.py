@@ -50,3 +50,44 @@ def test_garbage_on_the_socketcand_stream_is_counted_stops_the_base_and_the_link
     assert text.count("undecodable input from") == 1 and text.count("decodes again") == 1, text
     driver = [rec for rec in caplog.records if rec.name == r.base.log.logger.name]
     assert len(driver) < 20, text
+
+
+def test_an_error_in_python_cans_receive_thread_is_taken_by_the_frame_monitor():
+    """While ``open`` and ``close`` run python-can's receive thread, what the bus raises there goes to the frame
+    monitor (counted, its first line kept for one report) and the thread reads on, instead of ending with an
+    uncaught exception's traceback."""
+    import threading
+    import time
+
+    import can
+
+    from runtime.drivers.cia402 import _FrameMonitor
+
+    class Garbled(can.BusABC):
+        def __init__(self):
+            super().__init__(channel="garbled")
+            self.reads = 0
+
+        def _recv_internal(self, timeout):
+            self.reads += 1
+            time.sleep(0.002)
+            raise can.CanError("Failed to receive: 'ascii' codec can't decode byte 0xfe\nTraceback (most recent ...")
+
+        def send(self, msg, timeout=None):
+            pass
+
+    uncaught = []
+    hook, threading.excepthook = threading.excepthook, uncaught.append
+    bus, monitor = Garbled(), _FrameMonitor()
+    try:
+        notifier = can.Notifier(bus, [monitor], 0.01)
+        deadline = time.monotonic() + 5.0
+        while bus.reads < 5 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        notifier.stop(1.0)
+    finally:
+        threading.excepthook = hook
+        bus.shutdown()
+    assert bus.reads >= 5 and not uncaught
+    assert monitor.malformed >= 5
+    assert monitor.thread_errors[0] == "CanError: Failed to receive: 'ascii' codec can't decode byte 0xfe"

@@ -61,6 +61,7 @@ class ArcosBase(MobileBase):
 
     Config = ArcosConfig
     ranging = True             # the sonar ring
+    input_period = 0.1         # s: one SIP per cycle (the P3-DX's default, as MobileSim's)
 
     @classmethod
     def from_config(cls, cfg: ArcosConfig, robot_id=None) -> "ArcosBase":

@@ -145,6 +145,7 @@ class MobileBase(abc.ABC):
     odometry: Odometry
     sensors: BaseSensors
     stats: LinkStats
+    input_period = 0.0         # s between the odometry updates the base sends (the input watchdog waits 3 at least)
     latches_faults = False     # True: ``sensors.faults`` stay, and the base stands, until reset_faults() clears them
     ranging = False            # True: it has range sensors (``sensors.ranges`` empty then means nothing in range)
 
@@ -161,7 +162,7 @@ class MobileBase(abc.ABC):
         self._last_cmd_t: float | None = None
         self._moving = False               # the last command sent told the base to move
         self._valid_t: float | None = None     # the last poll that decoded fresh odometry since open
-        self.blind = False                     # the last poll found no valid input for a watchdog period: held still
+        self.blind = False                     # the last poll found no valid input for input_timeout: held still
         self._blind_since: float | None = None  # an input-loss episode was logged at this time
         self._failures: dict[str, int] = {}    # link failures in a row, by counter (_link_failed)
 
@@ -194,7 +195,7 @@ class MobileBase(abc.ABC):
     # ------------------------------------------------------------------ cycle
     def poll(self, now: float) -> bool:
         """Read and decode what has arrived, then enforce both watchdogs: no command for ``watchdog`` s, and no
-        valid input (fresh odometry) for ``watchdog`` s once there was some since open, which holds the base still
+        valid input (fresh odometry) for ``input_timeout`` s once there was some since open, which holds the base still
         until valid input returns (a base that babbles or goes silent is not driven blind).  True if new
         odometry."""
         if not self.is_open:
@@ -210,11 +211,16 @@ class MobileBase(abc.ABC):
             self._moving = self._command(0.0, 0.0, now)
             self.stats.watchdog_stops += 1
             self.log.warning("watchdog: no command for %.2f s, base stopped", now - self._last_cmd_t)
-        self.blind = self._valid_t is not None and now - self._valid_t >= self.watchdog
+        self.blind = self._valid_t is not None and now - self._valid_t >= self.input_timeout
         if self._moving and self.blind:
             self._moving = self._command(0.0, 0.0, now)
             self._lost_input(now)
         return fresh
+
+    @property
+    def input_timeout(self) -> float:
+        """Seconds without fresh odometry before the base is held still: ``watchdog``, at least 3 input periods."""
+        return max(self.watchdog, 3 * self.input_period)
 
     def _lost_input(self, now: float) -> None:
         """One line per episode, when it first stops (or refuses to move) the base."""

@@ -197,6 +197,7 @@ class Cia402Base(MobileBase):
         super().__init__(Footprint(cfg.radius, cfg.track, cfg.max_speed, turn), cfg.watchdog,
                          get_logger("cia402", robot_id))
         self.cfg = cfg
+        self.input_period = cfg.pdo_period
         self.drives = (_Drive("left", cfg.left_node, -1 if cfg.invert_left else 1),
                        _Drive("right", cfg.right_node, -1 if cfg.invert_right else 1))
         self.network: canopen.Network | None = None

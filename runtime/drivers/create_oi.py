@@ -42,6 +42,7 @@ class CreateOI(MobileBase):
     """Create 2 or Create 1 on one serial link; non-blocking, polled with the current time."""
 
     Config = CreateOIConfig
+    input_period = P.STREAM_PERIOD
 
     @classmethod
     def from_config(cls, cfg: CreateOIConfig, robot_id=None) -> "CreateOI":

@@ -16,7 +16,7 @@ import time
 from dataclasses import dataclass
 
 from runtime import config as C
-from runtime.clock import Clock, ClockStalled
+from runtime.clock import Clock, ClockStalled, SharedClock
 from runtime.log import get_logger
 from runtime.robot.core import GCS, PEERS, Inbox, RobotCore, Sensed
 from runtime.robot.ports import BaseFacts
@@ -195,6 +195,8 @@ def run(daemon: Daemon, clock: Clock, duration: float | None = None, stats_path:
     try:
         daemon.open(t0)
         daemon.start_guard()
+        if isinstance(clock, SharedClock) and daemon.guard is not None:
+            clock.on_wait = daemon.guard.beat      # a SITL world paused (drawing, stalled) is not a frozen daemon
         while duration is None or clock.now() - t0 < duration:
             now = clock.now()
             late = now - next_t

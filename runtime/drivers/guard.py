@@ -125,7 +125,11 @@ def start(base, robot_id, log) -> StopGuard | None:
     if fd is None:
         log.warning("no stop guard: the base's port has no file descriptor to hand over (loop:// or closed)")
         return None
-    guard = StopGuard(fd, *stop, base.guard, f"robot={robot_id}", log)
+    try:
+        guard = StopGuard(fd, *stop, base.guard, f"robot={robot_id}", log)
+    except OSError as exc:                  # no process or descriptor left: the daemon runs, without its guard
+        log.error("no stop guard (%s): the base will not be stopped if this daemon dies or freezes", exc)
+        return None
     log.info("stop guard pid %d: stops the base %.2f s after the last cycle, or when this daemon dies",
              guard.pid, base.guard)
     return guard

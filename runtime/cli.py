@@ -22,6 +22,7 @@ from runtime import log
 # command -> module that provides register(subparsers) for it, in help order
 COMMANDS = {
     "daemon": "runtime.daemon_cli",                          # mrta daemon ROBOT_CONFIG
+    "stop-base": "runtime.stop_base_cli",                    # mrta stop-base ROBOT_CONFIG (systemd ExecStopPost)
     "sitl": "sitl.launcher",                                 # mrta sitl run FLEET_CONFIG
     "assign": "runtime.allocation.formation.assign_cli",     # mrta assign PROBLEM.json
     "wdp": "runtime.allocation.coalition.wdp_cli",           # mrta wdp BIDS.json

@@ -128,9 +128,8 @@ def test_unit_runs_the_daemon_as_a_dedicated_user_and_restarts_it_on_failure():
     assert keys["CacheDirectory"] == ["mrta"] and keys["StateDirectory"] == ["mrta"]
     assert keys["RestartPreventExitStatus"] == ["2"]          # a bad config waits for a person
     assert keys["ExecStart"] == [f"{D.UNIT_MRTA} -v daemon /etc/mrta/%i.yaml --stats ${{STATE_DIRECTORY}}/%i.json"]
-    # issue 31 adds the stop-the-base command; until it is merged its line is a marked placeholder
-    assert "PLACEHOLDER" in D.UNIT.read_text() and "ExecStopPost" not in keys
-    assert f"\n#ExecStopPost=-{D.UNIT_MRTA} stop-base /etc/mrta/%i.yaml\n" in D.UNIT.read_text()
+    # after any exit the base is told to stop once more (issue 31); "-": an unplugged base does not fail the unit
+    assert keys["ExecStopPost"] == [f"-{D.UNIT_MRTA} stop-base /etc/mrta/%i.yaml"]
 
 
 def _verify(unit_text: str, folder: Path) -> tuple[int, str]:
@@ -148,8 +147,8 @@ def test_unit_passes_systemd_analyze_verify(tmp_path):
         pytest.skip(f"no mrta script beside {sys.executable}: ExecStart could not name an executable")
     text = D.unit_text(str(mrta))
     assert f"ExecStart={mrta} -v daemon" in text
+    assert f"ExecStopPost=-{mrta} stop-base" in text
     assert _verify(text, tmp_path) == (0, "")
-    assert _verify(text.replace("\n#ExecStopPost=", "\nExecStopPost="), tmp_path) == (0, "")   # once uncommented
     # verify only warns (exit 0) on a key it does not know: the test reads its output, so it can fail
     code, out = _verify(text.replace("Restart=on-failure", "Restart=on-failures"), tmp_path)
     assert "Failed to parse service restart specifier" in out

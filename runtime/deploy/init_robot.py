@@ -63,7 +63,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def unit_text(mrta: str | None = None) -> str:
-    """The shipped unit with ``ExecStart`` (and the placeholder ExecStopPost) running ``mrta`` (default: the
+    """The shipped unit with ``ExecStart`` and ``ExecStopPost`` running ``mrta`` (default: the
     ``mrta`` script beside this Python, else the shipped /opt/mrta path)."""
     if mrta is None:
         here = Path(sys.executable).parent / "mrta"

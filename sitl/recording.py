@@ -21,6 +21,8 @@ from sitl.run_trace import RobotTrack, RunTrace, TaskMark, TraceEvent
 
 log = get_logger("sitl")
 OPERATOR = 0          # the robot id of the operator's events
+LOOK_PERIOD = 0.5     # s of sim time between looks at the world's things when no event changed them (formation
+#                       targets reached, holders)
 _STATE = {"awarded": "held", "arrived": "held", "done": "done", "released": "open", "failed": "open",
           "withdrawn": "withdrawn"}
 
@@ -41,15 +43,19 @@ class FleetRecording:
                                              for rid, r in f.robots.items()}})
         self.tap = LogTap(self.rec).attach()
         self._events = 0
-        self._tasks: dict | None = None
+        self._tasks: list | None = None
         self._world = None
+        self._carried: dict[int, tuple[float, tuple[int, ...]]] = {}   # task -> (wu left, carriers): leaders' word
+        self._carried_changed = False
+        self._next_look = 0.0
+        self._run_view = None
 
     def attach(self, daemons: dict) -> None:
         """A feed on each daemon's core (its cycles and messages) and a tap on its link (raw MAVLink frames)."""
         from runtime.recording.feed import CoreFeed, link_tap
 
         for rid, d in daemons.items():
-            d.feed = CoreFeed(self.rec, d.core, stats=d.snapshot)
+            d.feed = CoreFeed(self.rec, d.core, stats=d.snapshot, watch=self._watch_message)
             if self.rec.mavlink and hasattr(d.link, "tap"):
                 d.link.tap = link_tap(self.rec, rid)
 
@@ -68,19 +74,62 @@ class FleetRecording:
             rec.event(t, OPERATOR, "operator", ev.what, ev.task, ev.robots, {"detail": ev.detail}, t=ev.t)
         changed = len(events) != self._events
         self._events = len(events)
-        if changed or self._tasks is None or len(op.trace.tasks) != len(self._tasks):
-            self._scene(t, op.trace)
+        if changed or self._carried_changed or t >= self._next_look or self._tasks is None \
+                or len(op.trace.tasks) != len(self._tasks):
+            self._next_look = t + LOOK_PERIOD
+            self._carried_changed = False
+            self._scene(t, op)
         rec.check()
 
-    def _scene(self, t: float, trace: RunTrace) -> None:
+    def _watch_message(self, rid: int, msg) -> None:
+        left = getattr(msg, "left", None)
+        if left is not None:
+            self.watch(getattr(msg, "task", None), left, getattr(msg, "members", None))
+
+    def watch(self, task, left, members) -> None:
+        """A leader's report of an object (``task``: its ``left`` wu and the ``members`` carrying it; what a ``dr``
+        robot's DrLeaderAlive says) updates the object's scene entity."""
+        if task is None or left is None or members is None:
+            return
+        try:
+            facts = (float(left), tuple(int(r) for r in members))
+        except (TypeError, ValueError):
+            return
+        if self._carried.get(task) != facts:
+            self._carried[task] = facts
+            self._carried_changed = True
+
+    def _scene(self, t: float, op) -> None:
+        """The world's things as scene entities: each task place coloured by the operator's view of its state,
+        with who holds it now, what a leader last said is left of an object and who carries it, and what the
+        scenario adds (an object's weight, the robot standing on a formation target)."""
+        trace = op.trace
         state = {tid: "open" for tid in trace.tasks}
         for ev in trace.events:
             if ev.task in state and ev.what in _STATE:
                 state[ev.task] = _STATE[ev.what]
-        tasks = [(tid, m.x, m.y, m.name, state[tid]) for tid, m in trace.tasks.items()]
+        holders: dict[int, list[int]] = {}
+        for rid in op.live_robots():
+            for tid in op.gcs.robots[rid].tasks:
+                holders.setdefault(tid, []).append(rid)
+        hook = getattr(self.f.scenario, "scene_facts", None)
+        extra = hook(self._view(op)) if hook is not None else {}
+        tasks = []
+        for tid, m in trace.tasks.items():
+            facts = {"kind": m.kind, "robots": tuple(holders.get(tid, ())), **extra.get(tid, {})}
+            carried = self._carried.get(tid)
+            if carried is not None and state[tid] != "done":
+                facts["left"], facts["robots"] = carried
+            tasks.append((tid, m.x, m.y, m.name, state[tid], facts))
         if tasks != self._tasks:
             self._tasks = tasks
             self.rec.scene(t, trace.world, tasks)
+
+    def _view(self, op):
+        if self._run_view is None or self._run_view.op is not op:
+            from sitl.operator import RunView
+            self._run_view = RunView(op)
+        return self._run_view
 
     def close(self, trace: RunTrace | None = None) -> None:
         """The final trace facts (world, robots, task marks) as the file's ``trace`` metadata, then close."""

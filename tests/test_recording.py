@@ -153,6 +153,18 @@ def test_a_recorded_lock_step_run_read_back_and_watched_live(tmp_path, capsys):
     _the_picture_from_the_recording_is_the_one_from_the_trace(run)
     _the_summary_says_who_held_which_task(run, capsys)
     _a_live_client_gets_poses_and_allocation_events_in_order_while_the_run_goes(run)
+    _the_world_shows_each_formation_target_and_who_stands_on_it(run)
+
+
+def _the_world_shows_each_formation_target_and_who_stands_on_it(run):
+    by = _by_topic(run["rec"])
+    scenes = [_world_objects(m) for m in by["/world"]]
+    last = scenes[-1]
+    assert sorted(o["target"] for o in last.values()) == ["P0", "P1", "P2", "P3"]
+    on = [o.get("on") for o in last.values()]
+    assert None not in on and len(set(on)) == 4          # the goal: a distinct robot on every target
+    assert all(o["robots"] == o["on"] for o in last.values())     # and it is the one holding it
+    assert len(scenes) < len(by["/robot_1/truth"]) / 5   # when something changed, not every step
 
 
 def _every_channel_is_there_with_its_schema_and_time_never_goes_back(run):
@@ -470,3 +482,71 @@ def test_a_live_address_in_use_is_one_line_and_the_file_is_closed(tmp_path):
         with pytest.raises(InputError, match=f"--live 127.0.0.1:{port}: expected an address free to serve on"):
             Recorder(tmp_path / "x.mcap", live=("127.0.0.1", port))
     assert read_messages(tmp_path / "x.mcap").truncated is None          # closed: a whole (empty) recording
+
+
+def _world_objects(msg) -> dict[str, dict]:
+    return {ent.id: {**{kv.key: kv.value for kv in ent.metadata}, "height": ent.cylinders[0].size.z,
+                     "text": ent.texts[0].text} for ent in msg.data.entities if ent.id.startswith("task_")}
+
+
+def test_foraging_objects_on_the_world_show_weight_left_and_carriers_and_change_only_when_they_change(tmp_path):
+    """The foraging scenario's objects as /world entities, from a FleetRecording stepped by hand (a stub operator,
+    no physics): the weight and carriers a leader reports (DrLeaderAlive: left, members) show on the object, its
+    disc shrinks with the weight left, it turns done, and steps that change nothing write no /world message."""
+    from types import SimpleNamespace
+
+    from runtime import config as C
+    from runtime.allocation.dr.messages import DrLeaderAlive
+    from sitl import fleet_config as FC
+    from sitl.recording import LOOK_PERIOD, FleetRecording
+    from sitl.run_trace import RunTrace, TaskMark
+    from sitl.scenarios.foraging import Scenario
+
+    fleet = FC.load_fleet("configs/fleets/foraging_4.yaml")
+    world = C.load_world(fleet.world)
+    scenario = Scenario(fleet, world)
+    o1, o2 = scenario.handovers()
+    o1.task_ids, o2.task_ids = [65537], [65538]
+    trace = RunTrace(world=world)
+    for h, tid in ((o1, 65537), (o2, 65538)):
+        trace.tasks[tid] = TaskMark(tid, "transport", h.items[0].x, h.items[0].y, h.labels[0])
+    gcs = SimpleNamespace(robots={rid: SimpleNamespace(tasks=()) for rid in (1, 2, 3, 4)})
+    op = SimpleNamespace(trace=trace, gcs=gcs, live_robots=lambda: [1, 2, 3, 4], handovers=[o1, o2], fleet=SimpleNamespace(robots={1: 0, 2: 0, 3: 0, 4: 0}),
+                         done_by={}, done_at={}, driven={})
+    robots = {rid: SimpleNamespace(base_type="pioneer", radius=0.25) for rid in (1, 2, 3, 4)}
+    f = SimpleNamespace(fleet=SimpleNamespace(source="foraging_4.yaml", world=fleet.world), robots=robots,
+                        withdrawn=set(), true_pose=lambda rid: (float(rid), 0.0, 0.0), scenario=scenario)
+    fr = FleetRecording(f, tmp_path / "run.mcap")
+    try:
+        t = 0.0
+        for _ in range(5):                              # nothing changes: one /world message
+            t += 0.05
+            fr.step(t, op)
+        gcs.robots[3].tasks = (65537,)
+        trace.event(t, "awarded", 65537, (3,))
+        t += 0.05
+        fr.step(t, op)
+        fr._watch_message(3, DrLeaderAlive(3, 0, 65537, 10.0, 6.0, 6.0, 1.0, 1.0, 1.0, (3, 4)))
+        t += 0.05
+        fr.step(t, op)
+        for _ in range(int(LOOK_PERIOD / 0.05) + 2):      # the same report again, nothing else: no message
+            fr._watch_message(3, DrLeaderAlive(3, 0, 65537, 10.0, 6.0, 6.0, 1.0, 1.0, 1.0, (3, 4)))
+            t += 0.05
+            fr.step(t, op)
+        trace.event(t, "done", 65537, (3, 4))
+        t += 0.05
+        fr.step(t, op)
+    finally:
+        fr.tap.detach()
+        fr.rec.close()
+    scenes = [_world_objects(m) for m in _by_topic(read_messages(tmp_path / "run.mcap"))["/world"]]
+    assert len(scenes) == 4
+    first, held, carried, done = scenes
+    assert first["task_65537"]["state"] == "open" and first["task_65537"]["object"] == "O1"
+    assert first["task_65537"]["weight"] == "16" and "left" not in first["task_65537"]
+    assert held["task_65537"]["state"] == "held" and held["task_65537"]["robots"] == "3"
+    assert carried["task_65537"]["left"] == "10" and carried["task_65537"]["robots"] == "3,4"
+    assert "10/16 wu" in carried["task_65537"]["text"] and "R3+R4" in carried["task_65537"]["text"]
+    assert first["task_65537"]["height"] > carried["task_65537"]["height"] > 0
+    assert done["task_65537"]["state"] == "done" and "left" not in done["task_65537"]
+    assert all(s["task_65538"]["state"] == "open" for s in scenes)

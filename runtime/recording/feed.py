@@ -36,8 +36,10 @@ class CoreFeed:
     recording has them as the senders' ``sent`` already)."""
 
     def __init__(self, rec, core, *, received: bool = False, stats=None, stats_period: float = 1.0,
-                 scene: bool = False):
+                 scene: bool = False, watch=None):
         self.rec = rec
+        self.watch = watch                  # (robot id, message) -> None: told every message the robot sends its
+        #                                     peers (a fleet's host learns objects' weights left from them)
         self.scene = scene                  # draw /world (the robot's map and its table's tasks): a robot's own
         #                                     recording; a fleet's host draws the world itself
         self.stats = stats                  # () -> the host's status snapshot, recorded every stats_period s
@@ -82,15 +84,8 @@ class CoreFeed:
         if path is not self._path:
             self._path = path
             rec.path(rid, now, path or ())
-        sensors = core.sensors
-        if sensors is not None:
-            ranges = getattr(sensors, "ranges", ())
-            if ranges:
-                rec.ranges(rid, now, ranges)
-            bump = (sensors.bump_left, sensors.bump_right, sensors.wheel_drop, tuple(getattr(sensors, "faults", ())))
-            if bump != self._bumpers:
-                self._bumpers = bump
-                rec.bumpers(rid, now, *bump)
+        if core.sensors is not None:
+            self._sensors(now, core.sensors)
         self._frames(now, out, inbox)
         for p in out.progress:
             rec.event(now, rid, "progress", p.event, p.task, (rid,), {"detail": p.detail}, t=p.t)
@@ -105,6 +100,19 @@ class CoreFeed:
             rec.stats(rid, now, self.stats())
         rec.check()
 
+    def _sensors(self, now: float, sensors) -> None:
+        """What the base senses: its range readings as points, its bumpers when they change.  The place for the
+        robot's own sensors (``sensors:`` in the robot's config, e.g. an RPLIDAR) once the core hands them out: a
+        laser as ``/robot_N/scan`` (``foxglove.LaserScan``: start angle, step, ranges) beside ``ranges``."""
+        rec, rid = self.rec, self.id
+        ranges = getattr(sensors, "ranges", ())
+        if ranges:
+            rec.ranges(rid, now, ranges)
+        bump = (sensors.bump_left, sensors.bump_right, sensors.wheel_drop, tuple(getattr(sensors, "faults", ())))
+        if bump != self._bumpers:
+            self._bumpers = bump
+            rec.bumpers(rid, now, *bump)
+
     def _frames(self, now: float, out, inbox) -> None:
         rec, rid = self.rec, self.id
         if self.received and inbox is not None:
@@ -116,6 +124,8 @@ class CoreFeed:
                 msg = frame[1]
                 rec.event(now, rid, "sent", type(msg).__name__, getattr(msg, "task", None), (rid,),
                           message_fields(msg))
+                if self.watch is not None:
+                    self.watch(rid, msg)
             elif frame[0] in (GCS, TO) and getattr(frame[1], "get_type", lambda: "")() == "STATUSTEXT":
                 text = frame[1].text
                 text = text.decode(errors="replace") if isinstance(text, bytes) else str(text)

@@ -387,20 +387,38 @@ class Recorder:
 
     def scene(self, now: float, world, tasks=()) -> None:
         """The world (a WorldConfig, or None: no map) as scene entities: the arena's floor and walls, the
-        obstacles, and ``tasks`` as ``(id, x, y, label, state)`` places coloured by state (:data:`TASK_COLOURS`)."""
+        obstacles, and ``tasks`` as ``(id, x, y, label, state)`` or ``(id, x, y, label, state, facts)`` places
+        coloured by state (:data:`TASK_COLOURS`).  ``facts`` (a dict) says more about the thing at the place, each
+        one a metadata pair of the entity: ``robots`` (who holds or carries it), ``weight`` and ``left`` (wu of an
+        object to carry: the place's disc is as tall as the share left), ``on`` (a formation target: the robot
+        standing on it), ``kind``."""
         ns = self.stamp(now)
         m = self.m
         ts = self._ts(ns)
         entities = [] if world is None else self._arena(world, ts)
-        for tid, x, y, label, state in tasks:
+        for tid, x, y, label, state, *more in tasks:
+            facts = more[0] if more and more[0] else {}
             rgb = TASK_COLOURS.get(state, (0.8, 0.2, 0.8))
+            height, text = 0.05, f"{label} {state}"
+            robots = facts.get("robots")
+            if robots:
+                text += " " + "+".join(f"R{r}" for r in robots)
+            weight, left = facts.get("weight"), facts.get("left")
+            if weight:
+                share = 1.0 if left is None else min(1.0, max(0.0, left / weight))
+                height = 0.05 + 0.3 * share
+                text += f" {weight:g} wu" if left is None else f" {left:.3g}/{weight:g} wu"
+            if facts.get("on") is not None:
+                text += f" (R{facts['on']} on it)"
+            meta = [m.KeyValuePair(key="state", value=state), m.KeyValuePair(key="task", value=str(tid))]
+            meta += [m.KeyValuePair(key=k, value=_fact(v)) for k, v in facts.items() if v is not None]
             entities.append(m.SceneEntity(
-                timestamp=ts, frame_id=WORLD, id=f"task_{tid}",
-                metadata=[m.KeyValuePair(key="state", value=state), m.KeyValuePair(key="task", value=str(tid))],
-                cylinders=[m.CylinderPrimitive(pose=self._pose(x, y, 0.0), size=m.Vector3(x=0.3, y=0.3, z=0.05),
+                timestamp=ts, frame_id=WORLD, id=f"task_{tid}", metadata=meta,
+                cylinders=[m.CylinderPrimitive(pose=self._pose(x, y, 0.0, height / 2.0),
+                                               size=m.Vector3(x=0.3, y=0.3, z=height),
                                                bottom_scale=1.0, top_scale=1.0, color=self._colour(rgb, 0.8))],
-                texts=[m.TextPrimitive(pose=self._pose(x, y, 0.0, 0.3), billboard=True, font_size=14.0,
-                                       scale_invariant=True, color=self._colour(rgb), text=f"{label} {state}")]))
+                texts=[m.TextPrimitive(pose=self._pose(x, y, 0.0, height + 0.25), billboard=True, font_size=14.0,
+                                       scale_invariant=True, color=self._colour(rgb), text=text)]))
         self.channel("/world", TOPICS["/world"]).log(m.SceneUpdate(entities=entities), log_time=ns)
 
     def _colour(self, rgb, a: float = 1.0):
@@ -431,6 +449,13 @@ def recoverable(exc: BaseException) -> bool:
     """An error the recording may end on while the robot runs on: an Exception, or a panic in the Rust library
     (pyo3's PanicException is a BaseException); never a signal's or the interpreter's own."""
     return isinstance(exc, Exception) or type(exc).__name__ == "PanicException"
+
+
+def _fact(v) -> str:
+    """A scene fact as a metadata value: robot lists as "3,4", numbers as they print."""
+    if isinstance(v, (list, tuple)):
+        return ",".join(str(x) for x in v)
+    return f"{v:g}" if isinstance(v, float) else str(v)
 
 
 def _plain(v):

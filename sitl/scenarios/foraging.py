@@ -269,6 +269,12 @@ class Scenario:
                 return t - dropped_at, group
         return None
 
+    def scene_facts(self, run) -> dict[int, dict]:
+        """What the recording's world shows of each object handed in: its label and weight (what is left of it
+        and who carries it come from its leader's reports)."""
+        return {o.task_id: {"object": o.label, "weight": o.spec.weight} for o in self.objects
+                if o.task_id is not None}
+
     # ------------------------------------------------------------------ verdict
     def goal(self, run) -> bool:
         return self.shortfall(run) is None

@@ -56,6 +56,22 @@ class Scenario:
             out[rid] = held[0] if held else None
         return out
 
+    def scene_facts(self, run) -> dict[int, dict]:
+        """What the recording's world shows of each target: its label and the live robot standing on it (within
+        ``tolerance``), if any."""
+        ids = run.handovers[0].task_ids
+        live = run.live_robots()
+        out = {}
+        for i, tid in enumerate(ids):
+            if tid is None:
+                continue
+            px, py = self.positions[i]
+            on = next((rid for rid in live
+                       if math.hypot(run.true_pose(rid)[0] - px, run.true_pose(rid)[1] - py) <= self.cfg.tolerance),
+                      None)
+            out[tid] = {"target": f"P{i}", "on": on}
+        return out
+
     def goal(self, run) -> bool:
         return self.shortfall(run) is None
 

@@ -26,9 +26,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "simulator's time from it")
     p.add_argument("--duration", type=float, default=None, help="stop after this many (clock) seconds")
     p.add_argument("--stats", default=None, help="write a JSON status snapshot here every second")
-    from runtime.recording.options import add_live, add_record
+    from runtime.recording.options import add_live, add_live_relay, add_record
     add_record(p)
     add_live(p, "this robot's recording channels")
+    add_live_relay(p)
     p.set_defaults(func=_main)
 
 
@@ -90,7 +91,7 @@ def _main(args) -> int:
 def _recording(args, daemon: D.Daemon, wall: bool):
     """``--record`` / ``--live``: a recorder fed by the daemon's core (and its link's frames with
     ``--record-mavlink``), or None."""
-    if args.record is None and args.live is None:
+    if args.record is None and args.live is None and args.live_relay is None:
         return None
     from runtime.errors import InputError
     from runtime.recording.feed import Recording
@@ -100,7 +101,7 @@ def _recording(args, daemon: D.Daemon, wall: bool):
     try:
         return Recording.of_daemon(daemon, args.record, wall=wall, limit=int(args.record_limit * 1e6),
                                    rotate=args.record_rotate, live=live_address(args.live),
-                                   mavlink=args.record_mavlink)
+                                   mavlink=args.record_mavlink, relay=live_address(args.live_relay, "--live-relay"))
     except RecordingUnavailable as exc:
         raise InputError(f"--record: {exc}") from None
     except OSError as exc:

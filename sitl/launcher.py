@@ -514,7 +514,8 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
                   live: tuple[str, int] | None = None) -> dict:
     """One daemon process per robot on a clock ``speedup`` times real time.  ``record``: the world's and the
     operator's side in RUN_DIR/run.mcap and each daemon's own recording in RUN_DIR/robot_N.mcap; ``live``: the
-    world's and the operator's side served over the Foxglove WebSocket protocol.
+    world's and the operator's side served over the Foxglove WebSocket protocol, with every daemon's channels
+    (each streams them to the launcher, ``--live-relay``: :mod:`runtime.recording.relay`).
 
     ``linger``: wall seconds to keep everything running after the goal is met; the result then holds each
     daemon's CPU share over that idle window (``idle_cpu_share``, 1.0 = one core).  ``wait``: run until the
@@ -524,15 +525,18 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
     clock_file = f.run_dir / "clock"
     for stale in f.run_dir.glob("clock*"):
         stale.unlink()
+    recording = open_recording(f, record, live)
+    relay = recording.serve_relay() if recording is not None and live is not None else None
     for r in f.robots.values():
         cmd = [sys.executable, "-m", "runtime.cli", *_verbosity(), "daemon", str(r.config_path),
                "--speedup", repr(speedup), "--clock-file", str(clock_file),
                "--stats", str(f.run_dir / f"robot_{r.id}.stats.json")]
         if record:
             cmd += ["--record", str(f.run_dir / f"robot_{r.id}.mcap"), "--record-mavlink"]
+        if relay is not None:            # one live view for the whole fleet: each daemon streams its channels here
+            cmd += ["--live-relay", f"{relay[0]}:{relay[1]}"]
         with open(f.run_dir / f"robot_{r.id}.log", "w") as log_fh:
             r.proc = subprocess.Popen(cmd, stdout=log_fh, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent)
-    recording = open_recording(f, record, live)
     op = Operator(f)
     # start barrier: the sim clock starts once every daemon is built (imports take seconds)
     deadline = time.monotonic() + 120
@@ -570,6 +574,8 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
                 slips += 1
             now = f.world.t
             op.poll(now)
+            if recording is not None:
+                recording.poll()
             scenario_actions(f, op, now, lambda rid: _kill_process(f, rid))
             if now >= next_record:
                 op.record(now)

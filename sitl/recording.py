@@ -49,6 +49,7 @@ class FleetRecording:
         self._carried_changed = False
         self._next_look = 0.0
         self._run_view = None
+        self.relay = None          # a RelayServer: the daemons' channels (process fleets with --live)
 
     def attach(self, daemons: dict) -> None:
         """A feed on each daemon's core (its cycles and messages) and a tap on its link (raw MAVLink frames)."""
@@ -80,6 +81,29 @@ class FleetRecording:
             self._carried_changed = False
             self._scene(t, op)
         rec.check()
+
+    def serve_relay(self) -> tuple[str, int]:
+        """Listen for the daemons' channels (a process fleet with ``--live``): the address to pass them as
+        ``--live-relay``.  :meth:`poll` takes in what they send."""
+        from runtime.recording.relay import RelayServer
+
+        self.relay = RelayServer(self.rec, on_message=self._relayed)
+        return self.relay.address
+
+    def poll(self) -> None:
+        """What the daemons relayed since the last call, onto the live view."""
+        if self.relay is not None:
+            self.relay.poll()
+
+    def _relayed(self, robot: int, topic: str, payload: bytes) -> None:
+        if b'"left"' in payload and topic.endswith("/allocation"):
+            try:
+                d = json.loads(payload)
+                if d.get("event") == "sent":
+                    fields = d.get("fields") or {}
+                    self.watch(d.get("task"), fields.get("left"), fields.get("members"))
+            except (ValueError, AttributeError):
+                pass
 
     def _watch_message(self, rid: int, msg) -> None:
         left = getattr(msg, "left", None)
@@ -141,6 +165,8 @@ class FleetRecording:
                                for r in trace.robots.values()],
                     "tasks": [dataclasses.asdict(tk) for tk in trace.tasks.values()]})
         finally:
+            if self.relay is not None:
+                self.relay.close()
             self.tap.detach()
             self.rec.close()
 

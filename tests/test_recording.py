@@ -45,6 +45,7 @@ class LiveClient(threading.Thread):
         self.port, self.topics = port, topics
         self.got: list[tuple[str, int, bytes]] = []
         self.subscribed: set[str] = set()
+        self.status: list[dict] = []          # the server's other text messages (status, unadvertise ...)
         self.error: Exception | None = None
         self.stop = threading.Event()
 
@@ -71,6 +72,8 @@ class LiveClient(threading.Thread):
                         continue
                     if isinstance(m, str):
                         d = json.loads(m)
+                        if d.get("op") not in ("advertise", "serverInfo"):
+                            self.status.append(d)
                         for c in d.get("channels", ()) if d.get("op") == "advertise" else ():
                             if c["topic"] in self.topics and c["topic"] not in self.subscribed:
                                 sid = len(subs) + 1
@@ -550,3 +553,199 @@ def test_foraging_objects_on_the_world_show_weight_left_and_carriers_and_change_
     assert first["task_65537"]["height"] > carried["task_65537"]["height"] > 0
     assert done["task_65537"]["state"] == "done" and "left" not in done["task_65537"]
     assert all(s["task_65538"]["state"] == "open" for s in scenes)
+
+
+@pytest.mark.slow
+def test_one_live_view_shows_a_process_fleet_whole(tmp_path):
+    """`mrta sitl run --live` without --lockstep (two daemon processes, two short waypoints): a Foxglove WebSocket
+    client on the launcher's one server gets each robot's poses and allocation events (relayed by the daemons
+    under /robot_N/...), and from the first one it got, every one the robot recorded in robot_N.mcap, in order
+    and without a gap, up to the last one it got."""
+    from sitl import launcher
+    from tests.test_sitl_fleet import _fleet_copy
+
+    tasks = [{"kind": "goto", "x": x, "y": 1.0, "hold": 0.5} for x in (-1.0, 1.0)]
+    robots = [{"id": 1, "start": [-1.0, 0.0, 1.5708]}, {"id": 2, "start": [1.0, 0.0, 1.5708]}]
+    f = launcher.build(_fleet_copy(tmp_path, robots=robots, scenario={"type": "mission", "tasks": tasks}),
+                       tmp_path / "run")
+    port = _free_tcp_port()
+    topics = {f"/robot_{rid}/{t}" for rid in (1, 2) for t in ("pose", "allocation")}
+    client = LiveClient(port, topics)
+    client.start()
+    try:
+        res = launcher.run_processes(f, 2.0, timeout=40, record=True, live=("127.0.0.1", port))
+    finally:
+        f.close()
+        client.stop.set()
+        client.join(timeout=10)
+    assert client.error is None, client.error
+    assert res["goal_met"], res["verdict"]
+    got = defaultdict(list)
+    for topic, ns, payload in client.got:
+        got[topic].append((ns, payload))
+    assert client.subscribed == topics and all(got[t] for t in topics), {t: len(got[t]) for t in topics}
+    run_mcap = read_messages(tmp_path / "run" / "run.mcap")
+    assert not any(t.startswith("/robot_") and not t.endswith("/truth") for t in run_mcap.channels)
+    for rid in (1, 2):
+        by = _by_topic(read_messages(tmp_path / "run" / f"robot_{rid}.mcap"))
+        poses = [m.ns for m in by[f"/robot_{rid}/pose"]]
+        live = [ns for ns, _ in got[f"/robot_{rid}/pose"]]
+        start = poses.index(live[0])
+        assert live == poses[start:start + len(live)], rid
+        events = [json.dumps(m.data, sort_keys=True) for m in by["/allocation"]]
+        live = [json.dumps(json.loads(p), sort_keys=True) for _, p in got[f"/robot_{rid}/allocation"]]
+        start = events.index(live[0])
+        assert live == events[start:start + len(live)], rid
+        assert any(json.loads(e)["event"] == "committed" for e in live), rid
+
+
+def _relay_pair(tmp_path):
+    """A daemon-side Recorder relaying to a launcher-side Recorder's RelayServer (both in this process)."""
+    from runtime.recording.relay import RelayServer
+
+    launcher_rec = Recorder(tmp_path / "run.mcap")
+    seen = []
+    server = RelayServer(launcher_rec, on_message=lambda rid, topic, payload: seen.append((rid, topic)))
+    robot_rec = Recorder(tmp_path / "robot_3.mcap", relay=server.address, robot_id=3)
+    return launcher_rec, server, robot_rec, seen
+
+
+def test_the_relay_carries_a_daemons_channels_whole_and_in_order_and_not_into_the_launchers_file(tmp_path):
+    launcher_rec, server, robot_rec, seen = _relay_pair(tmp_path)
+    try:
+        for k in range(300):
+            robot_rec.pose(3, 0.05 * k, (0.01 * k, 0.0, 0.1))
+            robot_rec.event(0.05 * k, 3, "sent", "Bid", 65537, (3,), {"cost": 0.5 * k})
+            robot_rec.check()
+            server.poll()
+        robot_rec.text(15.0, logging.INFO, "mrta.daemon robot=3", "done")
+        robot_rec.close()
+        deadline = time.monotonic() + 10
+        while server.peers or not server.messages and time.monotonic() < deadline:
+            server.poll()
+            time.sleep(0.01)
+    finally:
+        server.close()
+        launcher_rec.close()
+    assert server.messages == 601 and server.dropped == 0
+    assert [t for _, t in seen[:2]] == ["/robot_3/pose", "/robot_3/allocation"] and seen[-1] == (3, "/robot_3/log")
+    assert {t for _, t in seen} == set(launcher_rec._relayed)
+    assert read_messages(tmp_path / "run.mcap").channels == {}        # the daemon's own file has them
+    assert len(read_messages(tmp_path / "robot_3.mcap").messages) == 601
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_the_relay_receiver_never_raises_on_random_cut_or_bit_flipped_streams(tmp_path, data):
+    """What reaches the launcher's relay port: a real stream cut anywhere, bit-flipped, or random bytes.  The
+    receiver never raises; what it cannot read it counts or ends the connection."""
+    from runtime.recording.relay import CHANNEL, MESSAGE, RelayServer, _Peer, frame
+
+    rec = Recorder(None)
+    try:
+        server = RelayServer(rec)
+        good = frame(CHANNEL, 1, json.dumps({"robot": 2, "topic": "/allocation", "encoding": "json",
+                                             "schema": "mrta.AllocationEvent", "schema_encoding": "jsonschema",
+                                             "schema_data": ""}).encode())
+        good += b"".join(frame(MESSAGE, 1, struct.pack("<Q", k) + b'{"robot":2}') for k in range(5))
+        kind = data.draw(st.sampled_from(["cut", "flip", "random"]))
+        if kind == "cut":
+            stream = good[:data.draw(st.integers(0, len(good)))]
+        elif kind == "flip":
+            stream = bytearray(good)
+            for _ in range(data.draw(st.integers(1, 8))):
+                i = data.draw(st.integers(0, len(stream) - 1))
+                stream[i] ^= 1 << data.draw(st.integers(0, 7))
+            stream = bytes(stream)
+        else:
+            stream = data.draw(st.binary(max_size=400))
+        a, b = socket.socketpair()
+        try:
+            b.setblocking(False)
+            peer = _Peer(b)
+            server.peers.append(peer)
+            a.sendall(stream)
+            a.close()
+            for _ in range(5):
+                server.poll()
+            assert peer not in server.peers            # the stream ended: the connection is closed
+            assert server.messages + server.dropped <= 5 + len(stream)
+        finally:
+            a.close()
+            b.close()
+        server.close()
+    finally:
+        rec.close()
+
+
+def test_log_replay_sends_the_recorded_frames_to_a_ground_station_at_their_pace(tmp_path, capsys):
+    """`mrta log replay FILE.mcap --to HOST:PORT --speed X`: a pymavlink listener on loopback gets every frame two
+    robots sent, in the recorded order, each robot's heartbeats with their sequence numbers, and nothing they
+    received; the replay takes at least the recorded span over X."""
+    from pymavlink import mavutil
+    from pymavlink.dialects.v20 import common
+
+    from runtime import cli
+
+    rec = Recorder(tmp_path / "robot.mcap", mavlink=True)
+    packers = {rid: common.MAVLink(None, srcSystem=rid, srcComponent=1) for rid in (1, 2)}
+    sent = []
+    for k in range(20):
+        for rid, mav in packers.items():
+            msg = mav.heartbeat_encode(common.MAV_TYPE_GROUND_ROVER, common.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, k, 4)
+            data = msg.pack(mav)
+            mav.seq = (mav.seq + 1) % 256
+            rec.frame(rid, 0.05 * k, "tx", data, ("127.0.0.1", 14550))
+            rec.frame(rid, 0.05 * k, "rx", b"\xfd\x00junk", ("127.0.0.1", 14601))
+            sent.append((rid, k))
+    rec.close()
+    port = _free_udp_port()
+    conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255)
+    try:
+        start = time.monotonic()
+        assert cli.main(["log", "replay", str(tmp_path / "robot.mcap"), "--to", f"127.0.0.1:{port}",
+                         "--speed", "4"]) == 0
+        took = time.monotonic() - start
+        got = []
+        for _ in range(len(sent) + 5):
+            m = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=2 if len(got) < len(sent) else 0.2)
+            if m is None:
+                break
+            got.append((m.get_srcSystem(), m.custom_mode, m.get_seq()))
+    finally:
+        conn.close()
+    assert got == [(rid, k, k) for rid, k in sent]
+    assert took >= 0.95 * 19 * 0.05 / 4
+    assert "sent 40 frames" in capsys.readouterr().out
+
+
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--to", "nohost"], "--to: expected HOST:PORT"),
+    (["--to", "127.0.0.1:9", "--speed", "0"], "--speed"),
+])
+def test_bad_replay_options_are_one_line_and_exit_2(argv, says, capsys, tmp_path):
+    from runtime import cli
+
+    rec = Recorder(tmp_path / "r.mcap", mavlink=True)
+    rec.frame(1, 0.0, "tx", b"\xfe\x00", None)
+    rec.close()
+    assert cli.main(["log", "replay", str(tmp_path / "r.mcap"), *argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and says in err[0]
+
+
+def test_replaying_a_recording_without_frames_names_the_file(tmp_path, capsys):
+    from runtime import cli
+
+    rec = Recorder(tmp_path / "r.mcap")
+    rec.pose(1, 0.0, (0.0, 0.0, 0.0))
+    rec.close()
+    assert cli.main(["log", "replay", str(tmp_path / "r.mcap"), "--to", "127.0.0.1:9"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert str(tmp_path / "r.mcap") in err and "expected raw MAVLink frames" in err

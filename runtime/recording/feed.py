@@ -219,11 +219,11 @@ class Recording:
 
     @classmethod
     def of_daemon(cls, daemon, path, *, wall: bool = True, limit: int | None = None, rotate: bool = False,
-                  live=None, mavlink: bool = False) -> "Recording":
+                  live=None, mavlink: bool = False, relay=None) -> "Recording":
         from runtime.recording.recorder import Recorder
 
         rec = Recorder(path, wall=wall, limit=limit, rotate=rotate, live=live, mavlink=mavlink, robot_id=daemon.id,
-                       name=f"mrta robot {daemon.id}", flush_period=FLUSH_PERIOD)
+                       name=f"mrta robot {daemon.id}", flush_period=FLUSH_PERIOD, relay=relay)
         rec.metadata("robot", {"id": str(daemon.id), "base": daemon.cfg.base.type,
                                "allocation": daemon.cfg.allocation.method, "clock": "system" if wall else "sim"})
         daemon.feed = CoreFeed(rec, daemon.core, received=True, stats=daemon.snapshot, scene=True)

@@ -15,6 +15,12 @@ def add_live(p: argparse.ArgumentParser, what: str) -> None:
                         f"{LIVE_DEFAULT}; open it in Foxglove: Open connection, Foxglove WebSocket)")
 
 
+def add_live_relay(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--live-relay", default=None, metavar="HOST:PORT",
+                   help="stream this robot's recording channels to a SITL launcher listening there (what `mrta sitl "
+                        "run --live` passes its daemons, so that one live view shows the whole fleet)")
+
+
 def add_record(p: argparse.ArgumentParser) -> None:
     p.add_argument("--record", default=None, metavar="FILE.mcap",
                    help="record the robot (poses, path, commands, ranges, allocation events, logs) into this MCAP "
@@ -27,13 +33,13 @@ def add_record(p: argparse.ArgumentParser) -> None:
                    help="with --record: the raw MAVLink frames of the robot's link too (a replayable record)")
 
 
-def live_address(text: str | None) -> tuple[str, int] | None:
-    """``--live``'s HOST:PORT, or an InputError naming the option."""
+def live_address(text: str | None, option: str = "--live") -> tuple[str, int] | None:
+    """``--live``'s (or ``option``'s) HOST:PORT, or an InputError naming the option."""
     if text is None:
         return None
     host, sep, port = text.rpartition(":")
     if not sep or not host or not (port.isascii() and port.isdigit()) or not 0 < int(port) < 65536:
-        raise InputError(f"--live: expected HOST:PORT with a port in 1..65535, got {text!r}")
+        raise InputError(f"{option}: expected HOST:PORT with a port in 1..65535, got {text!r}")
     return host, int(port)
 
 
@@ -44,3 +50,4 @@ def check_record(args) -> None:
     argcheck.output_file(args.record, "--record")
     argcheck.number(args.record_limit, "--record-limit", 0.0, lo_open=True)
     live_address(args.live)
+    live_address(getattr(args, "live_relay", None), "--live-relay")

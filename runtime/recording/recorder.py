@@ -25,6 +25,7 @@ from runtime.log import get_logger
 
 WORLD = "world"                     # the fixed frame every pose is in
 CHUNK = 256 * 1024                  # bytes of messages per MCAP chunk: what a killed recorder loses at most
+LIVE_BACKLOG = 16384                # messages the live server holds per client before it drops the oldest
 TOPICS = {                          # topic (robot topics: {id} is the robot id) -> schema name
     "/robot_{id}/pose": "foxglove.PoseInFrame",        # the robot's own estimate, every control cycle
     "/robot_{id}/truth": "foxglove.PoseInFrame",       # SITL: where the body really is, every control cycle
@@ -139,7 +140,7 @@ class Recorder:
     def __init__(self, path: str | Path | None = None, *, wall: bool = False, limit: int | None = None,
                  rotate: bool = False, live: tuple[str, int] | None = None, mavlink: bool = False,
                  chunk_size: int = CHUNK, name: str = "mrta", robot_id: int | str | None = None,
-                 flush_period: float | None = None):
+                 flush_period: float | None = None, relay: tuple[str, int] | None = None):
         fx = _fx()
         self.fx = fx
         self.m = fx.messages
@@ -162,12 +163,23 @@ class Recorder:
         self._by_robot: dict[tuple[int, str], object] = {}
         self._metadata: list[tuple[str, dict]] = []
         self.server = None
+        self.relay = None                    # a RelaySender: every message also to a SITL launcher (--live-relay)
+        self._relay_ids: dict[int, int] = {}     # id(channel) -> the relay's channel id
+        self._relayed: dict[str, object] = {}    # topic -> a channel the launcher relays from a daemon
+        if relay is not None:
+            from runtime.recording.relay import RelaySender
+            try:
+                self.relay = RelaySender(relay, int(robot_id or 0))
+            except OSError as exc:
+                self.log.warning("live relay to %s:%d not open: %s (the robot runs on)", relay[0], relay[1],
+                                 exc.strerror or exc)
         if self.target is not None:
             self._open(self.target)
         if live is not None:
             host, port = live
             try:
-                self.server = fx.start_server(name=name, host=host, port=port, context=self.ctx)
+                self.server = fx.start_server(name=name, host=host, port=port, context=self.ctx,
+                                              message_backlog_size=LIVE_BACKLOG)
             except RuntimeError as exc:          # foxglove's FoxgloveError: the address is taken or unknown
                 self.close()
                 raise InputError(f"--live {host}:{port}: expected an address free to serve on ({exc})") from None
@@ -179,7 +191,8 @@ class Recorder:
 
         self._file = _File(path)
         opts = MCAPWriteOptions(chunk_size=self.chunk_size, compression_threads=0, profile="")
-        self._writer = self.fx.open_mcap(self._file, context=self.ctx, writer_options=opts)
+        self._writer = self.fx.open_mcap(self._file, context=self.ctx, writer_options=opts,
+                                         channel_filter=_not_relayed)
         self.files.append(path)
         for name, data in self._metadata:        # a rotated file carries the recording's metadata too
             self._writer.write_metadata(name, data)
@@ -195,7 +208,9 @@ class Recorder:
 
     def check(self) -> None:
         """The file's bound and health, once a cycle: rotate or stop at the limit; a refused write ends the file
-        recording with one warning line."""
+        recording with one warning line.  A live relay sends what it holds."""
+        if self.relay is not None:
+            self.relay.flush()
         f = self._file
         if f is None:
             return
@@ -247,6 +262,8 @@ class Recorder:
     def close(self) -> None:
         self._close_file()
         self._file = None
+        if self.relay is not None:
+            self.relay.close()
         if self.server is not None:
             self.server.stop()
             self.server = None
@@ -286,6 +303,28 @@ class Recorder:
                                 schema=fx.Schema(name=schema, encoding="jsonschema",
                                                  data=json.dumps(SCHEMAS[schema]).encode()))
             self._channels[topic] = ch
+            if self.relay is not None:
+                if schema.startswith("foxglove."):
+                    sch, enc = getattr(self.m, schema.split(".", 1)[1]).get_schema(), "protobuf"
+                else:
+                    sch, enc = fx.Schema(name=schema, encoding="jsonschema",
+                                         data=json.dumps(SCHEMAS[schema]).encode()), "json"
+                self._relay_ids[id(ch)] = self.relay.channel(topic, enc, sch)
+        return ch
+
+    def _log(self, ch, msg, ns: int) -> None:
+        """``msg`` (a foxglove message, or JSON text) on ``ch`` at ``ns``, and to the live relay if there is one."""
+        ch.log(msg, log_time=ns)
+        if self.relay is not None:
+            self.relay.send(self._relay_ids[id(ch)], msg.encode(), ns)    # str: UTF-8; foxglove's: protobuf
+
+    def relayed_channel(self, topic: str, encoding: str, schema, robot: int):
+        """A channel for what a daemon relays (:class:`~runtime.recording.relay.RelayServer`): served live, left
+        out of this recorder's file."""
+        ch = self._relayed.get(topic)
+        if ch is None:
+            ch = self._relayed[topic] = self.fx.Channel(topic, schema=schema, message_encoding=encoding,
+                                                         context=self.ctx, metadata={"relayed": f"robot_{robot}"})
         return ch
 
     def _robot(self, rid: int, topic: str):
@@ -300,7 +339,7 @@ class Recorder:
             text = json.dumps(data, separators=(",", ":"), allow_nan=False, default=_plain)
         except ValueError:             # a NaN or inf: null in the JSON
             text = json.dumps(_finite(data), separators=(",", ":"), default=_plain)
-        ch.log(text, log_time=ns)
+        self._log(ch, text, ns)
 
     def _quat(self, yaw: float):
         return self.m.Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
@@ -315,28 +354,27 @@ class Recorder:
         robot transform (from the truth when there is one)."""
         ns = self.stamp(now)
         m, p = self.m, self._pose(*pose[:3])
-        self._robot(rid, "truth" if truth else "pose").log(
-            m.PoseInFrame(timestamp=self._ts(ns), frame_id=WORLD, pose=p), log_time=ns)
+        self._log(self._robot(rid, "truth" if truth else "pose"),
+                  m.PoseInFrame(timestamp=self._ts(ns), frame_id=WORLD, pose=p), ns)
 
     def transform(self, rid: int, now: float, pose) -> None:
         ns = self.stamp(now)
         m = self.m
-        self.channel("/tf", TOPICS["/tf"]).log(
-            m.FrameTransform(timestamp=self._ts(ns), parent_frame_id=WORLD, child_frame_id=f"robot_{rid}",
-                             translation=m.Vector3(x=float(pose[0]), y=float(pose[1]), z=0.0),
-                             rotation=self._quat(pose[2])), log_time=ns)
+        self._log(self.channel("/tf", TOPICS["/tf"]),
+                  m.FrameTransform(timestamp=self._ts(ns), parent_frame_id=WORLD, child_frame_id=f"robot_{rid}",
+                                   translation=m.Vector3(x=float(pose[0]), y=float(pose[1]), z=0.0),
+                                   rotation=self._quat(pose[2])), ns)
 
     def path(self, rid: int, now: float, points) -> None:
         ns = self.stamp(now)
         m = self.m
         poses = [self._pose(p[0], p[1], 0.0) for p in points or ()]
-        self._robot(rid, "path").log(m.PosesInFrame(timestamp=self._ts(ns), frame_id=WORLD, poses=poses),
-                                     log_time=ns)
+        self._log(self._robot(rid, "path"), m.PosesInFrame(timestamp=self._ts(ns), frame_id=WORLD, poses=poses), ns)
 
     def command(self, rid: int, now: float, v: float, w: float) -> None:
         v, w = float(v), float(w)
         if math.isfinite(v) and math.isfinite(w):      # every cycle: the JSON written out by hand
-            self._robot(rid, "command").log(f'{{"robot":{int(rid)},"v":{v!r},"w":{w!r}}}', log_time=self.stamp(now))
+            self._log(self._robot(rid, "command"), f'{{"robot":{int(rid)},"v":{v!r},"w":{w!r}}}', self.stamp(now))
         else:
             self._json(self._robot(rid, "command"), {"robot": rid, "v": v, "w": w}, self.stamp(now))
 
@@ -348,8 +386,8 @@ class Recorder:
                         if math.isfinite(b) and math.isfinite(d))
         f32 = m.PackedElementFieldNumericType.Float32
         fields = [m.PackedElementField(name=n, offset=4 * i, type=f32) for i, n in enumerate("xyz")]
-        self._robot(rid, "ranges").log(m.PointCloud(timestamp=self._ts(ns), frame_id=f"robot_{rid}",
-                                                    point_stride=12, fields=fields, data=data), log_time=ns)
+        self._log(self._robot(rid, "ranges"), m.PointCloud(timestamp=self._ts(ns), frame_id=f"robot_{rid}",
+                                                           point_stride=12, fields=fields, data=data), ns)
 
     def bumpers(self, rid: int, now: float, left: bool, right: bool, wheel_drop: bool, faults=()) -> None:
         self._json(self._robot(rid, "bumpers"), {"robot": rid, "left": bool(left), "right": bool(right),
@@ -373,17 +411,17 @@ class Recorder:
         m = self.m
         lv = m.LogLevel
         level = lv.Error if level >= 40 else lv.Warning if level >= 30 else lv.Info if level >= 20 else lv.Debug
-        self.channel("/log", TOPICS["/log"]).log(
-            m.Log(timestamp=self._ts(ns), level=level, message=text, name=name, file=file, line=line), log_time=ns)
+        self._log(self.channel("/log", TOPICS["/log"]),
+                  m.Log(timestamp=self._ts(ns), level=level, message=text, name=name, file=file, line=line), ns)
 
     def frame(self, rid: int, now: float, direction: str, data: bytes, address=None) -> None:
         """One raw MAVLink datagram of robot ``rid``'s link (``direction`` "tx" or "rx"; ``address`` (host, port)).
         The JSON is written out by hand: this runs for every datagram."""
         if self.mavlink:
             addr = "" if address is None else f"{address[0]}:{int(address[1])}"
-            self._robot(rid, "mavlink").log(
-                f'{{"robot":{int(rid)},"direction":"{"rx" if direction == "rx" else "tx"}",'
-                f'"address":{json.dumps(addr)},"frame":"{bytes(data).hex()}"}}', log_time=self.stamp(now))
+            self._log(self._robot(rid, "mavlink"),
+                      f'{{"robot":{int(rid)},"direction":"{"rx" if direction == "rx" else "tx"}",'
+                      f'"address":{json.dumps(addr)},"frame":"{bytes(data).hex()}"}}', self.stamp(now))
 
     def scene(self, now: float, world, tasks=()) -> None:
         """The world (a WorldConfig, or None: no map) as scene entities: the arena's floor and walls, the
@@ -419,7 +457,7 @@ class Recorder:
                                                bottom_scale=1.0, top_scale=1.0, color=self._colour(rgb, 0.8))],
                 texts=[m.TextPrimitive(pose=self._pose(x, y, 0.0, height + 0.25), billboard=True, font_size=14.0,
                                        scale_invariant=True, color=self._colour(rgb), text=text)]))
-        self.channel("/world", TOPICS["/world"]).log(m.SceneUpdate(entities=entities), log_time=ns)
+        self._log(self.channel("/world", TOPICS["/world"]), m.SceneUpdate(entities=entities), ns)
 
     def _colour(self, rgb, a: float = 1.0):
         return self.m.Color(r=rgb[0], g=rgb[1], b=rgb[2], a=a)
@@ -449,6 +487,11 @@ def recoverable(exc: BaseException) -> bool:
     """An error the recording may end on while the robot runs on: an Exception, or a panic in the Rust library
     (pyo3's PanicException is a BaseException); never a signal's or the interpreter's own."""
     return isinstance(exc, Exception) or type(exc).__name__ == "PanicException"
+
+
+def _not_relayed(channel) -> bool:
+    """The file's channel filter: what a launcher relays from its daemons is in their own files."""
+    return "relayed" not in (channel.metadata or {})
 
 
 def _fact(v) -> str:

@@ -15,11 +15,14 @@ from collections import Counter, defaultdict
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("log", help="recordings (MCAP): mrta log summary FILE.mcap")
+    p = sub.add_parser("log", help="recordings (MCAP): mrta log summary FILE.mcap, mrta log replay FILE.mcap "
+                                   "--to HOST:PORT")
     s = p.add_subparsers(dest="log_cmd", metavar="SUBCOMMAND", required=True)
     r = s.add_parser("summary", help="per robot and per task, what a recording says happened")
     r.add_argument("file", help="an MCAP recording (RUN_DIR/run.mcap, mrta daemon --record FILE.mcap)")
     r.set_defaults(func=_main)
+    from runtime.recording.replay import add_parser
+    add_parser(s)
 
 
 def summarize(path) -> dict:

@@ -9,12 +9,19 @@ alone, so the recorded runs also time themselves inside the recording's hooks (:
 their wall time is the recording's cost, measured in the same run.  Size: MCAP bytes per robot per minute of simulated time, raw MAVLink frames
 included (on by default in SITL).
 
-Usage: python benchmarks/recording_cost.py [--fleets create2_4 coalition_6] [--repeats 3] [--json OUT]
+With ``--processes SPEEDUP`` the runs are daemon processes instead (``mrta sitl run`` without ``--lockstep``; the
+process-mode tests run so), each daemon recording ``robot_N.mcap`` with raw frames and the launcher ``run.mcap``;
+CPU then is every process's (this one's and its ended children's), the size that of every file.
+
+Usage: python benchmarks/recording_cost.py [--fleets create2_4 coalition_6] [--repeats 3] [--processes SPEEDUP]
+[--json OUT]
 """
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import resource
 import statistics
 import sys
 import tempfile
@@ -66,29 +73,40 @@ class Inside:
             setattr(klass, name, fn)
 
 
-def one(fleet: Path, run_dir: Path, record: bool) -> dict:
+def _cpu() -> float:
+    """CPU seconds of this process and of its children that have ended (the daemon processes)."""
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + children.ru_utime + children.ru_stime
+
+
+def one(fleet: Path, run_dir: Path, record: bool, speedup: float | None = None) -> dict:
+    """One run: lock-step, or (``speedup``) one daemon process per robot on a clock that many times real time,
+    each recording itself into RUN_DIR/robot_N.mcap as `mrta sitl run` has them do."""
     f = launcher.build(fleet, run_dir)
-    inside = Inside() if record else None
+    inside = Inside() if record and speedup is None else None
     try:
-        wall0, cpu0 = time.perf_counter(), time.process_time()
-        res = launcher.run_lockstep(f, record=record)
-        wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+        wall0, cpu0 = time.perf_counter(), _cpu()
+        if speedup is None:
+            res = launcher.run_lockstep(f, record=record)
+        else:
+            res = launcher.run_processes(f, speedup, record=record)
     finally:
         f.close()
+        wall, cpu = time.perf_counter() - wall0, _cpu() - cpu0
         if inside is not None:
             inside.restore()
-    size = (run_dir / "run.mcap").stat().st_size if record else 0
+    size = sum(p.stat().st_size for p in run_dir.glob("*.mcap")) if record else 0
     return {"wall": wall, "cpu": cpu, "sim": res["sim_time"], "robots": len(f.robots), "bytes": size,
             "goal_met": res["goal_met"], "inside": inside.seconds if inside else 0.0}
 
 
-def measure(name: str, repeats: int, tmp: Path) -> dict:
+def measure(name: str, repeats: int, tmp: Path, speedup: float | None = None) -> dict:
     fleet = shipped_fleet(tmp, f"{name}.yaml", ports_from=33000)
     runs = {False: [], True: []}
     for k in range(repeats):
         for record in (False, True):
-            runs[record].append(one(fleet, tmp / f"{name}_{k}_{int(record)}", record))
-    sims = {r["sim"] for rs in runs.values() for r in rs}
+            runs[record].append(one(fleet, tmp / f"{name}_{k}_{int(record)}_{speedup}", record, speedup))
+    sims = {round(r["sim"], 1) for rs in runs.values() for r in rs}
     off, on = runs[False], runs[True]
     med = lambda rs, key: statistics.median(r[key] for r in rs)          # noqa: E731
     robot_min = on[0]["robots"] * on[0]["sim"] / 60.0
@@ -99,6 +117,9 @@ def measure(name: str, repeats: int, tmp: Path) -> dict:
         "wall_overhead": med(on, "wall") / med(off, "wall") - 1.0, "cpu_overhead": med(on, "cpu") / med(off, "cpu") - 1.0,
         "inside_share": statistics.median(r["inside"] / r["wall"] for r in on),
         "mcap_bytes": on[0]["bytes"], "mb_per_robot_minute": on[0]["bytes"] / 1e6 / robot_min,
+        "cpu_each": {"off": [round(r["cpu"], 2) for r in off], "on": [round(r["cpu"], 2) for r in on]},
+        "wall_each": {"off": [round(r["wall"], 2) for r in off], "on": [round(r["wall"], 2) for r in on]},
+        "mode": "lockstep" if speedup is None else f"processes at {speedup:g}x",
     }
 
 
@@ -106,13 +127,19 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--fleets", nargs="+", default=["create2_4", "coalition_6"])
     p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--processes", type=float, default=None, metavar="SPEEDUP",
+                   help="daemon processes on a clock SPEEDUP times real time (each recording robot_N.mcap, as "
+                        "`mrta sitl run` does) instead of lock-step; CPU is every process's")
     p.add_argument("--json", default=None)
     args = p.parse_args(argv)
     rows = []
     with tempfile.TemporaryDirectory(prefix="mrta-rec-bench-") as tmp:
         for name in args.fleets:
-            row = measure(name, args.repeats, Path(tmp))
+            row = measure(name, args.repeats, Path(tmp), args.processes)
             rows.append(row)
+            print(f"{name} ({row['mode']}, load average {os.getloadavg()[0]:.1f}): CPU each run without "
+                  f"{row['cpu_each']['off']}, with {row['cpu_each']['on']}; wall without {row['wall_each']['off']}, "
+                  f"with {row['wall_each']['on']}", flush=True)
             print(f"{name}: {row['robots']} robots, {row['sim_time']:.1f} s sim (same in every run: "
                   f"{row['same_sim_time']}); wall {row['wall_off']:.2f} -> {row['wall_on']:.2f} s "
                   f"({100 * row['wall_overhead']:+.1f} %), CPU {row['cpu_off']:.2f} -> {row['cpu_on']:.2f} s "

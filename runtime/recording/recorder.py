@@ -162,6 +162,7 @@ class Recorder:
         self._channels: dict[str, object] = {}
         self._by_robot: dict[tuple[int, str], object] = {}
         self._metadata: list[tuple[str, dict]] = []
+        self._frame_heads: dict[tuple, str] = {}
         self.server = None
         self.relay = None                    # a RelaySender: every message also to a SITL launcher (--live-relay)
         self._relay_ids: dict[int, int] = {}     # id(channel) -> the relay's channel id
@@ -418,10 +419,14 @@ class Recorder:
         """One raw MAVLink datagram of robot ``rid``'s link (``direction`` "tx" or "rx"; ``address`` (host, port)).
         The JSON is written out by hand: this runs for every datagram."""
         if self.mavlink:
-            addr = "" if address is None else f"{address[0]}:{int(address[1])}"
-            self._log(self._robot(rid, "mavlink"),
-                      f'{{"robot":{int(rid)},"direction":"{"rx" if direction == "rx" else "tx"}",'
-                      f'"address":{json.dumps(addr)},"frame":"{bytes(data).hex()}"}}', self.stamp(now))
+            key = (rid, direction, None if address is None else (address[0], address[1]))
+            head = self._frame_heads.get(key)
+            if head is None:              # the JSON up to the frame, once per robot, direction and address
+                addr = "" if address is None else f"{address[0]}:{int(address[1])}"
+                head = self._frame_heads[key] = (
+                    f'{{"robot":{int(rid)},"direction":"{"rx" if direction == "rx" else "tx"}",'
+                    f'"address":{json.dumps(addr)},"frame":"')
+            self._log(self._robot(rid, "mavlink"), f'{head}{data.hex()}"}}', self.stamp(now))
 
     def scene(self, now: float, world, tasks=()) -> None:
         """The world (a WorldConfig, or None: no map) as scene entities: the arena's floor and walls, the

@@ -96,7 +96,7 @@ def one(fleet: Path, run_dir: Path, record: bool, speedup: float | None = None) 
         if inside is not None:
             inside.restore()
     size = sum(p.stat().st_size for p in run_dir.glob("*.mcap")) if record else 0
-    return {"wall": wall, "cpu": cpu, "sim": res["sim_time"], "robots": len(f.robots), "bytes": size,
+    return {"wall": wall, "cpu": cpu, "sim": res["sim_time"], "cpu_per_sim": cpu / max(res["sim_time"], 1e-9), "robots": len(f.robots), "bytes": size,
             "goal_met": res["goal_met"], "inside": inside.seconds if inside else 0.0}
 
 
@@ -118,6 +118,10 @@ def measure(name: str, repeats: int, tmp: Path, speedup: float | None = None) ->
         "inside_share": statistics.median(r["inside"] / r["wall"] for r in on),
         "mcap_bytes": on[0]["bytes"], "mb_per_robot_minute": on[0]["bytes"] / 1e6 / robot_min,
         "cpu_each": {"off": [round(r["cpu"], 2) for r in off], "on": [round(r["cpu"], 2) for r in on]},
+        "sim_each": {"off": [round(r["sim"], 2) for r in off], "on": [round(r["sim"], 2) for r in on]},
+        # daemon processes run on a clock, so their runs end at different sim times: CPU per sim second
+        "cpu_per_sim_off": med(off, "cpu_per_sim"), "cpu_per_sim_on": med(on, "cpu_per_sim"),
+        "cpu_per_sim_overhead": med(on, "cpu_per_sim") / med(off, "cpu_per_sim") - 1.0,
         "wall_each": {"off": [round(r["wall"], 2) for r in off], "on": [round(r["wall"], 2) for r in on]},
         "mode": "lockstep" if speedup is None else f"processes at {speedup:g}x",
     }
@@ -139,7 +143,9 @@ def main(argv=None) -> int:
             rows.append(row)
             print(f"{name} ({row['mode']}, load average {os.getloadavg()[0]:.1f}): CPU each run without "
                   f"{row['cpu_each']['off']}, with {row['cpu_each']['on']}; wall without {row['wall_each']['off']}, "
-                  f"with {row['wall_each']['on']}", flush=True)
+                  f"with {row['wall_each']['on']}; sim time without {row['sim_each']['off']}, with "
+                  f"{row['sim_each']['on']}; CPU per sim second {row['cpu_per_sim_off']:.3f} -> "
+                  f"{row['cpu_per_sim_on']:.3f} ({100 * row['cpu_per_sim_overhead']:+.1f} %)", flush=True)
             print(f"{name}: {row['robots']} robots, {row['sim_time']:.1f} s sim (same in every run: "
                   f"{row['same_sim_time']}); wall {row['wall_off']:.2f} -> {row['wall_on']:.2f} s "
                   f"({100 * row['wall_overhead']:+.1f} %), CPU {row['cpu_off']:.2f} -> {row['cpu_on']:.2f} s "

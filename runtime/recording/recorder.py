@@ -163,6 +163,7 @@ class Recorder:
         self._by_robot: dict[tuple[int, str], object] = {}
         self._metadata: list[tuple[str, dict]] = []
         self._frame_heads: dict[tuple, str] = {}
+        self._ts_ns, self._ts_last = -1, None
         self.server = None
         self.relay = None                    # a RelaySender: every message also to a SITL launcher (--live-relay)
         self._relay_ids: dict[int, int] = {}     # id(channel) -> the relay's channel id
@@ -289,7 +290,10 @@ class Recorder:
         return self._last_ns
 
     def _ts(self, ns: int):
-        return self.m.Timestamp(sec=ns // 1_000_000_000, nsec=ns % 1_000_000_000)
+        """A foxglove Timestamp of ``ns``: one object for every message of a cycle (the messages copy it)."""
+        if ns != self._ts_ns:
+            self._ts_ns, self._ts_last = ns, self.m.Timestamp(sec=ns // 1_000_000_000, nsec=ns % 1_000_000_000)
+        return self._ts_last
 
     # ------------------------------------------------------------------ channels
     def channel(self, topic: str, schema: str):

@@ -65,6 +65,8 @@ class RelaySender:
         cid = self.ids.get(topic)
         if cid is None:
             cid = self.ids[topic] = len(self.ids) + 1
+            if self.stopped is not None:
+                return cid
             body = json.dumps({"robot": self.robot, "topic": topic, "encoding": encoding, "schema": schema.name,
                                "schema_encoding": schema.encoding,
                                "schema_data": base64.b64encode(bytes(schema.data)).decode()}).encode()

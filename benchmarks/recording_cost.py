@@ -36,8 +36,9 @@ from tests.sitl_util import shipped_fleet  # noqa: E402
 
 
 class Inside:
-    """Time spent inside the recording's hooks (perf_counter), measured in the recorded run itself: the host's
-    calls into the feed, the operator's side, the link taps and the log tap, opening and closing the file."""
+    """Time spent inside the recording's hooks (wall by perf_counter, CPU by thread_time), measured in the recorded
+    run itself: the host's calls into the feed, the operator's side, the link taps and the log tap, opening and
+    closing the file."""
 
     HOOKS = (("runtime.recording.feed", "CoreFeed", "cycle"), ("runtime.recording.feed", "CoreFeed", "frames"),
              ("runtime.recording.feed", "LogTap", "emit"), ("runtime.recording.recorder", "Recorder", "frame"),
@@ -48,6 +49,7 @@ class Inside:
         import importlib
 
         self.seconds = 0.0
+        self.cpu = 0.0                          # CPU seconds (this thread's) inside the hooks: load moves it less
         self.depth = 0
         self.saved = []
         for mod, cls, name in self.HOOKS:
@@ -60,11 +62,12 @@ class Inside:
             if self.depth:                      # nested hooks (a log record inside the feed) count once
                 return fn(*args, **kwargs)
             self.depth += 1
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.thread_time()
             try:
                 return fn(*args, **kwargs)
             finally:
                 self.seconds += time.perf_counter() - t0
+                self.cpu += time.thread_time() - c0
                 self.depth -= 1
         return timed
 
@@ -97,7 +100,8 @@ def one(fleet: Path, run_dir: Path, record: bool, speedup: float | None = None) 
             inside.restore()
     size = sum(p.stat().st_size for p in run_dir.glob("*.mcap")) if record else 0
     return {"wall": wall, "cpu": cpu, "sim": res["sim_time"], "cpu_per_sim": cpu / max(res["sim_time"], 1e-9), "robots": len(f.robots), "bytes": size,
-            "goal_met": res["goal_met"], "inside": inside.seconds if inside else 0.0}
+            "goal_met": res["goal_met"], "inside": inside.seconds if inside else 0.0,
+            "inside_cpu": inside.cpu if inside else 0.0}
 
 
 def measure(name: str, repeats: int, tmp: Path, speedup: float | None = None) -> dict:
@@ -116,6 +120,8 @@ def measure(name: str, repeats: int, tmp: Path, speedup: float | None = None) ->
         "wall_off": med(off, "wall"), "wall_on": med(on, "wall"), "cpu_off": med(off, "cpu"), "cpu_on": med(on, "cpu"),
         "wall_overhead": med(on, "wall") / med(off, "wall") - 1.0, "cpu_overhead": med(on, "cpu") / med(off, "cpu") - 1.0,
         "inside_share": statistics.median(r["inside"] / r["wall"] for r in on),
+        "inside_cpu_share": statistics.median(r["inside_cpu"] / r["cpu"] for r in on),
+        "inside_cpu_each": [round(r["inside_cpu"] / r["cpu"], 3) for r in on],
         "mcap_bytes": on[0]["bytes"], "mb_per_robot_minute": on[0]["bytes"] / 1e6 / robot_min,
         "cpu_each": {"off": [round(r["cpu"], 2) for r in off], "on": [round(r["cpu"], 2) for r in on]},
         "sim_each": {"off": [round(r["sim"], 2) for r in off], "on": [round(r["sim"], 2) for r in on]},
@@ -145,12 +151,14 @@ def main(argv=None) -> int:
                   f"{row['cpu_each']['off']}, with {row['cpu_each']['on']}; wall without {row['wall_each']['off']}, "
                   f"with {row['wall_each']['on']}; sim time without {row['sim_each']['off']}, with "
                   f"{row['sim_each']['on']}; CPU per sim second {row['cpu_per_sim_off']:.3f} -> "
-                  f"{row['cpu_per_sim_on']:.3f} ({100 * row['cpu_per_sim_overhead']:+.1f} %)", flush=True)
+                  f"{row['cpu_per_sim_on']:.3f} ({100 * row['cpu_per_sim_overhead']:+.1f} %); CPU inside the hooks "
+                  f"each recorded run (share of its CPU) {row['inside_cpu_each']}", flush=True)
             print(f"{name}: {row['robots']} robots, {row['sim_time']:.1f} s sim (same in every run: "
                   f"{row['same_sim_time']}); wall {row['wall_off']:.2f} -> {row['wall_on']:.2f} s "
                   f"({100 * row['wall_overhead']:+.1f} %), CPU {row['cpu_off']:.2f} -> {row['cpu_on']:.2f} s "
                   f"({100 * row['cpu_overhead']:+.1f} %); inside the recording's hooks "
-                  f"{100 * row['inside_share']:.1f} % of the recorded runs' wall time; run.mcap {row['mcap_bytes'] / 1e6:.2f} MB = "
+                  f"{100 * row['inside_share']:.1f} % of the recorded runs' wall time, "
+                  f"{100 * row['inside_cpu_share']:.1f} % of their CPU; files {row['mcap_bytes'] / 1e6:.2f} MB = "
                   f"{row['mb_per_robot_minute']:.2f} MB per robot-minute", flush=True)
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=2))

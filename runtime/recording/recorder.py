@@ -164,6 +164,7 @@ class Recorder:
         self._metadata: list[tuple[str, dict]] = []
         self._frame_heads: dict[tuple, str] = {}
         self._ts_ns, self._ts_last = -1, None
+        self._parts_cache: dict[tuple, tuple] = {}
         self.server = None
         self.relay = None                    # a RelaySender: every message also to a SITL launcher (--live-relay)
         self._relay_ids: dict[int, int] = {}     # id(channel) -> the relay's channel id
@@ -354,21 +355,31 @@ class Recorder:
         return m.Pose(position=m.Vector3(x=float(x), y=float(y), z=float(z)), orientation=self._quat(yaw))
 
     # ------------------------------------------------------------------ what is recorded
+    def _parts(self, key, pose):
+        """(position, orientation, Pose) of ``pose`` (x, y, yaw), built once while ``key``'s pose stays the same
+        (a robot standing still; the truth and its frame transform in the same cycle): every cycle logs them."""
+        xyy = (float(pose[0]), float(pose[1]), float(pose[2]))
+        last = self._parts_cache.get(key)
+        if last is None or last[0] != xyy:
+            m = self.m
+            vec, quat = m.Vector3(x=xyy[0], y=xyy[1], z=0.0), self._quat(xyy[2])
+            last = self._parts_cache[key] = (xyy, vec, quat, m.Pose(position=vec, orientation=quat))
+        return last
+
     def pose(self, rid: int, now: float, pose, truth: bool = False) -> None:
         """The robot's pose ``(x, y, yaw)`` (its estimate, or with ``truth`` the simulation's), and the world ->
         robot transform (from the truth when there is one)."""
         ns = self.stamp(now)
-        m, p = self.m, self._pose(*pose[:3])
+        p = self._parts((rid, truth), pose)[3]
         self._log(self._robot(rid, "truth" if truth else "pose"),
-                  m.PoseInFrame(timestamp=self._ts(ns), frame_id=WORLD, pose=p), ns)
+                  self.m.PoseInFrame(timestamp=self._ts(ns), frame_id=WORLD, pose=p), ns)
 
     def transform(self, rid: int, now: float, pose) -> None:
         ns = self.stamp(now)
-        m = self.m
+        _, vec, quat, _ = self._parts((rid, True), pose)
         self._log(self.channel("/tf", TOPICS["/tf"]),
-                  m.FrameTransform(timestamp=self._ts(ns), parent_frame_id=WORLD, child_frame_id=f"robot_{rid}",
-                                   translation=m.Vector3(x=float(pose[0]), y=float(pose[1]), z=0.0),
-                                   rotation=self._quat(pose[2])), ns)
+                  self.m.FrameTransform(timestamp=self._ts(ns), parent_frame_id=WORLD, child_frame_id=f"robot_{rid}",
+                                        translation=vec, rotation=quat), ns)
 
     def path(self, rid: int, now: float, points) -> None:
         ns = self.stamp(now)

@@ -93,7 +93,10 @@ class RelaySender:
                 return
             except OSError as exc:
                 self.stopped = f"{self.address[0]}:{self.address[1]}: {exc.strerror or exc}"
-                self.log.warning("live relay stopped: %s (the robot runs on)", self.stopped)
+                if isinstance(exc, (BrokenPipeError, ConnectionResetError)):    # the launcher's run ended first
+                    self.log.info("live relay ended: %s", self.stopped)
+                else:
+                    self.log.warning("live relay stopped: %s (the robot runs on)", self.stopped)
                 self.buf.clear()
                 self.close()
                 return

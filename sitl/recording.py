@@ -140,6 +140,8 @@ class FleetRecording:
         extra = hook(self._view(op)) if hook is not None else {}
         tasks = []
         for tid, m in trace.tasks.items():
+            if state[tid] == "open" and tid in holders:      # released by one robot, held by another already
+                state[tid] = "held"
             facts = {"kind": m.kind, "robots": tuple(holders.get(tid, ())), **extra.get(tid, {})}
             carried = self._carried.get(tid)
             if carried is not None and state[tid] != "done":

@@ -156,7 +156,8 @@ class RelayServer:
         for p in list(self.peers):
             self._read(p)
 
-    def _read(self, p: _Peer) -> None:
+    def _read(self, p: _Peer) -> int:
+        """Bytes read from ``p`` now (at most :data:`READ`), its frames logged; the peer dropped at its end."""
         got, ended = 0, False
         while got < READ:
             try:
@@ -176,6 +177,7 @@ class RelayServer:
             ended = True
         if ended:
             self._drop_peer(p)
+        return got
 
     def _frames(self, p: _Peer) -> bool:
         buf, off = p.buf, 0
@@ -234,7 +236,9 @@ class RelayServer:
 
     def close(self) -> None:
         for p in list(self.peers):
-            self._read(p)                # what was sent before the daemon ended
+            for _ in range(64):          # what was sent before the run ended (a daemon still running: bounded)
+                if not self._read(p) or p not in self.peers:
+                    break
             if p in self.peers:
                 self._drop_peer(p)
         self.sock.close()

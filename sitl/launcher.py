@@ -305,17 +305,7 @@ def finish(f: Fleet, op, ended: str) -> dict:
     res = f.scenario.summary(view)
     res["sim_time"] = f.world.t
     res["lost"] = sorted(op.dead)
-    short = f.scenario.shortfall(view)
-    res["goal_met"] = short is None
-    if short is None:
-        res["verdict"] = "goal met"
-    else:
-        why = {"timeout": f"timeout after {f.world.t:.0f} s", "stopped": "stopped by the operator",
-               "refused": "; ".join(op.refused()), "unreachable": f.scenario.unreachable(view) or "unreachable"}
-        parts = [why.get(ended, ended), short]
-        if op.dead:
-            parts.append("robot(s) " + ", ".join(map(str, sorted(op.dead))) + " died")
-        res["verdict"] = "goal not met: " + "; ".join(parts)
+    res["goal_met"], res["verdict"] = verdict(f.scenario, view, ended, f.world.t, op.dead, op.refused())
     res["events"] = list(f.events)
     try:
         op.trace.write(f.run_dir / "trace.json")
@@ -324,6 +314,25 @@ def finish(f: Fleet, op, ended: str) -> dict:
         log.warning("run picture not drawn: %s", exc)
         res["picture"] = None
     return res
+
+
+def verdict(scenario, view, ended: str, t: float, dead, refused: list[str]) -> tuple[bool, str]:
+    """(goal met, the verdict line) of a run that ``ended`` ("goal", "timeout", "stopped", "refused",
+    "unreachable") at sim time ``t``: "goal met" only over work done; a run with no work to judge it by (nothing
+    handed in, or all of it withdrawn by a clear: the scenario's ``idle(view)`` line) says so and is not met."""
+    short = scenario.shortfall(view)
+    if short is None:
+        return True, "goal met"
+    idle = getattr(scenario, "idle", None)
+    if idle is not None and ended in ("stopped", "timeout") and short == idle(view):
+        head, parts = "", [short]                  # no work: the run is judged by nothing, and says so
+    else:
+        why = {"timeout": f"timeout after {t:.0f} s", "stopped": "stopped by the operator",
+               "refused": "; ".join(refused), "unreachable": scenario.unreachable(view) or "unreachable"}
+        head, parts = "goal not met: ", [why.get(ended, ended), short]
+    if dead:
+        parts.append("robot(s) " + ", ".join(map(str, sorted(dead))) + " died")
+    return False, head + "; ".join(parts)
 
 
 def print_summary(f: Fleet, res: dict, out=sys.stdout) -> None:
@@ -502,6 +511,7 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
     wait = getattr(f.fleet.scenario, "wait", False) if wait is None else wait
     since, next_progress, next_record = None, 0.0, 0.0
     max_lag, slips, idle_from, ended = 0.0, 0, None, None
+    t_start, wall_start = f.world.t, time.monotonic()
     try:
         while True:
             if stop_flag and stop_flag():
@@ -554,13 +564,23 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
     res["world_max_lag"] = max_lag
     res["clock_slips"] = slips
     if slips:
-        res["events"].append(f"the world fell more than {MAX_LAG} s behind the {speedup:g}x clock {slips} times "
-                             f"(the machine cannot hold this speedup)")
+        res["events"].append(slip_warning(speedup, slips, f.world.t - t_start, time.monotonic() - wall_start))
     if idle_from is not None:
         wall = time.monotonic() - idle_from[0]
         res["idle_cpu_share"] = {rid: (_cpu_seconds(f.robots[rid].proc.pid) - c0) / wall
                                  for rid, c0 in idle_from[1].items()}
     return res
+
+
+def slip_warning(speedup: float, slips: int, sim: float, wall: float) -> str:
+    """The run's event when the world fell behind its clock: what it means for the run and what to do."""
+    achieved = sim / wall if wall > 0 else speedup
+    suggest = max(0.5, math.floor(min(achieved, speedup) * 0.8 * 2) / 2)
+    return (f"this machine could not hold the {speedup:g}x clock: the world fell more than {MAX_LAG} s behind it "
+            f"{slips} times and ran at {achieved:.2g}x on average. The daemons, short of CPU too, then step less often "
+            f"than their control rate in sim time, so robots react later than on real hardware (closer calls, "
+            f"longer stops) and the run is less faithful; run it again with --speedup {suggest:g} "
+            f"or lower, or with --lockstep")
 
 
 def _verbosity() -> list[str]:
@@ -595,11 +615,25 @@ def _cpu_seconds(pid: int) -> float:
 
 
 def _progress(f: Fleet, op) -> None:
+    """One line every 5 s of sim time: who reports, who holds a task, the fleet's tasks, then the scenario's own
+    progress where it has one (formation: positions held and reached, as its tasks are never done), else how many
+    tasks are done (done-then-cleared ones too) and withdrawn."""
+    from runtime.messages import CLEARED, DONE, WITHDRAWN
+    from sitl.operator import RunView
+
     live = op.live_robots()
     busy = sum(1 for rid in live if op.gcs.robots[rid].tasks)
-    done = sum(1 for r in op.gcs.table.values() if r.state == 1)
-    print(f"[t={f.world.t:6.1f} s] robots reporting {len(live)}/{len(f.robots)}, holding a task {busy}, "
-          f"fleet tasks {len(op.gcs.table)} ({done} done)", flush=True)
+    states = [r.state for r in op.gcs.table.values()]
+    done = sum(s in (DONE, CLEARED) for s in states)
+    withdrawn = sum(s == WITHDRAWN for s in states)
+    own = getattr(f.scenario, "progress", None)
+    line = (f"[t={f.world.t:6.1f} s] robots reporting {len(live)}/{len(f.robots)}, holding a task {busy}, "
+            f"fleet tasks {len(states)}")
+    if own is not None:                 # its tasks may never be done (formation positions): its own words
+        line += f", {own(RunView(op))}"
+    else:
+        line += f" ({done} done{f', {withdrawn} withdrawn' if withdrawn else ''})"
+    print(line, flush=True)
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -77,6 +77,18 @@ class Fleet:
     device_hook: object = None          # called with the sim time after every device service
     withdrawn: set[int] = field(default_factory=set)     # robots taken out of the arena
     stopped: set[int] = field(default_factory=set)       # robots whose lock-step daemon no longer runs (killed)
+    held: dict = field(default_factory=dict)             # robot id -> its MAVLink port's socket, bound since the check
+
+    # -------------------------------------------------------------- ports
+    def take_socket(self, rid: int):
+        """Robot ``rid``'s MAVLink socket, bound since the port check, for its daemon (None once taken)."""
+        return self.held.pop(rid, None)
+
+    def release_ports(self) -> None:
+        """Unbind the ports still held (devices only: the user's own daemons bind them)."""
+        for sock in self.held.values():
+            sock.close()
+        self.held.clear()
 
     # -------------------------------------------------------------- devices
     def service_devices(self) -> None:
@@ -105,6 +117,7 @@ class Fleet:
         self.withdrawn.add(rid)
 
     def close(self, keep_key: bool = False) -> None:
+        self.release_ports()
         for r in self.robots.values():
             if r.daemon is not None:
                 r.daemon.close()
@@ -125,9 +138,11 @@ class Fleet:
             self.fresh_key.unlink(missing_ok=True)
 
 
-def claim_ports(fleet: FC.FleetConfig, instance: int = 0) -> FC.FleetConfig:
-    """The fleet moved to instance ``instance`` (its ground-station and robot ports + INSTANCE_STRIDE x N), once
-    every robot's MAVLink port is checked free: a busy one is an InputError naming it (another fleet runs)."""
+def claim_ports(fleet: FC.FleetConfig, instance: int = 0) -> tuple[FC.FleetConfig, dict]:
+    """The fleet moved to instance ``instance`` (its ground-station and robot ports + INSTANCE_STRIDE x N), and
+    every robot's MAVLink port bound: ``(fleet, {robot id: its bound UDP socket})``.  The sockets are held from
+    this check on and handed to the daemons (:meth:`Fleet.take_socket`), so no program that starts meanwhile can
+    take a robot's port; a port busy now is an InputError naming it (another fleet runs)."""
     import dataclasses
     import socket
 
@@ -135,18 +150,21 @@ def claim_ports(fleet: FC.FleetConfig, instance: int = 0) -> FC.FleetConfig:
     host, gcs_port = C.parse_hostport(fleet.gcs, fleet.source, "gcs")
     shift = INSTANCE_STRIDE * instance
     fleet = dataclasses.replace(fleet, base_port=fleet.base_port + shift, gcs=f"{host}:{gcs_port + shift}")
+    held: dict[int, socket.socket] = {}
     for r in fleet.robots:
         port = fleet.base_port + r.id
         s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             s.bind(("127.0.0.1", port))
         except OSError as e:
+            s.close()
+            for other in held.values():
+                other.close()
             raise C.ConfigError(fleet.source, "base_port",
                                 f"free UDP ports: 127.0.0.1:{port} (robot {r.id}'s MAVLink port) is in use "
                                 f"({e.strerror}); another fleet? run this one with --instance N") from None
-        finally:
-            s.close()
-    return fleet
+        held[r.id] = s
+    return fleet, held
 
 
 def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: str | Path | None = None,
@@ -154,14 +172,26 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
           speedup: float | None = None, instance: int = 0, peer_loss: float | None = None,
           loss_burst: float | None = None, key: str | Path | None = None,
           unsigned_gcs: list[str] | None = None) -> Fleet:
-    """Load the fleet, build the world and devices, write robot configs and the manifest.  ``peer_loss`` and
-    ``loss_burst`` (else the fleet's, else each template's) become every robot's ``comms.peer_loss`` and
-    ``comms.loss_burst``.  The fleet signs with the key file ``key`` (``--key``), else the fleet's ``signing_key``,
-    else (``signing``) a fresh key in the run directory, removed by :meth:`Fleet.close` unless kept.  ``unsigned_gcs``
-    (``--unsigned-gcs``; networks in CIDR form) becomes every robot's ``comms.unsigned_gcs``."""
+    """Load the fleet, hold its robots' ports, build the world and devices, write robot configs and the manifest.
+    ``peer_loss`` and ``loss_burst`` (else the fleet's, else each template's) become every robot's
+    ``comms.peer_loss`` and ``comms.loss_burst``.  The fleet signs with the key file ``key`` (``--key``), else the
+    fleet's ``signing_key``, else (``signing``) a fresh key in the run directory, removed by :meth:`Fleet.close`
+    unless kept.  ``unsigned_gcs`` (``--unsigned-gcs``; networks in CIDR form) becomes every robot's
+    ``comms.unsigned_gcs``."""
+    fleet, held = claim_ports(FC.load_fleet(fleet_path), instance)
+    try:
+        return _build(fleet, held, run_dir, manifest, seed, signing, method, speedup, peer_loss, loss_burst, key,
+                      unsigned_gcs)
+    except BaseException:
+        for sock in held.values():
+            sock.close()
+        raise
+
+
+def _build(fleet, held, run_dir, manifest, seed, signing, method, speedup, peer_loss, loss_burst, key,
+           unsigned_gcs) -> Fleet:
     from sitl import scenarios
 
-    fleet = claim_ports(FC.load_fleet(fleet_path), instance)
     world_cfg = C.load_world(fleet.world)
     templates = {}
     for r in fleet.robots:
@@ -231,7 +261,7 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
 
     manifest_path = Path(manifest) if manifest else run_dir / "manifest.json"
     out = Fleet(fleet, world_cfg, robots, world, run_dir, manifest_path, key=key,
-                fresh_key=key_path if fresh_key else None, key_path=key_path)
+                fresh_key=key_path if fresh_key else None, key_path=key_path, held=held)
     out.scenario = scenarios.module(fleet.scenario.type).Scenario(fleet, world_cfg)
     if hasattr(out.scenario, "build"):
         out.scenario.build(world)                 # the scenario's own bodies (unmapped obstacles)
@@ -395,7 +425,7 @@ class Lockstep:
         self.clock = SimClock(f.world.t)
         self.daemons = {}
         for r in f.robots.values():
-            r.daemon = self.daemons[r.id] = Daemon(C.load_robot(r.config_path))
+            r.daemon = self.daemons[r.id] = Daemon(C.load_robot(r.config_path), listen_socket=f.take_socket(r.id))
             r.daemon.open(self.clock.now())
         self.op = Operator(f)
         self.period = min(d.period for d in self.daemons.values())
@@ -489,8 +519,16 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
         cmd = [sys.executable, "-m", "runtime.cli", *_verbosity(), "daemon", str(r.config_path),
                "--speedup", repr(speedup), "--clock-file", str(clock_file),
                "--stats", str(f.run_dir / f"robot_{r.id}.stats.json")]
-        with open(f.run_dir / f"robot_{r.id}.log", "w") as log_fh:
-            r.proc = subprocess.Popen(cmd, stdout=log_fh, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent)
+        sock = f.take_socket(r.id)              # the port held since the check: the daemon inherits it, bound
+        if sock is not None:
+            cmd += ["--listen-fd", str(sock.fileno())]
+        try:
+            with open(f.run_dir / f"robot_{r.id}.log", "w") as log_fh:
+                r.proc = subprocess.Popen(cmd, stdout=log_fh, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent,
+                                          pass_fds=() if sock is None else (sock.fileno(),))
+        finally:
+            if sock is not None:
+                sock.close()                    # the daemon has its own descriptor of it now
     op = Operator(f)
     # start barrier: the sim clock starts once every daemon is built (imports take seconds)
     deadline = time.monotonic() + 120
@@ -697,6 +735,7 @@ def _main(args) -> int:
     print(f"SITL: {len(f.robots)} robots, manifest {f.manifest_path}, run dir {f.run_dir}", flush=True)
     try:
         if args.devices_only:
+            f.release_ports()                   # your own daemons bind the robots' ports
             print("devices only: Ctrl-C to stop", flush=True)
             clock = ScaledClock(speedup)
             while not stop["flag"]:

@@ -141,3 +141,22 @@ def test_the_slip_warning_says_what_it_costs_the_run_and_what_to_do():
     assert "could not hold the 4x clock" in line and "37 times" in line and "2.5x on average" in line
     assert "react later" in line and "--speedup 2 or lower" in line and "--lockstep" in line
     assert "--speedup 0.5 or lower" in launcher.slip_warning(1.0, 5, sim=10.0, wall=100.0)
+
+
+def test_a_close_call_below_the_fleet_s_clearance_fails_the_verdict_naming_it():
+    """Issue 31 point 11: configs/fleets/comutar_3.yaml states scenario.clearance 0.1 m; a borrower closer than that
+    to a pillar ends the run (unreachable) with a verdict that names the distance, when, and the clearance asked."""
+    from runtime import config as C
+    from sitl import fleet_config as FC
+    from sitl.scenarios import surveillance
+    from tests.sitl_util import ROOT
+    fleet = FC.load_fleet(ROOT / "configs" / "fleets" / "comutar_3.yaml")
+    assert fleet.scenario.clearance == 0.1
+    sc = surveillance.Scenario(fleet, C.load_world(fleet.world))
+    sc.least, sc.least_at = 0.039, 121.5                     # the issue's process-mode run
+    line = "R1 came within 0.039 m of a pillar at 121.5 s (the fleet's scenario.clearance asks for more than 0.1 m)"
+    assert sc.unreachable(View()) == line
+    met, verdict = launcher.verdict(sc, View(), "unreachable", 121.6, set(), [])
+    assert not met and verdict.startswith(f"goal not met: {line}")
+    sc.least = 0.287                                         # the least of 20 process-mode runs on a loaded machine
+    assert sc.unreachable(View()) is None and "pillar" not in (sc.shortfall(View()) or "")

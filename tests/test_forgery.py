@@ -447,7 +447,8 @@ def _family_run(method: str, starts, specs, until: float, options=None, single: 
     return f, ids, forger, worst[0], types
 
 
-@pytest.mark.parametrize("method", ["auction", "bs", "coalition", "dr", "comutar"])
+@pytest.mark.parametrize("method", ["auction", "bs", "coalition", pytest.param("dr", marks=pytest.mark.slow),
+                                    pytest.param("comutar", marks=pytest.mark.slow)])
 def test_one_forgery_of_every_private_message_type_leaves_an_unsigned_fleet_valid(method):
     """Issue 31 point 5: every private message type of the family and of the fleet task table forged with plausible
     values (three ways each, at three moments, and a made-up one of each type the run never sent) on an unsigned

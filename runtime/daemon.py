@@ -32,7 +32,9 @@ class ShellStats:
 
 
 class Daemon:
-    def __init__(self, cfg: C.RobotConfig, *, base=None, gps=None, link=None):
+    def __init__(self, cfg: C.RobotConfig, *, base=None, gps=None, link=None, listen_socket=None):
+        """``listen_socket``: a UDP socket already bound to ``comms.listen`` for the link (the SITL launcher's,
+        held since it checked the port), else the link binds one."""
         self.cfg = cfg
         self.id = cfg.robot.id
         self.log = get_logger("daemon", self.id)
@@ -52,7 +54,8 @@ class Daemon:
                                cfg.comms.gcs, signing_key=key,
                                heartbeat_timeout=cfg.comms.heartbeat_timeout, peer_loss=cfg.comms.peer_loss,
                                loss_burst=cfg.comms.loss_burst, loss_seed=cfg.comms.loss_seed,
-                               unsigned_gcs=cfg.comms.unsigned_gcs, fleet=[p.id for p in cfg.comms.peers])
+                               unsigned_gcs=cfg.comms.unsigned_gcs, fleet=[p.id for p in cfg.comms.peers],
+                               sock=listen_socket)
         self.link = link
         self.guard = None                 # the base's stop guard (start_guard), in a daemon of its own process
         fp = base.footprint

@@ -206,6 +206,28 @@ def _resolve(text: str, what: str, family: int | None = None, *, listen: bool = 
     return fam, sockaddr
 
 
+def _bound(sock: socket.socket | None, family: int, addr: tuple, listen: str) -> socket.socket:
+    """A UDP socket bound to ``addr``: ``sock`` if it is one (an InputError naming comms.listen if it is bound
+    elsewhere or is no UDP socket), else a new one bound here."""
+    if sock is not None:
+        try:
+            ok = sock.type == socket.SOCK_DGRAM and sock.getsockname()[:2] == addr[:2]
+            where = sock.getsockname()
+        except OSError as e:
+            raise InputError(f"comms.listen: the socket handed in is not usable ({e.strerror})") from None
+        if not ok:
+            raise InputError(f"comms.listen: expected the socket handed in to be UDP bound to {listen!r}, got "
+                             f"{where!r}")
+        return sock
+    sock = socket.socket(family, socket.SOCK_DGRAM)
+    try:
+        sock.bind(addr)
+    except OSError as e:
+        sock.close()
+        raise InputError(f"comms.listen: cannot bind {listen!r} ({e.strerror})") from None
+    return sock
+
+
 DROP_REASONS = ("parse_errors", "bad_crc", "unsigned_dropped", "bad_signature_dropped", "replayed_dropped",
                 "unknown", "invalid", "not_for_us", "ignored", "gcs_overflow", "setup_signing_refused")
 
@@ -325,7 +347,9 @@ class MavlinkLink:
                  signing_key: bytes | None = None, heartbeat_timeout: float = 3.0, *,
                  heartbeat_period: float = 1.0, wallclock: Callable[[], float] = time.time,
                  peer_loss: float = 0.0, loss_burst: float = 0.0, loss_seed: int | None = None,
-                 unsigned_gcs: Iterable[str] = (), fleet: Iterable[int] = ()):
+                 unsigned_gcs: Iterable[str] = (), fleet: Iterable[int] = (), sock: socket.socket | None = None):
+        """``sock``: a UDP socket already bound to ``listen`` (held for this robot since its port was checked, as
+        the SITL launcher does, or inherited: ``mrta daemon --listen-fd``) instead of binding one here."""
         if not 1 <= int(robot_id) <= 250:
             raise InputError(f"robot id: expected 1..250, got {robot_id!r}")
         if signing_key is not None and len(signing_key) != 32:
@@ -371,12 +395,7 @@ class MavlinkLink:
         family, self._listen_addr = _resolve(listen, "comms.listen", listen=True)
         self._peers = [_resolve(p, f"comms.peers[{i}]", family)[1] for i, p in enumerate(peers)]
         self._gcs = _resolve(gcs, "comms.gcs", family)[1] if gcs else None
-        self.sock = socket.socket(family, socket.SOCK_DGRAM)
-        try:
-            self.sock.bind(self._listen_addr)
-        except OSError as e:
-            self.sock.close()
-            raise InputError(f"comms.listen: cannot bind {listen!r} ({e.strerror})") from None
+        self.sock = _bound(sock, family, self._listen_addr, listen)
         self.sock.setblocking(False)
         self._overflows = udp.count_overflows(self.sock)
         self._next_kernel_check = -math.inf

@@ -51,6 +51,7 @@ from runtime.tasks import FAILED as P_FAILED, Commitment, Progress, Task
 
 KINDS = ("surveillance", "avoid_obstacles")
 CHOOSE_PERIOD = 0.25                      # s between re-evaluations of the nearest waypoint (at once on news)
+CLAIM_STALE = 5                           # status periods without a surveyor's CmSurvey before its claim is dropped
 STREAM_PERIOD = {A.RANGE_DATA: 0.1, A.OBSTACLE_LIST: 0.2}   # s: the 10 Hz and 5 Hz of ActionSpec.rates
 SENSE_FRESH = 0.5                         # s: a provider streams only readings newer than this
 SELF_ECHO = 0.12                          # m past a consumer's body: a streamed disc this close is the consumer itself
@@ -90,6 +91,7 @@ class ComutarAgent:
         self.bidder = Bidder(self)
         self.auction = Auctioneer(self)
         self._status_at: dict[int, float] = {}
+        self._survey_heard: dict[tuple[int, int], float] = {}     # (task, surveyor) -> its last CmSurvey
         self._choose_at: dict[int, float] = {}
         self._region_at: dict[int, float] = {}
         self._refused: set[int] = set()
@@ -458,6 +460,9 @@ class ComutarAgent:
     def _surveys(self, now: float) -> list:
         out = []
         for tid, board in self.boards.items():
+            for r in [r for r in board.claims if r != self.robot_id
+                      and now - self._survey_heard.get((tid, r), now) > CLAIM_STALE * self.options.status_period]:
+                board.forget(r)          # a surveyor that left the task (resigned, cancelled) no longer holds a claim
             held = tid in self.bidder.holdings
             if held and self.pose is not None and now >= self._choose_at.get(tid, -math.inf):
                 self._choose_at[tid] = now + CHOOSE_PERIOD
@@ -518,6 +523,7 @@ class ComutarAgent:
             board = self.boards.get(msg.task)
             if board is None or msg.sender == self.robot_id:
                 return []
+            self._survey_heard[(msg.task, msg.sender)] = now
             target = msg.target - 1 if 0 < msg.target <= len(board.points) else None
             if board.merge(msg.sender, map(int.__sub__, msg.visited, itertools.repeat(1)), target, msg.claimed):
                 self._status_at[msg.task] = self._choose_at[msg.task] = -math.inf

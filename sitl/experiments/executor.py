@@ -156,7 +156,7 @@ def _ray(address: str) -> Iterator[Executor]:
     except ImportError:
         raise InputError(f"--cluster {address}: Ray is not installed: {NEEDS_RAY}") from None
     try:
-        ray.init(address=address, log_to_driver=False)
+        ray.init(address=address)
     except (ConnectionError, OSError, TimeoutError) as exc:
         raise InputError(f"--cluster {address}: no Ray head answered ({exc})") from None
     try:

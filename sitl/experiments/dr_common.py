@@ -295,9 +295,9 @@ def kind_of(cell: Cell) -> str:
 
 def estimate(args, name: str, cells: Sequence[Cell], setup: Setup) -> int:
     """``--estimate``: one calibration run (seed 1) per kind of cell, cut at ``--estimate-time`` simulated s, gives
-    CPU s per simulated s and objects done per simulated s; a run of the command lasts until ``max_objects`` are
-    done at that rate (or its time limit), and the command is every (cell, seed).  Prints the figures; runs nothing
-    else."""
+    CPU s per simulated s and when objects get done (:func:`run_length`); a run of the command lasts until
+    ``max_objects`` are done (or its time limit), and the command is every (cell, seed).  Prints the figures; runs
+    nothing else."""
     model, source = resolve_model(args.model, Path(args.out))
     online = getattr(args, "online", False)
     cells = [replace(c, late=args.late, online=c.online or (online and c.uses_model)) for c in cells]
@@ -307,24 +307,27 @@ def estimate(args, name: str, cells: Sequence[Cell], setup: Setup) -> int:
         if kind_of(cell) in kinds:
             continue
         cpu0 = time.process_time()
-        r = run_one(cell, short, 1, model)["run"]
+        res = run_one(cell, short, 1, model)
         cpu = time.process_time() - cpu0
-        kinds[kind_of(cell)] = {"cell": cell.label, "cpu": cpu, "sim": r["sim_s"], "done": r["objects_done"]}
+        r = res["run"]
+        kinds[kind_of(cell)] = {"cell": cell.label, "cpu": cpu, "sim": r["sim_s"],
+                                "finished": sorted(o["finished_s"] for o in res["objects"] if o["done"])}
         print(f"calibration: {cell.label} seed 1, {r['sim_s']:.0f} simulated s: {cpu:.1f} CPU s "
               f"({r['sim_s'] / cpu:.1f}x real time per core), {r['objects_done']} objects done")
     total, lines = 0.0, []
     for kind, k in kinds.items():
         n = sum(1 for c in cells if kind_of(c) == kind) * args.seeds
-        rate = k["done"] / k["sim"] if k["sim"] > 0 else 0.0
         want = setup.max_objects
-        sim = setup.time_limit if not want or rate <= 0 else min(setup.time_limit, want / rate)
+        rate, needed = run_length(k["finished"], k["sim"], want)
+        sim = min(setup.time_limit, needed)
         cpu = k["cpu"] / k["sim"] * sim
         total += n * cpu
         note = ""
-        if want and (rate <= 0 or want / rate > setup.time_limit):
-            need = f"about {want / rate:.0f}" if rate > 0 else "more (no object was done in the calibration)"
-            note = (f"; ends at --time-limit {setup.time_limit:g} s with about {rate * setup.time_limit:.0f} of "
-                    f"{want} objects done: --time-limit {need} s reaches {want}")
+        if want and needed > setup.time_limit:
+            need = f"about {needed:.0f}" if math.isfinite(needed) else "more (no object was done in the calibration)"
+            note = (f"; ends at --time-limit {setup.time_limit:g} s with about "
+                    f"{min(want, rate * setup.time_limit):.0f} of {want} objects done: --time-limit {need} s "
+                    f"reaches {want}")
         lines.append(f"  {kind}: {n} runs x {cpu:.0f} CPU s ({sim:.0f} simulated s each at "
                      f"{rate * 3600:.1f} objects done per simulated hour){note}")
     command = (f"mrta experiment {name.replace('_', '-')} --seeds {args.seeds}"
@@ -335,6 +338,21 @@ def estimate(args, name: str, cells: Sequence[Cell], setup: Setup) -> int:
     print(f"total: {total:.0f} CPU s = {total / 3600:.1f} CPU h; wall about {total / args.jobs / 3600:.1f} h on "
           f"--jobs {args.jobs}, {total / 3600 / 16:.1f} h on 16 cores of a --cluster")
     return 0
+
+
+def run_length(finished: Sequence[float], sim: float, want: int | None) -> tuple[float, float]:
+    """(objects done per simulated s, simulated s until ``want`` are done: inf if none was done, ``sim`` with no
+    ``want``) from one calibration run of ``sim`` s whose objects finished at ``finished`` s.  The steady rate
+    leaves out the start (robots drive out to the first objects): from the first finish to the last, when two or
+    more finished; else what was done over the whole run."""
+    done = len(finished)
+    if done >= 2 and finished[-1] > finished[0]:
+        rate = (done - 1) / (finished[-1] - finished[0])
+        return rate, (finished[0] + (want - 1) / rate) if want else sim
+    rate = done / sim if sim > 0 else 0.0
+    if not want:
+        return rate, sim
+    return rate, want / rate if rate > 0 else math.inf
 
 
 def objects_setup(args, full: Setup) -> Setup:

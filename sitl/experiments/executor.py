@@ -73,8 +73,11 @@ def kind(cluster: str | None) -> str | None:
 
 
 def command_flags(args) -> str:
-    """How the sweep ran, for the command lines the reports print: ``--jobs N`` and ``--cluster X`` if given."""
+    """How the sweep ran, for the command lines the reports print: ``--jobs N`` (local processes or LocalCluster
+    workers) or ``--cluster ADDRESS`` (a remote cluster: its workers decide)."""
     cluster = getattr(args, "cluster", None)
+    if kind(cluster) in ("dask", "ray"):
+        return f"--cluster {cluster}"
     return f"--jobs {args.jobs}" + (f" --cluster {cluster}" if cluster else "")
 
 

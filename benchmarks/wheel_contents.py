@@ -3,7 +3,8 @@ bindings and the example configs inside (docs/deploy.md).
 
     python benchmarks/wheel_contents.py [WHEEL]
 
-Without WHEEL it builds one from this checkout (pip wheel . --no-deps, into a temp dir).  Prints the top-level
+Without WHEEL it builds one from this checkout (pip wheel . --no-deps, into a temp dir) and also checks that every
+module in it is the checkout's.  Prints the top-level
 entries with their file counts, then each problem; exit 1 when there is one.
 """
 from __future__ import annotations
@@ -19,7 +20,8 @@ ROOT = Path(__file__).resolve().parents[1]
 TOP = {"runtime", "sitl"}
 MUST = ("runtime/comms/_dialect/mrta.py", "runtime/comms/_dialect/KEY", "runtime/comms/mrta.xml",
         "runtime/examples/fleets/create2_4.yaml", "runtime/examples/robots/create2.yaml",
-        "runtime/examples/worlds/arena_10m.yaml", "runtime/examples/missions/square_6.plan")
+        "runtime/examples/worlds/arena_10m.yaml", "runtime/examples/missions/square_6.plan",
+        "runtime/deploy/mrta-daemon@.service", "runtime/deploy/99-mrta-serial.rules")
 
 
 def build(out: Path) -> Path:
@@ -32,6 +34,18 @@ def build(out: Path) -> Path:
 def tops(names: list[str]) -> Counter:
     """File count per top-level entry (``*.dist-info`` as one)."""
     return Counter("*.dist-info" if n.split("/")[0].endswith(".dist-info") else n.split("/")[0] for n in names)
+
+
+def stale(wheel: Path) -> list[str]:
+    """Modules of ``wheel`` that differ from this checkout's: setuptools copies into ``build/lib`` only what is
+    newer than the copy there, so a ``build/`` left by an earlier ``pip wheel`` can ship old code (seen here: a
+    wheel whose robot core predated the daemon it shipped with)."""
+    z = zipfile.ZipFile(wheel)
+    why = "(a stale build/ directory? rm -rf build and build again)"
+    mods = [n for n in z.namelist() if n.endswith(".py") and n.split("/")[0] in TOP]
+    return ([f"{n} is not in the checkout {why}" for n in mods if not (ROOT / n).is_file()]
+            + [f"{n} differs from the checkout's {why}" for n in mods
+               if (ROOT / n).is_file() and z.read(n) != (ROOT / n).read_bytes()])
 
 
 def problems(names: list[str]) -> list[str]:
@@ -52,7 +66,7 @@ def main(argv: list[str]) -> int:
         print(f"{wheel.name}: {len(names)} files")
         for top, n in sorted(tops(names).items()):
             print(f"  {top:<24} {n:4d}")
-        found = problems(names)
+        found = problems(names) + ([] if argv else stale(wheel))
         for p in found:
             print(f"problem: {p}")
         return 1 if found else 0

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from runtime.errors import InputError
@@ -21,12 +22,16 @@ from runtime import log
 # command -> module that provides register(subparsers) for it, in help order
 COMMANDS = {
     "daemon": "runtime.daemon_cli",                          # mrta daemon ROBOT_CONFIG
+    "stop-base": "runtime.stop_base_cli",                    # mrta stop-base ROBOT_CONFIG (systemd ExecStopPost)
     "sitl": "sitl.launcher",                                 # mrta sitl run FLEET_CONFIG
     "assign": "runtime.allocation.formation.assign_cli",     # mrta assign PROBLEM.json
     "wdp": "runtime.allocation.coalition.wdp_cli",           # mrta wdp BIDS.json
     "experiment": "sitl.experiments.cli",                    # mrta experiment NAME
     "mission": "runtime.comms.mission_cli",                  # mrta mission upload|download|status TARGET ...
     "key": "runtime.comms.key_cli",                          # mrta key FILE
+    "init-robot": "runtime.deploy.init_robot",               # mrta init-robot DIR --base create2|pioneer|can
+    "schema": "runtime.config.schema_cli",                   # mrta schema robot|fleet|world
+    "log": "runtime.recording.summary",                      # mrta log summary FILE.mcap
 }
 SIMULATOR = ("pybullet", "matplotlib")       # the [sitl] extra
 NEEDS_SIMULATOR = "the simulator is not installed: pip install 'mrta-runtime[sitl]'"
@@ -131,6 +136,16 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:          # `mrta log summary F | head`: the reader left; say nothing more (Python's
+        _quiet_stdout()              # own advice: point stdout at devnull so the exit flush does not raise again)
+        return 141                   # 128 + SIGPIPE, what a shell reports for a command cut off by a pipe
+
+
+def _quiet_stdout() -> None:
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    except (OSError, ValueError):    # stdout already closed, or not a real file (a test's capture)
+        pass
 
 
 if __name__ == "__main__":

@@ -82,6 +82,7 @@ class SharedClock:
     def __init__(self, path: str, speedup: float = 1.0, stall_timeout: float = 30.0):
         import mmap
         self.stall_timeout = stall_timeout     # wall seconds without the time moving: the simulator is gone
+        self.on_wait = None                    # called at each look while sleep_until waits (the stop guard's beat)
         self._fh = open(path, "rb")
         self._mm = mmap.mmap(self._fh.fileno(), 24, access=mmap.ACCESS_READ)
         self.speedup = max(speedup, 1e-3)
@@ -104,6 +105,8 @@ class SharedClock:
                 last, since = now, time.monotonic()
             elif time.monotonic() - since > self.stall_timeout:
                 raise ClockStalled(f"simulator clock stopped at {now:.3f} s for {self.stall_timeout:.0f} s")
+            if self.on_wait is not None:
+                self.on_wait()
             time.sleep(min(0.005, max(0.0002, remaining / self.speedup)))
 
     def close(self) -> None:

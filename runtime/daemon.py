@@ -16,7 +16,7 @@ import time
 from dataclasses import dataclass
 
 from runtime import config as C
-from runtime.clock import Clock, ClockStalled
+from runtime.clock import Clock, ClockStalled, SharedClock
 from runtime.log import get_logger
 from runtime.robot.core import GCS, PEERS, Inbox, RobotCore, Sensed
 from runtime.robot.ports import BaseFacts
@@ -54,11 +54,13 @@ class Daemon:
                                loss_burst=cfg.comms.loss_burst, loss_seed=cfg.comms.loss_seed,
                                unsigned_gcs=cfg.comms.unsigned_gcs, fleet=[p.id for p in cfg.comms.peers])
         self.link = link
+        self.guard = None                 # the base's stop guard (start_guard), in a daemon of its own process
         fp = base.footprint
         facts = BaseFacts(float(fp.radius), float(getattr(fp, "max_speed", 0.5)), bool(base.ranging),
                           bool(base.latches_faults))
         self.core = RobotCore(cfg, facts, mavlink=(link.mav, link.module, link.counters))
         self.period = self.core.period
+        self.feed = None                  # a recording's CoreFeed (runtime.recording.feed): told every cycle
         self._mode()
 
     # ------------------------------------------------------------------ lifecycle
@@ -77,10 +79,21 @@ class Daemon:
         elif nets:
             self.log.info("comms.unsigned_gcs (%s) changes nothing: signing is off, every frame is taken", nets)
 
+    def start_guard(self) -> None:
+        """Start the base's stop guard (:mod:`runtime.drivers.guard`): a process that stops the base when this
+        one dies or stops stepping.  Only a daemon with a process of its own has one (``run``)."""
+        from runtime.drivers.guard import start
+        self.guard = start(self.base, self.id, self.log)
+
     def close(self) -> None:
+        stopped = False
         try:
             self.base.close()
+            stopped = True
         finally:
+            if self.guard is not None:
+                self.guard.close(goodbye=stopped)      # no goodbye: the guard stops the base itself
+                self.guard = None
             for part in (self.gps, self.link):
                 if part is not None and hasattr(part, "close"):
                     part.close()
@@ -93,16 +106,25 @@ class Daemon:
         fixes = self.gps.poll(now) if self.gps is not None else ()
         peers = link.poll(now)
         lost = link.peers_lost(now)
-        out = self.core.step(now, Sensed(odometry, fixes, base.sensors), self._inbox(peers, lost))
+        inbox = self._inbox(peers, lost)
+        out = self.core.step(now, Sensed(odometry, fixes, base.sensors), inbox)
         if out.reset_faults:
             base.reset_faults(now)
         base.set_velocity(*out.command, now)
         self._send(out, now)
+        if self.feed is not None:
+            self.feed.cycle(now, out, inbox)
+        if self.guard is not None:
+            self.guard.beat()
 
     def service(self, now: float) -> None:
         """Messages only, no control cycle: peers' task tables and ground-station requests (a SITL operator
         hands tasks in before the first cycle this way).  Peer messages for the agent wait for the next step."""
-        self._send(self.core.service(now, self._inbox(self.link.poll(now), ())), now)
+        inbox = self._inbox(self.link.poll(now), ())
+        out = self.core.service(now, inbox)
+        self._send(out, now)
+        if self.feed is not None:
+            self.feed.frames(now, out, inbox)
 
     def _inbox(self, peers: list, lost: list) -> Inbox:
         link = self.link
@@ -172,6 +194,9 @@ def run(daemon: Daemon, clock: Clock, duration: float | None = None, stats_path:
     code = 0
     try:
         daemon.open(t0)
+        daemon.start_guard()
+        if isinstance(clock, SharedClock) and daemon.guard is not None:
+            clock.on_wait = daemon.guard.beat      # a SITL world paused (drawing, stalled) is not a frozen daemon
         while duration is None or clock.now() - t0 < duration:
             now = clock.now()
             late = now - next_t

@@ -26,6 +26,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "simulator's time from it")
     p.add_argument("--duration", type=float, default=None, help="stop after this many (clock) seconds")
     p.add_argument("--stats", default=None, help="write a JSON status snapshot here every second")
+    from runtime.recording.options import add_live, add_record
+    add_record(p)
+    add_live(p, "this robot's recording channels")
     p.set_defaults(func=_main)
 
 
@@ -52,6 +55,8 @@ def _check_args(args) -> None:
     argcheck.number(args.duration, "--duration", 0.0, lo_open=True)
     argcheck.output_file(args.stats, "--stats")
     argcheck.output_file(args.clock_file, "--clock-file")
+    from runtime.recording.options import check_record
+    check_record(args)
 
 
 def _main(args) -> int:
@@ -74,4 +79,30 @@ def _main(args) -> int:
     if cfg.comms.signing_key is None:
         daemon.log.warning("MAVLink signing is off (comms.signing_key is not set): any host on the network can "
                            "command this robot")
-    return D.run(daemon, clock, args.duration, args.stats)
+    recording = _recording(args, daemon, wall=isinstance(clock, WallClock))
+    try:
+        return D.run(daemon, clock, args.duration, args.stats)
+    finally:
+        if recording is not None:
+            recording.close()
+
+
+def _recording(args, daemon: D.Daemon, wall: bool):
+    """``--record`` / ``--live``: a recorder fed by the daemon's core (and its link's frames with
+    ``--record-mavlink``), or None."""
+    if args.record is None and args.live is None:
+        return None
+    from runtime.errors import InputError
+    from runtime.recording.feed import Recording
+    from runtime.recording.options import live_address
+    from runtime.recording.recorder import RecordingUnavailable
+
+    try:
+        return Recording.of_daemon(daemon, args.record, wall=wall, limit=int(args.record_limit * 1e6),
+                                   rotate=args.record_rotate, live=live_address(args.live),
+                                   mavlink=args.record_mavlink)
+    except RecordingUnavailable as exc:
+        raise InputError(f"--record: {exc}") from None
+    except OSError as exc:
+        raise InputError(f"--record {args.record}: expected a file that can be written ({exc.strerror or exc})") \
+            from None

@@ -242,12 +242,15 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
 def fleet_key(fleet: FC.FleetConfig, key: str | Path | None, signing: bool, run_dir: Path) -> tuple[Path | None, bool]:
     """(the key file the robots sign with, whether it was made for this run): ``key`` (``--key``, checked: an
     InputError naming it if it is missing or not a key), else the fleet's ``signing_key`` (resolved against the
-    fleet file), else with ``signing`` a fresh key in ``run_dir``; (None, False) for an unsigned fleet."""
+    fleet file), else with ``signing`` a fresh key in ``run_dir``; (None, False) for an unsigned fleet: without
+    ``signing`` (``--no-signing``) the fleet's ``signing_key`` is not used either (the command line wins)."""
     from runtime.comms.link import load_key, new_key
 
     if key is not None:
         load_key(key, "--key")
         return Path(key).resolve(), False
+    if not signing:
+        return None, False
     if fleet.signing_key:
         return Path(fleet.signing_key).resolve(), False
     if signing:
@@ -332,6 +335,8 @@ def print_summary(f: Fleet, res: dict, out=sys.stdout) -> None:
         print(f"event: {e}", file=out)
     if res.get("picture"):
         print(f"picture: {res['picture']}", file=out)
+    if res.get("recording"):
+        print(f"recording: {res['recording']}", file=out)
     print(f"verdict: {res['verdict']}", file=out)
 
 
@@ -378,7 +383,7 @@ class Lockstep:
     """The daemons inside this process on a simulated clock, with the operator: :meth:`step` runs one control
     cycle of physics, daemons and operator.  Deterministic for a given seed."""
 
-    def __init__(self, f: Fleet):
+    def __init__(self, f: Fleet, record: str | Path | None = None, live: tuple[str, int] | None = None):
         from runtime.daemon import Daemon
         from sitl.operator import Operator
 
@@ -388,6 +393,9 @@ class Lockstep:
         for r in f.robots.values():
             r.daemon = self.daemons[r.id] = Daemon(C.load_robot(r.config_path))
             r.daemon.open(self.clock.now())
+        self.recording = open_recording(f, record, live)
+        if self.recording is not None:
+            self.recording.attach(self.daemons)
         self.op = Operator(f)
         self.period = min(d.period for d in self.daemons.values())
         self.stopped = f.stopped                # robots whose daemon no longer runs (killed), kept on the Fleet
@@ -415,12 +423,16 @@ class Lockstep:
         f = self.f
         f.advance_to(f.world.t + self.period)
         self.clock.sleep_until(f.world.t)
+        if self.recording is not None:
+            self.recording.rec.stamp(f.world.t)
         for rid, d in self.daemons.items():
             if rid not in self.stopped:
                 d.step(self.clock.now())
         self.op.poll(f.world.t)
         scenario_actions(f, self.op, f.world.t, self.kill)
         self.op.record(f.world.t)
+        if self.recording is not None:
+            self.recording.step(f.world.t, self.op)
 
     def kill(self, rid: int) -> None:
         """Robot ``rid``'s daemon dies: it neither steps nor answers from now on (its body stays)."""
@@ -429,13 +441,43 @@ class Lockstep:
         self.op.robot_died(rid, self.f.world.t)
 
     def close(self) -> None:
-        self.op.close()
+        try:
+            if self.recording is not None:
+                self.recording.close(self.op.trace)
+        finally:
+            self.op.close()
 
 
-def run_lockstep(f: Fleet, timeout: float | None = None, progress=None, on_step=None) -> dict:
+def open_recording(f: Fleet, record, live: tuple[str, int] | None):
+    """The run's recording (``record``: a path, True for RUN_DIR/run.mcap, None or False for none) and live view,
+    or None; without foxglove-sdk (the [record] extra) a warning and no recording, unless the live view was asked
+    for (then an InputError)."""
+    from runtime.errors import InputError
+
+    if not record and live is None:
+        return None
+    from runtime.recording.recorder import RecordingUnavailable
+    from sitl.recording import FleetRecording
+
+    path = f.run_dir / "run.mcap" if record is True else Path(record) if record else None
+    try:
+        return FleetRecording(f, path, live)
+    except RecordingUnavailable as exc:
+        if live is not None:
+            raise InputError(f"--live: {exc}") from None
+        log.warning("%s: the run is not recorded", exc)
+        return None
+    except OSError as exc:
+        raise InputError(f"{path}: expected a recording file that can be written ({exc.strerror or exc})") from None
+
+
+def run_lockstep(f: Fleet, timeout: float | None = None, progress=None, on_step=None, record=False,
+                 live: tuple[str, int] | None = None) -> dict:
     """Daemons in this process on a simulated clock: deterministic for a given seed.
-    ``on_step(fleet)`` is called after every control cycle (tests attach observers there)."""
-    run = Lockstep(f)
+    ``on_step(fleet)`` is called after every control cycle (tests attach observers there).  ``record``: the run's
+    MCAP (True: RUN_DIR/run.mcap, as `mrta sitl run` asks; a path; False: none, the default for tests and
+    experiments); ``live``: serve it over the Foxglove WebSocket protocol."""
+    run = Lockstep(f, record, live)
     timeout = timeout or f.fleet.timeout
     wait = getattr(f.fleet.scenario, "wait", False)
     since, next_progress, ended = None, 0.0, None
@@ -448,9 +490,12 @@ def run_lockstep(f: Fleet, timeout: float | None = None, progress=None, on_step=
             if progress and f.world.t >= next_progress:
                 progress(f, run.op)
                 next_progress += 5.0
-        return finish(f, run.op, ended or "timeout")
+        res = finish(f, run.op, ended or "timeout")
     finally:
         run.close()
+    if run.recording is not None and run.recording.path is not None:
+        res["recording"] = str(run.recording.path)
+    return res
 
 
 def daemon_stats(f: Fleet) -> dict[int, dict]:
@@ -465,8 +510,11 @@ def daemon_stats(f: Fleet) -> dict[int, dict]:
 
 
 def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progress=None, stop_flag=None,
-                  linger: float = 0.0, on_step=None, wait: bool | None = None) -> dict:
-    """One daemon process per robot on a clock ``speedup`` times real time.
+                  linger: float = 0.0, on_step=None, wait: bool | None = None, record=False,
+                  live: tuple[str, int] | None = None) -> dict:
+    """One daemon process per robot on a clock ``speedup`` times real time.  ``record``: the world's and the
+    operator's side in RUN_DIR/run.mcap and each daemon's own recording in RUN_DIR/robot_N.mcap; ``live``: the
+    world's and the operator's side served over the Foxglove WebSocket protocol.
 
     ``linger``: wall seconds to keep everything running after the goal is met; the result then holds each
     daemon's CPU share over that idle window (``idle_cpu_share``, 1.0 = one core).  ``wait``: run until the
@@ -480,8 +528,11 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
         cmd = [sys.executable, "-m", "runtime.cli", *_verbosity(), "daemon", str(r.config_path),
                "--speedup", repr(speedup), "--clock-file", str(clock_file),
                "--stats", str(f.run_dir / f"robot_{r.id}.stats.json")]
+        if record:
+            cmd += ["--record", str(f.run_dir / f"robot_{r.id}.mcap"), "--record-mavlink"]
         with open(f.run_dir / f"robot_{r.id}.log", "w") as log_fh:
             r.proc = subprocess.Popen(cmd, stdout=log_fh, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent)
+    recording = open_recording(f, record, live)
     op = Operator(f)
     # start barrier: the sim clock starts once every daemon is built (imports take seconds)
     deadline = time.monotonic() + 120
@@ -523,6 +574,8 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
             if now >= next_record:
                 op.record(now)
                 next_record = now + 0.05
+                if recording is not None:
+                    recording.step(now, op)
             if on_step is not None:
                 on_step(f)
             for r in f.robots.values():
@@ -550,7 +603,13 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
         publisher.close()
         res = finish(f, op, ended or "timeout")
     finally:
-        op.close()
+        try:
+            if recording is not None:
+                recording.close(op.trace)
+        finally:
+            op.close()
+    if recording is not None and recording.path is not None:
+        res["recording"] = str(recording.path)
     res["world_max_lag"] = max_lag
     res["clock_slips"] = slips
     if slips:
@@ -642,14 +701,22 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "brings them (%g..%g; default: the fleet's loss_burst, else 0: each on its own)"
                         % fleet_range("loss_burst"))
     r.add_argument("--json", default=None, help="write the result here as JSON")
+    r.add_argument("--no-record", dest="record", action="store_false",
+                   help="write no recording (default: RUN_DIR/run.mcap, and each daemon process its "
+                        "RUN_DIR/robot_N.mcap)")
+    from runtime.recording.options import add_live
+    add_live(r, "the fleet's recording channels")
     r.set_defaults(func=_main)
 
 
 def _main(args) -> int:
     from sitl import run_args
 
+    from runtime.recording.options import live_address
+
     args.fleet = str(FC.find_fleet(args.fleet))      # a file, or a shipped fleet by name
     run_args.check(args)          # every option, before the world is built
+    live = live_address(args.live)
     f = build(args.fleet, args.run_dir, args.manifest, args.seed, args.signing, args.method, args.speedup,
               args.instance, args.peer_loss, args.loss_burst, args.key, args.unsigned_gcs)
     speedup = args.speedup or f.fleet.speedup
@@ -674,10 +741,14 @@ def _main(args) -> int:
             print(f"waiting for an operator: upload missions to the robots' MAVLink ports in {f.manifest_path} "
                   f"(mrta mission upload 127.0.0.1:{f.robots[min(f.robots)].udp_port} FILE{key}); Ctrl-C to stop",
                   flush=True)
+        if live is not None:
+            print(f"live: Foxglove WebSocket on ws://{live[0]}:{live[1]} (layout: docs/foxglove_layout.json)",
+                  flush=True)
         if args.lockstep:
-            res = run_lockstep(f, args.timeout, progress=_progress)
+            res = run_lockstep(f, args.timeout, progress=_progress, record=args.record, live=live)
         else:
-            res = run_processes(f, speedup, args.timeout, progress=_progress, stop_flag=lambda: stop["flag"])
+            res = run_processes(f, speedup, args.timeout, progress=_progress, stop_flag=lambda: stop["flag"],
+                                record=args.record, live=live)
     finally:
         f.close(keep_key=args.keep_key)
     print_summary(f, res)

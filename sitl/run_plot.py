@@ -2,9 +2,10 @@
 which task when (right).
 
 ``plot_run(trace, "run/trace.png")`` draws a :class:`sitl.run_trace.RunTrace` with matplotlib on the Agg
-backend (no display).  Redraw a saved run without ``mrta``::
+backend (no display).  Redraw a saved run without ``mrta``, from its trace or its recording::
 
     python -m sitl.run_plot RUN_DIR/trace.json [OUT.png]
+    python -m sitl.run_plot RUN_DIR/run.mcap [OUT.png]
 """
 from __future__ import annotations
 
@@ -318,13 +319,22 @@ def _shade_disarmed(ax, trace: RunTrace, rid: int, y: float, end: float) -> None
 
 # ---------------------------------------------------------------------- command line
 
+def read_trace(path: str | Path) -> RunTrace:
+    """A run's trace from ``trace.json``, or from the run's recording (a file ending in ``.mcap``)."""
+    if str(path).endswith(".mcap"):
+        from sitl.recording import trace_from_mcap
+        return trace_from_mcap(path)
+    return RunTrace.read(path)
+
+
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m sitl.run_plot", description="Redraw a SITL run from its trace.json.")
-    p.add_argument("trace", help="RUN_DIR/trace.json written by the launcher")
+    p = argparse.ArgumentParser(prog="python -m sitl.run_plot",
+                                description="Redraw a SITL run from its trace.json or its recording (run.mcap).")
+    p.add_argument("trace", help="RUN_DIR/trace.json or RUN_DIR/run.mcap written by the launcher")
     p.add_argument("out", nargs="?", help="PNG to write (default: beside the trace, same name, .png)")
     args = p.parse_args(argv)
     try:
-        trace = RunTrace.read(args.trace)
+        trace = read_trace(args.trace)
         out = plot_run(trace, args.out or Path(args.trace).with_suffix(".png"))
     except InputError as exc:
         print(f"run_plot: {exc}", file=sys.stderr)

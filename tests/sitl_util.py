@@ -63,6 +63,27 @@ def robot_template(tmp_path: Path, src: Path, name: str, **allocation) -> Path:
     return out
 
 
+def devices_only(fleet: Path, tmp_path: Path) -> tuple:
+    """``mrta sitl run FLEET --devices-only --speedup 1`` (the world and the emulated devices, no daemons, real
+    time) started as a process: (the process, its manifest's robots) once the manifest is written.  Stop it with
+    SIGINT."""
+    import json
+    import subprocess
+    import sys
+
+    manifest = tmp_path / "manifest.json"
+    proc = subprocess.Popen([sys.executable, "-m", "runtime.cli", "sitl", "run", str(fleet), "--devices-only",
+                             "--speedup", "1", "--manifest", str(manifest), "--run-dir", str(tmp_path / "run")],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    deadline = time.monotonic() + 60
+    while not manifest.exists():
+        if proc.poll() is not None or time.monotonic() > deadline:
+            proc.kill()
+            raise AssertionError(f"no manifest: {proc.communicate()[0]}")
+        time.sleep(0.05)
+    return proc, json.loads(manifest.read_text())["robots"]
+
+
 def lockstep_run(fleet_path: Path, run_dir: Path, read=lambda f: None, on_step=None):
     """Build the fleet at ``fleet_path``, run it in lock-step to its end (goal, timeout, ...), and return (the
     run's result, ``read(fleet)`` taken before the daemons close)."""

@@ -236,6 +236,16 @@ def test_packets_after_garbage_are_found(garbage, bodies):
 
 
 @settings(max_examples=200, deadline=None)
+@given(st.binary(max_size=60), _packets(), st.integers(3, P.MAX_COUNT))
+def test_packets_after_garbage_are_found_at_once_even_behind_a_stray_header(garbage, bodies, count):
+    """No FILL this time: a stray header with a long count (the garbage's last bytes) does not hold back the
+    complete good packets after it (``stale_headers``)."""
+    p = P.PacketParser()
+    out = p.feed(garbage + P.HEADER + bytes([count]) + b"".join(P.frame(b) for b in bodies))
+    assert out[-len(bodies):] == bodies and _accounts(p) and p.pending == 0
+
+
+@settings(max_examples=200, deadline=None)
 @given(_packets(), st.integers(1, 40), st.binary(min_size=1, max_size=1))
 @example([b"\x00I\x00\xb1"], 8, b"\x00")     # its checksum's last byte is the next packet's first sync byte
 def test_a_truncated_packet_is_held_then_dropped_when_the_next_one_comes(bodies, cut, _):

@@ -180,3 +180,22 @@ def test_argcheck_numbers():
         argcheck.number(0, "--x", 0, lo_open=True)
     with pytest.raises(InputError, match=r"--n: expected a number in \[0, 400\], got an integer of 401 digits"):
         argcheck.number(10 ** 400, "--n", 0, 400)          # found by the fuzz suite: was an OverflowError
+
+
+def test_no_signing_wins_over_the_fleets_signing_key(tmp_path):
+    """A fleet file naming a signing_key, run with --no-signing: the robots do not sign (the command line wins), as
+    --no-signing's help says; without it they sign with that key."""
+    import yaml
+    from runtime.comms.link import new_key
+    from sitl import fleet_config as FC
+    from sitl.launcher import fleet_key
+    key = new_key(tmp_path / "site.key")
+    data = yaml.safe_load(FLEET.read_text())
+    for k in ("world", "robot"):
+        data[k] = str((FLEET.parent / data[k]).resolve())
+    data["signing_key"] = str(key)
+    path = tmp_path / "fleet.yaml"
+    path.write_text(yaml.safe_dump(data))
+    fleet = FC.load_fleet(path)
+    assert fleet_key(fleet, None, False, tmp_path) == (None, False)
+    assert fleet_key(fleet, None, True, tmp_path) == (key.resolve(), False)

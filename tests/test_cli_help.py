@@ -31,3 +31,20 @@ def test_help_prints(path, capsys):
         cli.main([*path, "--help"])
     assert exit_.value.code == 0
     assert "usage:" in capsys.readouterr().out
+
+
+def test_a_reader_that_leaves_the_pipe_gets_no_traceback():
+    """`mrta schema robot | head -1`: the reader closes the pipe; mrta ends with 141 (as a shell shows a command cut
+    off by SIGPIPE) and writes nothing to stderr, where Python's default is a BrokenPipeError traceback."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+    r, w = os.pipe()
+    os.close(r)                                        # the reader is gone before the first write
+    try:
+        p = subprocess.run([sys.executable, "-m", "runtime.cli", "schema", "robot"], stdout=w, stderr=subprocess.PIPE,
+                           text=True, timeout=60, cwd=Path(__file__).resolve().parents[1])
+    finally:
+        os.close(w)
+    assert (p.returncode, p.stderr) == (141, "")

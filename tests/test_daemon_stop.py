@@ -25,6 +25,7 @@ class InstantClock:
 class SignalledInsideAParser:
     """A daemon whose first cycle gets SIGTERM while a parser's ``except Exception`` is around it."""
     period = 0.1
+    guard = None
 
     def __init__(self):
         self.stats = SimpleNamespace(cycles=0, missed_deadlines=0, worst_lateness=0.0, cpu_seconds=0.0,
@@ -34,6 +35,9 @@ class SignalledInsideAParser:
         self.closed = False
 
     def open(self, now: float) -> None:
+        pass
+
+    def start_guard(self) -> None:
         pass
 
     def step(self, now: float) -> None:

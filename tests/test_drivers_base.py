@@ -198,3 +198,40 @@ def test_poll_returns_what_the_driver_read():
     assert b.poll(0.1) is True
     b.fresh = False
     assert b.poll(0.2) is False and b.reads == [0.1, 0.2]
+
+
+def test_no_fresh_odometry_for_the_input_timeout_holds_the_base_still_one_line_per_episode(caplog):
+    b = opened(watchdog=0.5)
+    b.input_period = 0.25                          # 3 periods: 0.75 s, more than the watchdog
+    assert b.input_timeout == 0.75
+    with caplog.at_level(logging.WARNING):
+        for k in range(1, 11):                     # fresh odometry every 0.1 s while driving
+            b.poll(k * 0.1)
+            b.set_velocity(0.2, 0.0, k * 0.1)
+        assert b.sent[-1][:2] == (0.2, 0.0) and not b.blind
+        b.fresh = False                            # the device babbles or goes silent
+        t = 1.0
+        while t < 3.0:
+            t = round(t + 0.05, 2)
+            b.poll(t)
+            b.set_velocity(0.2, 0.0, t)
+            if t < 1.75:
+                assert b.sent[-1][:2] == (0.2, 0.0), t
+            else:
+                assert b.blind and b.sent[-1][:2] == (0.0, 0.0), t
+        b.fresh = True
+        b.poll(3.05)
+        b.set_velocity(0.2, 0.0, 3.05)
+        assert not b.blind and b.sent[-1][:2] == (0.2, 0.0)
+    assert b.stats.input_losses == 1 and b.stats.watchdog_stops == 0
+    lines = [r.getMessage() for r in caplog.records]
+    assert len(lines) == 2 and "no valid input" in lines[0] and "again after 2.05 s" in lines[1], lines
+
+
+def test_no_input_watchdog_before_the_first_odometry():
+    b = opened(watchdog=0.5)
+    b.fresh = False                                # a base that has not streamed yet (a handshake)
+    for k in range(1, 30):
+        b.poll(k * 0.1)
+        b.set_velocity(0.2, 0.0, k * 0.1)
+    assert not b.blind and b.sent[-1][:2] == (0.2, 0.0) and b.stats.input_losses == 0

@@ -71,3 +71,4 @@ def test_the_built_wheel_holds_runtime_and_sitl_with_the_dialect_and_examples(tm
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stdout
     assert [ln.split()[0] for ln in r.stdout.splitlines()[1:]] == ["*.dist-info", "runtime", "sitl"]
+    assert wheel_contents.stale(wheel) == []           # every module is this checkout's, none left from a build/

@@ -2,33 +2,22 @@
 `mrta sitl run --devices-only`, drives the pybullet robot and reads its sensors."""
 from __future__ import annotations
 
-import json
 import math
 import signal
-import subprocess
-import sys
 import time
 
 import pytest
 
-from tests.test_sitl_fleet import ROOT, _fleet_copy
+from tests.sitl_util import devices_only
+from tests.test_sitl_fleet import _fleet_copy
 
 
 @pytest.mark.slow
 def test_pycreate2_drives_a_sitl_robot_from_the_manifest(tmp_path):
     pycreate2 = pytest.importorskip("pycreate2")
-    manifest = tmp_path / "manifest.json"
-    sitl = subprocess.Popen([sys.executable, "-m", "runtime.cli", "sitl", "run", str(_fleet_copy(tmp_path)),
-                             "--devices-only", "--speedup", "1", "--manifest", str(manifest),
-                             "--run-dir", str(tmp_path / "run")],
-                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    sitl, robots = devices_only(_fleet_copy(tmp_path), tmp_path)
     try:
-        deadline = time.monotonic() + 60
-        while not manifest.exists():
-            assert sitl.poll() is None, sitl.stdout.read()
-            assert time.monotonic() < deadline, "no manifest"
-            time.sleep(0.05)
-        robot = json.loads(manifest.read_text())["robots"][0]
+        robot = robots[0]
         bot = pycreate2.Create2(robot["base"]["port"], baud=robot["base"]["baudrate"])
         bot.start()
         bot.safe()

@@ -389,6 +389,7 @@ class MavlinkLink:
         self._next_heartbeat: float | None = None
         self._beats = Silence(None, self.heartbeat_timeout)     # peers' HEARTBEATs: the one liveness rule
         self._now = float("-inf")
+        self.tap = None          # tap(direction "tx" | "rx", datagram, address, now): a recording's raw frames
         self.gcs_last_heartbeat: float | None = None
         self.gcs_inbox: list[tuple[object, tuple]] = []       # (pymavlink message, source address)
         self._gcs_seen: dict[tuple, float] = {}               # ground-station addresses -> last heard
@@ -418,6 +419,8 @@ class MavlinkLink:
         return frame
 
     def _sendto(self, frame: bytes, addr) -> bool:
+        if self.tap is not None:
+            self.tap("tx", frame, addr, self._now)
         try:
             self.sock.sendto(frame, addr)
         except OSError as e:
@@ -538,6 +541,8 @@ class MavlinkLink:
         """Parse one datagram; return the agent messages addressed to us.  Never raises.  The datagram is
         counted once: ``received`` if a frame in it was taken, else the first reason a frame was refused."""
         self._unsigned_net = self.signing and addr in self.unsigned_gcs
+        if self.tap is not None:
+            self.tap("rx", data, addr, now)
         msgs, after = parse_datagram(self.mav, self.module, data)
         refused: list[str] = []
         out: list = []

@@ -20,6 +20,7 @@ of drivers or methods exists once, in its registry); a wrong tag names the allow
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import sys
 import types
@@ -130,6 +131,13 @@ def union_field(tag: str, choices: Callable[[], Mapping[str, type]], default: st
 
 # --------------------------------------------------------------------------- builder
 
+@functools.cache
+def hints(tp: type) -> dict[str, Any]:
+    """``typing.get_type_hints(tp)``, evaluated once per config class (evaluating the annotations was 70 % of
+    building a robot config: docs/config.md)."""
+    return typing.get_type_hints(tp)
+
+
 def _type_name(tp: Any) -> str:
     origin = typing.get_origin(tp)
     if origin is Literal:
@@ -180,13 +188,13 @@ def _build(tp: Any, value: Any, file: str, key: str, meta: dict | None = None) -
                 raise ConfigError(file, f"{key}.{shown}" if key else shown,
                                   "no such key (known: " + ", ".join(fields) + ")")
         kwargs = {}
-        hints = typing.get_type_hints(tp)
+        th = hints(tp)
         for name, f in fields.items():
             sub = f"{key}.{name}" if key else name
             tagged = f.metadata.get("tagged")
             if tagged is not None and name in value:
                 v = value[name]
-                if typing.get_origin(hints[name]) is tuple:          # a list of union members
+                if typing.get_origin(th[name]) is tuple:          # a list of union members
                     if not isinstance(v, (list, tuple)):
                         raise ConfigError(file, sub, "a list of mappings", v)
                     kwargs[name] = tuple(_build(tagged.pick(e, file, f"{sub}[{i}]"), e, file, f"{sub}[{i}]")
@@ -194,10 +202,10 @@ def _build(tp: Any, value: Any, file: str, key: str, meta: dict | None = None) -
                 else:
                     kwargs[name] = _build(tagged.pick(v, file, sub), v, file, sub)
             elif name in value:
-                kwargs[name] = _build(hints[name], value[name], file, sub, dict(f.metadata))
+                kwargs[name] = _build(th[name], value[name], file, sub, dict(f.metadata))
             elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
                 what = (f"a mapping with {tagged.tag}: one of {'|'.join(tagged.choices())}" if tagged
-                        else _type_name(hints[name]))
+                        else _type_name(th[name]))
                 raise ConfigError(file, sub, f"{what} (required)")
         if "source" in {f.name for f in dataclasses.fields(tp)}:
             kwargs["source"] = file

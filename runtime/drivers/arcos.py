@@ -61,6 +61,7 @@ class ArcosBase(MobileBase):
 
     Config = ArcosConfig
     ranging = True             # the sonar ring
+    input_period = 0.1         # s: one SIP per cycle (the P3-DX's default, as MobileSim's)
 
     @classmethod
     def from_config(cls, cfg: ArcosConfig, robot_id=None) -> "ArcosBase":
@@ -78,7 +79,7 @@ class ArcosBase(MobileBase):
         self.port = port
         self.want_sonar = bool(sonar)
         self.stats.extra.update({k: 0 for k in (
-            "bad_count", "bad_sip", "bad_sonar", "other_packets", "handshakes", "sync_restarts", "sync_resends",
+            "bad_count", "stale_headers", "bad_sip", "bad_sonar", "other_packets", "handshakes", "sync_restarts", "sync_resends",
             "late_sync_replies",
             "stale_sessions", "reconnects", "pulses", "motion_commands", "enable_requests")})
         self.link = SerialLink(port, baudrate, "ARCOS", self.log, self.stats.extra)
@@ -127,6 +128,14 @@ class ArcosBase(MobileBase):
         self.link.close()
         self.state = "closed"
         self.sensors.mode = "closed"
+
+    def stop_bytes(self) -> tuple[bytes, bytes]:
+        """VEL 0 and RVEL 0; for a dead daemon then STOP and CLOSE (the server ends the session, motors stopped).
+        The robot's own watchdog stops it anyway, after its watchdog time (2 s on a P3-DX)."""
+        return P.vel(0) + P.rvel(0), P.vel(0) + P.rvel(0) + P.stop() + P.close()
+
+    def port_fd(self) -> int | None:
+        return self.link.fileno()
 
     # ------------------------------------------------------------------ polling
     def _read(self, now: float) -> bool:
@@ -360,6 +369,7 @@ class ArcosBase(MobileBase):
         self.stats.bad_checksum = p.bad_checksum
         self.stats.dropped_bytes = p.dropped_bytes
         self.stats.extra["bad_count"] = p.bad_count
+        self.stats.extra["stale_headers"] = p.stale_headers
 
 
 def arcos_footprint(params: P.RobotParams = P.P3DX_SH, max_speed: float | None = None) -> Footprint:

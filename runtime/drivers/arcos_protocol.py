@@ -123,8 +123,12 @@ class PacketParser:
 
     A packet starts at ``FA FB``; a count below 3 cannot be one.  A count that is impossible or a checksum
     that does not match drops only the ``FA`` and the search goes on from the next byte, so a good packet
-    that follows (or hides inside) garbage is still found.  Counters: ``packets``, ``packet_bytes``,
-    ``bad_checksum``, ``bad_count``, ``dropped_bytes``; with ``pending`` the bytes add up to ``fed``.
+    that follows (or hides inside) garbage is still found.  So does a count whose packet is not complete yet while
+    a complete packet with a good checksum starts after its header (``stale_headers``): a real packet arrives
+    whole before the next one starts, so such a header is garbage, and without this rule a stray ``FA FB`` with a
+    count of 250 at the end of garbage held the good packets after it back until 253 bytes had come (a
+    handshake's six-byte replies: 10 s).  Counters: ``packets``, ``packet_bytes``, ``bad_checksum``,
+    ``bad_count``, ``stale_headers``, ``dropped_bytes``; with ``pending`` the bytes add up to ``fed``.
     Never raises on any bytes.
     """
 
@@ -135,7 +139,20 @@ class PacketParser:
         self.packet_bytes = 0
         self.bad_checksum = 0
         self.bad_count = 0
+        self.stale_headers = 0
         self.dropped_bytes = 0
+
+    @staticmethod
+    def _good_packet_after(buf: bytearray, i: int, end: int) -> bool:
+        """A complete packet with a good checksum starts at a header after the one at ``i``."""
+        k = buf.find(HEADER, i + 1)
+        while 0 <= k and k + 3 <= end:
+            total = buf[k + 2] + 3
+            if buf[k + 2] >= 3 and k + total <= end and \
+                    checksum(bytes(buf[k + 3:k + total - 2])) == (buf[k + total - 2] << 8 | buf[k + total - 1]):
+                return True
+            k = buf.find(HEADER, k + 1)
+        return False
 
     @property
     def pending(self) -> int:
@@ -167,6 +184,11 @@ class PacketParser:
                 continue
             total = count + 3
             if end - i < total:
+                if self._good_packet_after(buf, i, end):   # garbage that looked like a long packet's start
+                    self.stale_headers += 1
+                    self.dropped_bytes += 1
+                    i += 1
+                    continue
                 break
             body = bytes(buf[i + 3:i + total - 2])
             if checksum(body) != (buf[i + total - 2] << 8 | buf[i + total - 1]):

@@ -132,6 +132,7 @@ class LinkStats:
     nonfinite_commands: int = 0  # of them with a nan/inf, sent as a stop
     clipped_commands: int = 0    # of them scaled down to the footprint's limits
     watchdog_stops: int = 0      # times the watchdog stopped a base left moving without commands
+    input_losses: int = 0        # episodes of no valid input (odometry) for a watchdog period while told to move
     frames: int = 0              # good frames decoded
     bad_checksum: int = 0        # frames dropped for a checksum mismatch
     dropped_bytes: int = 0       # bytes skipped while resynchronising
@@ -144,6 +145,7 @@ class MobileBase(abc.ABC):
     odometry: Odometry
     sensors: BaseSensors
     stats: LinkStats
+    input_period = 0.0         # s between the odometry updates the base sends (the input watchdog waits 3 at least)
     latches_faults = False     # True: ``sensors.faults`` stay, and the base stands, until reset_faults() clears them
     ranging = False            # True: it has range sensors (``sensors.ranges`` empty then means nothing in range)
 
@@ -159,6 +161,9 @@ class MobileBase(abc.ABC):
         self.is_open = False
         self._last_cmd_t: float | None = None
         self._moving = False               # the last command sent told the base to move
+        self._valid_t: float | None = None     # the last poll that decoded fresh odometry since open
+        self.blind = False                     # the last poll found no valid input for input_timeout: held still
+        self._blind_since: float | None = None  # an input-loss episode was logged at this time
         self._failures: dict[str, int] = {}    # link failures in a row, by counter (_link_failed)
 
     @property
@@ -174,6 +179,9 @@ class MobileBase(abc.ABC):
         self._open(now)
         self.is_open = True
         self._last_cmd_t = now
+        self._valid_t = None
+        self._blind_since = None
+        self.blind = False
         self._moving = False
 
     def close(self) -> None:
@@ -186,15 +194,43 @@ class MobileBase(abc.ABC):
 
     # ------------------------------------------------------------------ cycle
     def poll(self, now: float) -> bool:
-        """Read and decode what has arrived, then enforce the watchdog.  True if new odometry."""
+        """Read and decode what has arrived, then enforce both watchdogs: no command for ``watchdog`` s, and no
+        valid input (fresh odometry) for ``input_timeout`` s once there was some since open, which holds the base still
+        until valid input returns (a base that babbles or goes silent is not driven blind).  True if new
+        odometry."""
         if not self.is_open:
             return False
         fresh = self._read(now)
+        if fresh:
+            if self._blind_since is not None:
+                self.log.warning("valid input from the base again after %.2f s: driving again",
+                                 now - self._blind_since)
+                self._blind_since = None
+            self._valid_t = now
         if self._moving and now - self._last_cmd_t >= self.watchdog:
             self._moving = self._command(0.0, 0.0, now)
             self.stats.watchdog_stops += 1
             self.log.warning("watchdog: no command for %.2f s, base stopped", now - self._last_cmd_t)
+        self.blind = self._valid_t is not None and now - self._valid_t >= self.input_timeout
+        if self._moving and self.blind:
+            self._moving = self._command(0.0, 0.0, now)
+            self._lost_input(now)
         return fresh
+
+    @property
+    def input_timeout(self) -> float:
+        """Seconds without fresh odometry before the base is held still: ``watchdog``, at least 3 input periods."""
+        return max(self.watchdog, 3 * self.input_period)
+
+    def _lost_input(self, now: float) -> None:
+        """One line per episode, when it first stops (or refuses to move) the base."""
+        if self._blind_since is None:
+            self._blind_since = self._valid_t
+            self.stats.input_losses += 1
+            s = self.stats
+            self.log.warning("no valid input from the base for %.2f s (%d bytes dropped, %d bad checksums so far): "
+                             "base held still until it returns", now - self._valid_t, s.dropped_bytes,
+                             s.bad_checksum)
 
     def set_velocity(self, v: float, w: float, now: float) -> None:
         """Command forward speed ``v`` (m/s) and turn rate ``w`` (rad/s).  A nan or inf stops the base;
@@ -210,6 +246,9 @@ class MobileBase(abc.ABC):
             k = self._footprint.scale(v, w)
             if k < 1.0:
                 v, w = v * k, w * k
+        if (v, w) != (0.0, 0.0) and self.blind:
+            self._lost_input(now)
+            v = w = 0.0
         self._moving = self._command(v, w, now)
         self._last_cmd_t = now
         self.stats.commands += 1
@@ -232,6 +271,20 @@ class MobileBase(abc.ABC):
 
     def _link_ok(self, counter: str) -> None:
         self._failures[counter] = 0
+
+    # ------------------------------------------------------------------ stopping from outside the daemon
+    guard: float | None = None   # s of daemon silence before its stop guard stops the base; None: no guard
+
+    def stop_bytes(self) -> tuple[bytes, bytes] | None:
+        """What stops the base when written on its port by someone else than this driver (the stop guard,
+        ``mrta stop-base``): ``(pause, final)``, the stop for a frozen daemon that may wake up and the one for a
+        dead daemon; None for a base that cannot be stopped that way (it stops by its own watchdog).  A base that
+        has them has a :class:`~runtime.drivers.serial_link.SerialLink` as ``link`` (``mrta stop-base`` opens it)."""
+        return None
+
+    def port_fd(self) -> int | None:
+        """The open port's file descriptor, for the stop guard; None when it has none."""
+        return None
 
     def reset_faults(self, now: float) -> bool:
         """Ask the base to clear the faults it reports in ``sensors.faults`` and drive again (the operator's

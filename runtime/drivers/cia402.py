@@ -18,7 +18,7 @@ to ``canopen`` -- the driver is polled like every base; python-can's receive thr
 :meth:`_open` and :meth:`_close` block on SDO answers -- then sends this master's heartbeat (0x700 + ``master_node``,
 state 5) every ``heartbeat`` seconds; odometry from the position actual values (velocities from velocity actual);
 and the heartbeat consumer ``canopen`` lacks: a drive not heard for 3 heartbeat periods, or reporting FAULT
-(statusword), an EMCY, or an NMT state other than operational, is a fault.  On a fault the other drive gets a
+(statusword), an EMCY, or an NMT state other than operational, is a fault.  On a fault both drives get a
 quick stop (controlword 0x02, target 0) in the same cycle, the faults go to ``sensors.faults``
 (``"left_drive_silent"``, ``"right_drive_emcy_2310"``, ``"left_drive_fault"``, ``"left_drive_pre-operational"``)
 and stay there until :meth:`reset_faults`: NMT start where needed, then per drive the 402 transitions towards
@@ -29,6 +29,7 @@ without blocking; the faults clear when both drives are enabled and healthy, or 
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 from dataclasses import dataclass, field
 from typing import Literal, Optional
@@ -148,12 +149,20 @@ class _Drive:
 
 class _FrameMonitor(can.Listener):
     """Counts every received frame by CANopen kind, and the frames no service sends (bad id or length).
-    Never raises: an exception here would end python-can's receive thread."""
+    Never raises: an exception here would end python-can's receive thread.  :meth:`on_error` takes what the bus
+    raised in that thread (while ``_open`` and ``_close`` run it), so the thread goes on and the driver reports it
+    once."""
 
     def __init__(self):
         self.kinds: dict[str, int] = {}
         self.malformed = 0
         self.lengths: dict[int, int] = {}      # COB-ID -> data length its configured PDO has
+        self.thread_errors: list[str] = []     # what the receive thread raised (the first few), for the driver
+
+    def on_error(self, exc: Exception) -> None:
+        if len(self.thread_errors) < 10:
+            self.thread_errors.append(_first_line(exc))
+        self.malformed += 1
 
     def on_message_received(self, msg: can.Message) -> None:
         try:
@@ -188,12 +197,17 @@ class Cia402Base(MobileBase):
         super().__init__(Footprint(cfg.radius, cfg.track, cfg.max_speed, turn), cfg.watchdog,
                          get_logger("cia402", robot_id))
         self.cfg = cfg
+        self.input_period = cfg.pdo_period
         self.drives = (_Drive("left", cfg.left_node, -1 if cfg.invert_left else 1),
                        _Drive("right", cfg.right_node, -1 if cfg.invert_right else 1))
         self.network: canopen.Network | None = None
         self.monitor = _FrameMonitor()
         self.stats.extra.update({"frames_out": 0, "send_errors": 0, "receive_errors": 0, "malformed": 0, "heartbeats": 0, "emcy": 0,
-                                 "fault_stops": 0, "resets": 0})
+                                 "fault_stops": 0, "resets": 0, "undecodable": 0, "bus_log_lines": 0})
+        self._muffle = _Muffle()
+        self._muffled: logging.Logger | None = None
+        self._garbled_since: float | None = None   # an episode of undecodable input was logged at this time
+        self._thread_errors_seen = 0
         self._next_heartbeat = -math.inf
         self._latched: dict[str, str] = {}     # fault name -> description, until a reset clears it
         self._resetting: float | None = None   # the reset's deadline
@@ -213,6 +227,8 @@ class Cia402Base(MobileBase):
         except Exception as exc:       # noqa: BLE001 - each interface raises its own kinds
             raise InputError(f"CiA 402 base: cannot open the CAN bus {self._where()} ({exc}); expected a "
                              "python-can interface and channel that exist") from None
+        self._muffled = logging.getLogger(type(bus).__module__)
+        self._muffled.addFilter(self._muffle)
         net = canopen.Network(bus)
         net.listeners.append(self.monitor)
         self.network = net
@@ -343,6 +359,10 @@ class Cia402Base(MobileBase):
                 net.notifier = None
 
     def _shutdown(self) -> None:
+        self._thread_report()
+        if self._muffled is not None:
+            self._muffled.removeFilter(self._muffle)
+            self._muffled = None
         if self.network is not None:
             try:
                 self.network.disconnect()
@@ -365,19 +385,53 @@ class Cia402Base(MobileBase):
 
     def _receive(self) -> None:
         """Every frame waiting on the bus, in order, to canopen (which catches what its callbacks raise) and the
-        frame monitor.  A bus that fails LOST_AFTER polls in a row is lost."""
+        frame monitor.  A bus that fails LOST_AFTER polls in a row is lost; input that does not decode (garbage
+        on a socketcand or slcan stream) is counted in ``undecodable``, one line per episode, and reading goes on
+        (the drives' heartbeats fall silent meanwhile: a latched fault, the base stopped)."""
         net = self.network
+        self._thread_report()
+        garbled = got = False
         try:
             for _ in range(MAX_FRAMES_PER_POLL):
-                msg = net.bus.recv(0)
+                try:
+                    msg = net.bus.recv(0)
+                except can.CanError as exc:
+                    if not _undecodable(exc):
+                        raise
+                    garbled = True
+                    self.stats.extra["undecodable"] += 1
+                    continue
                 if msg is None:
                     break
+                got = True
                 for listener in net.listeners:
                     listener.on_message_received(msg)
         except (can.CanError, OSError) as exc:
             self._link_failed("receive_errors", exc, f"CiA 402 base: reads from {self._where()}")
             return
         self._link_ok("receive_errors")
+        self._garbled(garbled, got)
+
+    def _garbled(self, now_garbled: bool, got: bool) -> None:
+        x = self.stats.extra
+        x["bus_log_lines"] = self._muffle.count
+        if now_garbled and self._garbled_since is None:
+            self._garbled_since = self._last_now
+            self.log.warning("CiA 402 base: undecodable input from %s (counted in 'undecodable', not logged per "
+                             "frame)", self._where())
+        elif got and not now_garbled and self._garbled_since is not None:
+            self.log.warning("CiA 402 base: input from %s decodes again after %.2f s (%d undecodable reads)",
+                             self._where(), self._last_now - self._garbled_since, x["undecodable"])
+            self._garbled_since = None
+
+    def _thread_report(self) -> None:
+        """What python-can's receive thread raised (during open or close), reported once."""
+        errors = self.monitor.thread_errors
+        if len(errors) > self._thread_errors_seen:
+            if self._thread_errors_seen == 0:
+                self.log.warning("CiA 402 base: python-can's receive thread on %s: %s (further ones counted in "
+                                 "'malformed')", self._where(), errors[0])
+            self._thread_errors_seen = len(errors)
 
     def _odometry(self, now: float) -> bool:
         """Dead reckoning from the position actual values; wheel speeds from velocity actual, taken as 0 for a
@@ -445,12 +499,11 @@ class Cia402Base(MobileBase):
         self.sensors.faults = tuple(sorted(self._latched))
 
     def _stop_drives(self) -> None:
-        """Quick stop (0x02, target 0) to every drive that still listens: in the cycle the fault was seen."""
+        """Quick stop (0x02, target 0) to both drives, in the cycle the fault was seen."""
         self.stats.extra["fault_stops"] += 1
         self._resetting = None
-        for d in self.drives:
-            if not self._silent(d):
-                self._transmit(d, P.CW_QUICK_STOP, 0)
+        for d in self.drives:           # a silent drive too: it may be running, unheard (garbage on the bus)
+            self._transmit(d, P.CW_QUICK_STOP, 0)
         self._moving = False
 
     # ------------------------------------------------------------------ fault reset
@@ -508,8 +561,7 @@ class Cia402Base(MobileBase):
             return False
         if self._latched:
             for d in self.drives:
-                if not self._silent(d):
-                    self._transmit(d, P.CW_QUICK_STOP, 0)
+                self._transmit(d, P.CW_QUICK_STOP, 0)
             return False
         half = self._footprint.track / 2.0
         targets = [self.units.velocity((v + s * w * half) * d.sign) for s, d in zip((-1, 1), self.drives)]
@@ -539,6 +591,33 @@ class Cia402Base(MobileBase):
         self.stats.extra["malformed"] = m.malformed
         self.stats.extra["heartbeats"] = sum(d.heartbeats for d in self.drives)
         self.stats.extra["emcy"] = sum(len(d.emcy) for d in self.drives)
+
+
+def _first_line(exc: BaseException) -> str:
+    """``exc`` in one line (python-can's messages may carry a whole traceback)."""
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0] if text else ''}"
+
+
+def _undecodable(exc: BaseException) -> bool:
+    """A receive error caused by the bytes, not by the link: a socketcand or slcan line that does not parse."""
+    cause = exc.__cause__ or exc.__context__
+    return isinstance(cause, (ValueError, UnicodeError, IndexError, TypeError))
+
+
+class _Muffle(logging.Filter):
+    """On a python-can interface's logger: what it says per bad frame or failed receive (warnings, errors with a
+    traceback each) is counted, not printed; the driver reports the episode in one line."""
+
+    def __init__(self):
+        super().__init__()
+        self.count = 0
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno >= logging.WARNING:
+            self.count += 1
+            return False
+        return True
 
 
 def _emcy_text(code: int) -> str:

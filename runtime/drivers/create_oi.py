@@ -35,20 +35,22 @@ class CreateOIConfig:
     mode: Literal["safe", "full"] = "safe"
     watchdog: float = field(default=0.5, metadata=rng(0.05, 10.0))
     max_speed: float = field(default=0.5, metadata=rng(0.01, 0.5))   # m/s per wheel
+    guard: Optional[float] = field(default=0.5, metadata=rng(0.05, 10.0))   # s: the stop guard's bound; null: none
 
 
 class CreateOI(MobileBase):
     """Create 2 or Create 1 on one serial link; non-blocking, polled with the current time."""
 
     Config = CreateOIConfig
+    input_period = P.STREAM_PERIOD
 
     @classmethod
     def from_config(cls, cfg: CreateOIConfig, robot_id=None) -> "CreateOI":
         return cls(cfg.port, model=cfg.model, baudrate=cfg.baudrate, mode=cfg.mode, watchdog=cfg.watchdog,
-                   max_speed=cfg.max_speed, robot_id=robot_id)
+                   max_speed=cfg.max_speed, guard=cfg.guard, robot_id=robot_id)
 
     def __init__(self, port: str, model: str = "create2", baudrate: int | None = None, mode: str = "safe",
-                 watchdog: float = 0.5, max_speed: float = 0.5, robot_id=None):
+                 watchdog: float = 0.5, max_speed: float = 0.5, guard: float | None = None, robot_id=None):
         P.check_model(model)
         if mode not in ("safe", "full"):
             raise InputError(f"Create OI mode {mode!r}: expected 'safe' or 'full'")
@@ -60,6 +62,7 @@ class CreateOI(MobileBase):
             raise InputError(f"Create OI max_speed {max_speed!r}: expected 0 < m/s <= {top:g}")
         super().__init__(create_footprint(model, max_speed), watchdog, get_logger("create_oi", robot_id))
         self.port = port
+        self.guard = guard
         self.model = model
         self.geometry = geometry
         self.baudrate = baudrate
@@ -99,6 +102,14 @@ class CreateOI(MobileBase):
         self._write(P.pause_resume_stream(False))
         self._write(P.stop() if self.model == "create2" else P.start())
         self.link.close()
+
+    def stop_bytes(self) -> tuple[bytes, bytes]:
+        """Frozen daemon: Drive Direct 0 0 (the OI keeps it until the daemon drives again).  Dead daemon: Drive
+        Direct 0 0, then Start, which leaves the OI in Passive, where it takes no drive command."""
+        return P.drive_direct(0, 0), P.drive_direct(0, 0) + P.start()
+
+    def port_fd(self) -> int | None:
+        return self.link.fileno()
 
     # ------------------------------------------------------------------ polling
     def _read(self, now: float) -> bool:

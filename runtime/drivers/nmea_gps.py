@@ -61,6 +61,7 @@ class NmeaStats:
     truncated: int = 0             # cut by the next '$', or no '*hh' checksum
     overlong: int = 0              # no end of line within max_line bytes
     read_errors: int = 0           # serial read failures (driver only)
+    outages: int = 0               # episodes of no fix for the driver's ``silence`` seconds (driver only)
 
     @property
     def bad(self) -> int:
@@ -280,13 +281,21 @@ class NmeaParser:
 
 
 class NmeaGps:
-    """Polled NMEA GPS on any pyserial URL (device, pty, ``socket://``, ``loop://``)."""
+    """Polled NMEA GPS on any pyserial URL (device, pty, ``socket://``, ``loop://``).
 
-    def __init__(self, port: str, baudrate: int = 9600, robot_id=None):
+    A receiver that babbles or goes silent: what does not parse is counted (``stats``), never logged per sentence;
+    once fixes have come and then none for ``silence`` seconds, one warning opens the outage (``stats.outages``)
+    and one closes it when fixes return.  The robot drives on: the pose filter dead-reckons on odometry meanwhile
+    and gates the first fixes after."""
+
+    def __init__(self, port: str, baudrate: int = 9600, robot_id=None, silence: float = 2.0):
         self.port = port
         self.log = get_logger("gps", robot_id)
         self.parser = NmeaParser(robot_id=robot_id)
         self.last_fix: Optional[GpsFix] = None
+        self.silence = float(silence)
+        self._fix_t: Optional[float] = None      # the last poll that completed a fix
+        self._out_since: Optional[float] = None  # an outage was logged, counted from this fix time
         try:
             self.ser = serial.serial_for_url(port, baudrate=baudrate, timeout=0)
         except (serial.SerialException, ValueError, OSError) as exc:
@@ -315,7 +324,21 @@ class NmeaGps:
             fixes = self.parser.feed(b"", now)        # lets a lone sentence's epoch time out
         if fixes:
             self.last_fix = fixes[-1]
+        self._outage(now, bool(fixes))
         return fixes
+
+    def _outage(self, now: float, fixed: bool) -> None:
+        st = self.parser.stats
+        if fixed:
+            if self._out_since is not None:
+                self.log.warning("gps fixes again on %s after %.2f s", self.port, now - self._out_since)
+                self._out_since = None
+            self._fix_t = now
+        elif self._fix_t is not None and self._out_since is None and now - self._fix_t >= self.silence:
+            self._out_since = self._fix_t
+            st.outages += 1
+            self.log.warning("no gps fix on %s for %.2f s (%d bytes dropped, %d bad sentences so far): "
+                             "dead-reckoning on odometry", self.port, now - self._fix_t, st.dropped_bytes, st.bad)
 
     def close(self) -> None:
         try:

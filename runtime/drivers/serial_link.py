@@ -8,6 +8,8 @@ and logged sparingly; :data:`runtime.drivers.base.LOST_AFTER` reads in a row tha
 """
 from __future__ import annotations
 
+import socket
+
 import serial
 
 from runtime.drivers.base import LOST_AFTER, DeviceLost
@@ -46,6 +48,11 @@ class SerialLink:
             raise InputError(f"{self.what} port {self.url!r}: cannot open ({exc}); "
                              "expected a serial device, pty or pyserial URL") from None
         self._failed_reads = 0
+
+    def fileno(self) -> int | None:
+        """The open port's file descriptor (a device, pty or ``socket://``); None for ``loop://`` or when closed."""
+        from runtime.drivers.guard import port_fd
+        return None if self.ser is None else port_fd(self.ser)
 
     def read_all(self) -> bytes:
         """Everything waiting (non-blocking); b"" if nothing.  DeviceLost after LOST_AFTER failed reads in a row."""

@@ -1,0 +1,448 @@
+"""The recording's channels and sinks: an MCAP file (bounded: rotate or stop) and a Foxglove WebSocket server.
+
+One :class:`Recorder` per recording: a fleet in lock-step SITL records every robot into one file, a daemon
+(``mrta daemon ROBOT.yaml --record FILE.mcap``) records its own robot.  The channels use Foxglove's well-known schemas
+where one fits (``foxglove.PoseInFrame``, ``FrameTransform``, ``PosesInFrame``, ``PointCloud``, ``SceneUpdate``,
+``Log``) and named JSON schemas for the rest (allocation events, wheel commands, bumpers); the topics are in
+:data:`TOPICS`.  ``foxglove-sdk`` (the ``[record]`` extra) writes both, from Rust: one pose costs a few
+microseconds.  Times are given in seconds of the host's clock and written as nanoseconds: the simulated clock in
+SITL (``wall=False``), the system clock on a robot (``wall=True``, whatever the host's ``now``).
+
+A write the disk refuses (full, gone) ends the recording with one warning line and never reaches the host; so does
+reaching ``limit`` bytes without ``rotate`` (with it, the file is closed and the next one, ``NAME.1.mcap``,
+``NAME.2.mcap``, ..., opened).
+"""
+from __future__ import annotations
+
+import json
+import math
+import struct
+import time
+from pathlib import Path
+
+from runtime.errors import InputError
+from runtime.log import get_logger
+
+WORLD = "world"                     # the fixed frame every pose is in
+CHUNK = 256 * 1024                  # bytes of messages per MCAP chunk: what a killed recorder loses at most
+TOPICS = {                          # topic (robot topics: {id} is the robot id) -> schema name
+    "/robot_{id}/pose": "foxglove.PoseInFrame",        # the robot's own estimate, every control cycle
+    "/robot_{id}/truth": "foxglove.PoseInFrame",       # SITL: where the body really is, every control cycle
+    "/tf": "foxglove.FrameTransform",                  # world -> robot_{id}: each robot in the 3D panel
+    "/robot_{id}/path": "foxglove.PosesInFrame",       # the path the robot follows, when it changes
+    "/robot_{id}/command": "mrta.WheelCommand",        # (v, w) to the base, every control cycle
+    "/robot_{id}/ranges": "foxglove.PointCloud",       # range readings (sonar, laser) in the robot's frame
+    "/robot_{id}/bumpers": "mrta.Bumpers",             # bumpers and wheel drops, when they change
+    "/world": "foxglove.SceneUpdate",                  # arena, obstacles and task places coloured by state
+    "/allocation": "mrta.AllocationEvent",             # messages sent and received, commitments, progress, tasks
+    "/log": "foxglove.Log",                            # every log record and the STATUSTEXT lines
+    "/robot_{id}/mavlink": "mrta.MavlinkFrame",        # raw MAVLink frames of the robot's link (optional)
+    "/robot_{id}/stats": "mrta.RobotStats",            # the daemon's status snapshot (counters), every second
+}
+
+_ANY = {"type": "object", "additionalProperties": True}
+SCHEMAS = {
+    "mrta.WheelCommand": {"type": "object", "title": "mrta.WheelCommand", "properties": {
+        "robot": {"type": "integer"}, "v": {"type": "number", "description": "m/s"},
+        "w": {"type": "number", "description": "rad/s"}}},
+    "mrta.Bumpers": {"type": "object", "title": "mrta.Bumpers", "properties": {
+        "robot": {"type": "integer"}, "left": {"type": "boolean"}, "right": {"type": "boolean"},
+        "wheel_drop": {"type": "boolean"}, "faults": {"type": "array", "items": {"type": "string"}}}},
+    "mrta.AllocationEvent": {"type": "object", "title": "mrta.AllocationEvent", "properties": {
+        "robot": {"type": "integer", "description": "the robot whose event it is (0: the SITL operator)"},
+        "event": {"type": "string", "description": "sent | received | committed | released | progress | task | "
+                                                   "peer_lost | operator"},
+        "t": {"type": "number", "description": "s, the host's clock (sim time in SITL)"},
+        "task": {"type": ["integer", "null"]},
+        "message": {"type": "string", "description": "the message's type (sent, received), the progress or task "
+                                                     "state, the operator's event"},
+        "robots": {"type": "array", "items": {"type": "integer"}},
+        "fields": _ANY}},
+    "mrta.RobotStats": {"type": "object", "title": "mrta.RobotStats", "description": "the daemon's status snapshot: "
+                        "cycles, messages sent and received, drops by reason, the link's counters",
+                        "additionalProperties": True},
+    "mrta.MavlinkFrame": {"type": "object", "title": "mrta.MavlinkFrame", "properties": {
+        "robot": {"type": "integer"}, "direction": {"type": "string", "description": "tx | rx"},
+        "address": {"type": "string"}, "frame": {"type": "string", "description": "the datagram, hex"}}},
+}
+TASK_COLOURS = {"open": (1.0, 0.6, 0.1), "held": (0.2, 0.45, 1.0), "done": (0.2, 0.75, 0.3),
+                "withdrawn": (0.5, 0.5, 0.5), "cleared": (0.5, 0.5, 0.5)}
+
+
+class RecordingUnavailable(RuntimeError):
+    """The ``[record]`` extra is not installed."""
+
+
+def _fx():
+    try:
+        import foxglove
+        import foxglove.messages  # noqa: F401
+    except ImportError:
+        raise RecordingUnavailable("recording needs foxglove-sdk: pip install 'mrta-runtime[record]'") from None
+    return foxglove
+
+
+class _File:
+    """The MCAP writer's file: counts the bytes written; a write the disk refuses is kept as ``error`` and not
+    raised (the writer lives in Rust, inside the host's control cycle).  After an error the file's position goes
+    on as if the writes had landed (the writer checks it), until :meth:`Recorder.check` closes the recording."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.fh = open(path, "wb")
+        self.bytes = 0
+        self.pos = 0
+        self.error: OSError | None = None
+
+    def write(self, data) -> int:
+        if self.error is None:
+            try:
+                self.fh.write(data)
+                self.bytes += len(data)
+            except OSError as exc:
+                self.error = exc
+        self.pos += len(data)
+        return len(data)
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        if self.error is None:
+            try:
+                self.pos = self.fh.seek(offset, whence)
+                return self.pos
+            except OSError as exc:
+                self.error = exc
+        self.pos = offset if whence == 0 else self.pos + offset if whence == 1 else self.pos
+        return self.pos
+
+    def tell(self) -> int:
+        return self.pos
+
+    def flush(self) -> None:
+        if self.error is None:
+            try:
+                self.fh.flush()
+            except OSError as exc:
+                self.error = exc
+
+    def close(self) -> None:
+        try:
+            self.fh.close()
+        except OSError as exc:
+            self.error = self.error or exc
+
+
+class Recorder:
+    """Channels on one Foxglove context, sunk into ``path`` (an MCAP file; None: none) and, with ``live``
+    ``(host, port)``, a Foxglove WebSocket server.  ``limit``: bytes per file (None: unbounded); ``rotate``: at the
+    limit go on in the next file, else stop.  ``mavlink``: record raw MAVLink frames (:meth:`frame`)."""
+
+    def __init__(self, path: str | Path | None = None, *, wall: bool = False, limit: int | None = None,
+                 rotate: bool = False, live: tuple[str, int] | None = None, mavlink: bool = False,
+                 chunk_size: int = CHUNK, name: str = "mrta", robot_id: int | str | None = None,
+                 flush_period: float | None = None):
+        fx = _fx()
+        self.fx = fx
+        self.m = fx.messages
+        self.log = get_logger("recording", robot_id)
+        self.wall = wall
+        self.limit = limit
+        self.rotate = rotate
+        self.mavlink = mavlink
+        self.chunk_size = chunk_size
+        self.flush_period = flush_period      # wall s between chunk flushes: a killed recorder loses at most this
+        self._next_flush = time.monotonic() + (flush_period or 0.0)
+        self.ctx = fx.Context()
+        self.target = None if path is None else Path(path)
+        self.files: list[Path] = []          # every file written, in order
+        self.stopped: str | None = None      # why the file recording ended early
+        self._file: _File | None = None
+        self._writer = None
+        self._last_ns = 0
+        self._channels: dict[str, object] = {}
+        self._by_robot: dict[tuple[int, str], object] = {}
+        self._metadata: list[tuple[str, dict]] = []
+        self.server = None
+        if self.target is not None:
+            self._open(self.target)
+        if live is not None:
+            host, port = live
+            try:
+                self.server = fx.start_server(name=name, host=host, port=port, context=self.ctx)
+            except RuntimeError as exc:          # foxglove's FoxgloveError: the address is taken or unknown
+                self.close()
+                raise InputError(f"--live {host}:{port}: expected an address free to serve on ({exc})") from None
+        self.stamp(0.0)
+
+    # ------------------------------------------------------------------ sinks
+    def _open(self, path: Path) -> None:
+        from foxglove.mcap import MCAPWriteOptions
+
+        self._file = _File(path)
+        opts = MCAPWriteOptions(chunk_size=self.chunk_size, compression_threads=0, profile="")
+        self._writer = self.fx.open_mcap(self._file, context=self.ctx, writer_options=opts)
+        self.files.append(path)
+        for name, data in self._metadata:        # a rotated file carries the recording's metadata too
+            self._writer.write_metadata(name, data)
+
+    def _close_file(self) -> None:
+        if self._writer is not None:
+            try:
+                self._writer.close()
+            except Exception as exc:       # the writer's own I/O error: the file is what was written
+                self.log.debug("closing %s: %s", self._file.path, exc)
+            self._file.close()
+            self._writer = None
+
+    def check(self) -> None:
+        """The file's bound and health, once a cycle: rotate or stop at the limit; a refused write ends the file
+        recording with one warning line."""
+        f = self._file
+        if f is None:
+            return
+        if f.error is not None:
+            self._close_file()
+            self._file = None
+            self.stopped = f"{f.path}: {f.error.strerror or f.error}"
+            self.log.warning("recording stopped: %s (the robot runs on)", self.stopped)
+        elif self.flush_period is not None and time.monotonic() >= self._next_flush:
+            self._next_flush = time.monotonic() + self.flush_period
+            self._writer.flush()
+        if self._file is not None and self.limit is not None and self._file.bytes >= self.limit:
+            self._close_file()
+            self._file = None
+            if self.rotate:
+                stem = self.target.name[:-5] if self.target.name.endswith(".mcap") else self.target.name
+                self._open(self.target.with_name(f"{stem}.{len(self.files)}.mcap"))
+            else:
+                self.stopped = f"{f.path}: the size limit ({self.limit} bytes) reached"
+                self.log.warning("recording stopped: %s", self.stopped)
+
+    def flush(self) -> None:
+        if self._writer is not None:
+            self._writer.flush()
+
+    def fail(self, exc: BaseException) -> None:
+        """The writer itself failed (an error, or a panic in the Rust library): end the file recording with one
+        warning line."""
+        if self._file is None:
+            return
+        path = self._file.path
+        self._file.error = self._file.error or OSError(str(exc))
+        try:
+            self._close_file()
+        except BaseException as again:       # the library's panic on the way out: the file is what it is
+            if not recoverable(again):
+                raise
+        self._file = None
+        self.stopped = f"{path}: {type(exc).__name__}: {exc}"
+        self.log.warning("recording stopped: %s (the robot runs on)", self.stopped)
+
+    def metadata(self, name: str, data: dict) -> None:
+        """A metadata record (string values; others as JSON), in this file and every later one."""
+        data = {k: v if isinstance(v, str) else json.dumps(v, separators=(",", ":")) for k, v in data.items()}
+        self._metadata.append((name, data))
+        if self._writer is not None:
+            self._writer.write_metadata(name, data)
+
+    def close(self) -> None:
+        self._close_file()
+        self._file = None
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
+
+    @property
+    def port(self) -> int | None:
+        return None if self.server is None else self.server.port
+
+    # ------------------------------------------------------------------ time
+    def stamp(self, now: float) -> int:
+        """``now`` (s) as the recording's time in ns, never before the last one: the simulated clock, or the
+        system clock on a robot."""
+        if not self.wall and not math.isfinite(now):
+            return self._last_ns
+        ns = time.time_ns() if self.wall else int(round(now * 1e9))
+        if ns > self._last_ns:
+            self._last_ns = ns
+        return self._last_ns
+
+    @property
+    def ns(self) -> int:
+        return self._last_ns
+
+    def _ts(self, ns: int):
+        return self.m.Timestamp(sec=ns // 1_000_000_000, nsec=ns % 1_000_000_000)
+
+    # ------------------------------------------------------------------ channels
+    def channel(self, topic: str, schema: str):
+        ch = self._channels.get(topic)
+        if ch is None:
+            fx = self.fx
+            if schema.startswith("foxglove."):
+                cls = getattr(fx.channels, schema.split(".", 1)[1] + "Channel")
+                ch = cls(topic, context=self.ctx)
+            else:
+                ch = fx.Channel(topic, context=self.ctx, message_encoding="json",
+                                schema=fx.Schema(name=schema, encoding="jsonschema",
+                                                 data=json.dumps(SCHEMAS[schema]).encode()))
+            self._channels[topic] = ch
+        return ch
+
+    def _robot(self, rid: int, topic: str):
+        ch = self._by_robot.get((rid, topic))
+        if ch is None:
+            name = f"/robot_{{id}}/{topic}"
+            ch = self._by_robot[(rid, topic)] = self.channel(name.replace("{id}", str(rid)), TOPICS[name])
+        return ch
+
+    def _json(self, ch, data: dict, ns: int) -> None:
+        try:
+            text = json.dumps(data, separators=(",", ":"), allow_nan=False, default=_plain)
+        except ValueError:             # a NaN or inf: null in the JSON
+            text = json.dumps(_finite(data), separators=(",", ":"), default=_plain)
+        ch.log(text, log_time=ns)
+
+    def _quat(self, yaw: float):
+        return self.m.Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
+
+    def _pose(self, x: float, y: float, yaw: float, z: float = 0.0):
+        m = self.m
+        return m.Pose(position=m.Vector3(x=float(x), y=float(y), z=float(z)), orientation=self._quat(yaw))
+
+    # ------------------------------------------------------------------ what is recorded
+    def pose(self, rid: int, now: float, pose, truth: bool = False) -> None:
+        """The robot's pose ``(x, y, yaw)`` (its estimate, or with ``truth`` the simulation's), and the world ->
+        robot transform (from the truth when there is one)."""
+        ns = self.stamp(now)
+        m, p = self.m, self._pose(*pose[:3])
+        self._robot(rid, "truth" if truth else "pose").log(
+            m.PoseInFrame(timestamp=self._ts(ns), frame_id=WORLD, pose=p), log_time=ns)
+
+    def transform(self, rid: int, now: float, pose) -> None:
+        ns = self.stamp(now)
+        m = self.m
+        self.channel("/tf", TOPICS["/tf"]).log(
+            m.FrameTransform(timestamp=self._ts(ns), parent_frame_id=WORLD, child_frame_id=f"robot_{rid}",
+                             translation=m.Vector3(x=float(pose[0]), y=float(pose[1]), z=0.0),
+                             rotation=self._quat(pose[2])), log_time=ns)
+
+    def path(self, rid: int, now: float, points) -> None:
+        ns = self.stamp(now)
+        m = self.m
+        poses = [self._pose(p[0], p[1], 0.0) for p in points or ()]
+        self._robot(rid, "path").log(m.PosesInFrame(timestamp=self._ts(ns), frame_id=WORLD, poses=poses),
+                                     log_time=ns)
+
+    def command(self, rid: int, now: float, v: float, w: float) -> None:
+        v, w = float(v), float(w)
+        if math.isfinite(v) and math.isfinite(w):      # every cycle: the JSON written out by hand
+            self._robot(rid, "command").log(f'{{"robot":{int(rid)},"v":{v!r},"w":{w!r}}}', log_time=self.stamp(now))
+        else:
+            self._json(self._robot(rid, "command"), {"robot": rid, "v": v, "w": w}, self.stamp(now))
+
+    def ranges(self, rid: int, now: float, ranges) -> None:
+        """``(bearing, distance)`` pairs in the robot's frame, as points in ``robot_{rid}``."""
+        ns = self.stamp(now)
+        m = self.m
+        data = b"".join(struct.pack("<fff", d * math.cos(b), d * math.sin(b), 0.0) for b, d in ranges
+                        if math.isfinite(b) and math.isfinite(d))
+        f32 = m.PackedElementFieldNumericType.Float32
+        fields = [m.PackedElementField(name=n, offset=4 * i, type=f32) for i, n in enumerate("xyz")]
+        self._robot(rid, "ranges").log(m.PointCloud(timestamp=self._ts(ns), frame_id=f"robot_{rid}",
+                                                    point_stride=12, fields=fields, data=data), log_time=ns)
+
+    def bumpers(self, rid: int, now: float, left: bool, right: bool, wheel_drop: bool, faults=()) -> None:
+        self._json(self._robot(rid, "bumpers"), {"robot": rid, "left": bool(left), "right": bool(right),
+                                                 "wheel_drop": bool(wheel_drop), "faults": list(faults)},
+                   self.stamp(now))
+
+    def stats(self, rid: int, now: float, snapshot: dict) -> None:
+        self._json(self._robot(rid, "stats"), snapshot, self.stamp(now))
+
+    def event(self, now: float, robot: int, event: str, message: str = "", task: int | None = None,
+              robots=(), fields: dict | None = None, t: float | None = None) -> None:
+        """One allocation event (see the ``mrta.AllocationEvent`` schema); ``t`` (default ``now``) is when it
+        happened, for events told after the fact."""
+        self._json(self.channel("/allocation", TOPICS["/allocation"]),
+                   {"robot": robot, "event": event, "t": now if t is None else t, "task": task, "message": message,
+                    "robots": list(robots), "fields": fields or {}}, self.stamp(now))
+
+    def text(self, now: float, level: int, name: str, text: str, file: str = "", line: int = 0) -> None:
+        """One log line (``level`` as Python logging's)."""
+        ns = self.stamp(now)
+        m = self.m
+        lv = m.LogLevel
+        level = lv.Error if level >= 40 else lv.Warning if level >= 30 else lv.Info if level >= 20 else lv.Debug
+        self.channel("/log", TOPICS["/log"]).log(
+            m.Log(timestamp=self._ts(ns), level=level, message=text, name=name, file=file, line=line), log_time=ns)
+
+    def frame(self, rid: int, now: float, direction: str, data: bytes, address=None) -> None:
+        """One raw MAVLink datagram of robot ``rid``'s link (``direction`` "tx" or "rx"; ``address`` (host, port)).
+        The JSON is written out by hand: this runs for every datagram."""
+        if self.mavlink:
+            addr = "" if address is None else f"{address[0]}:{int(address[1])}"
+            self._robot(rid, "mavlink").log(
+                f'{{"robot":{int(rid)},"direction":"{"rx" if direction == "rx" else "tx"}",'
+                f'"address":{json.dumps(addr)},"frame":"{bytes(data).hex()}"}}', log_time=self.stamp(now))
+
+    def scene(self, now: float, world, tasks=()) -> None:
+        """The world (a WorldConfig, or None: no map) as scene entities: the arena's floor and walls, the
+        obstacles, and ``tasks`` as ``(id, x, y, label, state)`` places coloured by state (:data:`TASK_COLOURS`)."""
+        ns = self.stamp(now)
+        m = self.m
+        ts = self._ts(ns)
+        entities = [] if world is None else self._arena(world, ts)
+        for tid, x, y, label, state in tasks:
+            rgb = TASK_COLOURS.get(state, (0.8, 0.2, 0.8))
+            entities.append(m.SceneEntity(
+                timestamp=ts, frame_id=WORLD, id=f"task_{tid}",
+                metadata=[m.KeyValuePair(key="state", value=state), m.KeyValuePair(key="task", value=str(tid))],
+                cylinders=[m.CylinderPrimitive(pose=self._pose(x, y, 0.0), size=m.Vector3(x=0.3, y=0.3, z=0.05),
+                                               bottom_scale=1.0, top_scale=1.0, color=self._colour(rgb, 0.8))],
+                texts=[m.TextPrimitive(pose=self._pose(x, y, 0.0, 0.3), billboard=True, font_size=14.0,
+                                       scale_invariant=True, color=self._colour(rgb), text=f"{label} {state}")]))
+        self.channel("/world", TOPICS["/world"]).log(m.SceneUpdate(entities=entities), log_time=ns)
+
+    def _colour(self, rgb, a: float = 1.0):
+        return self.m.Color(r=rgb[0], g=rgb[1], b=rgb[2], a=a)
+
+    def _cube(self, x, y, yaw, sx, sy, sz, rgb, a: float = 1.0):
+        m = self.m
+        return m.CubePrimitive(pose=self._pose(x, y, yaw, sz / 2.0), size=m.Vector3(x=float(sx), y=float(sy),
+                                                                                      z=float(sz)),
+                               color=self._colour(rgb, a))
+
+    def _arena(self, world, ts) -> list:
+        """The floor, the walls (when the world has them) and the box obstacles."""
+        m, cube = self.m, self._cube
+        sx, sy = world.size
+        grey = (0.55, 0.55, 0.6)
+        arena = [cube(0.0, 0.0, 0.0, sx, sy, 0.01, (0.92, 0.92, 0.92), 0.6)]
+        if getattr(world, "walls", False):
+            arena += [cube(0.0, sy / 2, 0.0, sx, 0.05, 0.3, grey), cube(0.0, -sy / 2, 0.0, sx, 0.05, 0.3, grey),
+                      cube(sx / 2, 0.0, 0.0, 0.05, sy, 0.3, grey), cube(-sx / 2, 0.0, 0.0, 0.05, sy, 0.3, grey)]
+        obstacles = [cube(ob.center[0], ob.center[1], getattr(ob, "yaw", 0.0), ob.size[0], ob.size[1],
+                          float(getattr(ob, "height", 0.4)), (0.35, 0.35, 0.4))
+                     for ob in world.obstacles if getattr(ob, "size", None) is not None]
+        return [m.SceneEntity(timestamp=ts, frame_id=WORLD, id="arena", cubes=arena),
+                m.SceneEntity(timestamp=ts, frame_id=WORLD, id="obstacles", cubes=obstacles)]
+
+def recoverable(exc: BaseException) -> bool:
+    """An error the recording may end on while the robot runs on: an Exception, or a panic in the Rust library
+    (pyo3's PanicException is a BaseException); never a signal's or the interpreter's own."""
+    return isinstance(exc, Exception) or type(exc).__name__ == "PanicException"
+
+
+def _plain(v):
+    """JSON for what json does not know: tuples are lists already; enums and other objects as their text."""
+    return getattr(v, "name", None) or str(v)
+
+
+def _finite(v):
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, dict):
+        return {k: _finite(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_finite(x) for x in v]
+    return v

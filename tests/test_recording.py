@@ -1,0 +1,472 @@
+"""Recording (issue 36): a lock-step SITL run's run.mcap read back with the ``mcap`` reader, a Foxglove WebSocket
+client subscribed during the same run, the picture redrawn from the file, and the recorder's bounds (size limit,
+rotation, a full disk) and reader (files cut short, random and bit-flipped bytes) on their own."""
+from __future__ import annotations
+
+import errno
+import io
+import json
+import logging
+import shutil
+import socket
+import struct
+import threading
+import time
+from collections import defaultdict
+
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+pytest.importorskip("foxglove")
+pytest.importorskip("mcap_protobuf")
+
+from runtime.errors import InputError  # noqa: E402
+from runtime.recording import summary  # noqa: E402
+from runtime.recording.read import read_messages  # noqa: E402
+from runtime.recording.recorder import TOPICS, Recorder  # noqa: E402
+from tests.sitl_util import worker_fleet  # noqa: E402
+
+ROBOT_TOPICS = ("pose", "truth", "command", "path", "bumpers", "mavlink", "stats")
+SUBPROTOCOL = "foxglove.sdk.v1"        # what foxglove-sdk 0.30's server speaks (the successor of foxglove.websocket.v1)
+
+
+def _free_tcp_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class LiveClient(threading.Thread):
+    """A Foxglove WebSocket client (``websockets``): subscribes to ``topics`` as the server advertises them and
+    keeps every message it gets as (topic, log time ns, payload)."""
+
+    def __init__(self, port: int, topics: set[str]):
+        super().__init__(daemon=True)
+        self.port, self.topics = port, topics
+        self.got: list[tuple[str, int, bytes]] = []
+        self.subscribed: set[str] = set()
+        self.error: Exception | None = None
+        self.stop = threading.Event()
+
+    def run(self) -> None:
+        from websockets.exceptions import ConnectionClosedOK
+        from websockets.sync.client import connect
+
+        try:
+            deadline = time.monotonic() + 30
+            while True:
+                try:
+                    ws = connect(f"ws://127.0.0.1:{self.port}", subprotocols=[SUBPROTOCOL], open_timeout=5)
+                    break
+                except OSError:
+                    if time.monotonic() > deadline:
+                        raise
+                    time.sleep(0.05)
+            with ws:
+                subs: dict[int, str] = {}
+                while not self.stop.is_set():
+                    try:
+                        m = ws.recv(timeout=0.2)
+                    except TimeoutError:
+                        continue
+                    if isinstance(m, str):
+                        d = json.loads(m)
+                        for c in d.get("channels", ()) if d.get("op") == "advertise" else ():
+                            if c["topic"] in self.topics and c["topic"] not in self.subscribed:
+                                sid = len(subs) + 1
+                                subs[sid] = c["topic"]
+                                ws.send(json.dumps({"op": "subscribe",
+                                                    "subscriptions": [{"id": sid, "channelId": c["id"]}]}))
+                                self.subscribed.add(c["topic"])
+                    elif m[0] == 1:            # message data: opcode, subscription id, log time, payload
+                        _, sid, ns = struct.unpack_from("<BIQ", m)
+                        self.got.append((subs[sid], ns, m[13:]))
+        except ConnectionClosedOK:     # the server stopped at the end of the run
+            pass
+        except Exception as exc:       # the test reports it
+            self.error = exc
+
+
+class LogCapture(logging.Handler):
+    def __init__(self):
+        super().__init__(logging.INFO)
+        self.lines: list[str] = []
+
+    def emit(self, record):
+        self.lines.append(record.getMessage())
+
+
+def recorded_run(tmp) -> dict:
+    """One short lock-step run of create2_4, recorded, with a live client subscribed to robot 1's pose and the
+    allocation events while it runs."""
+    from sitl import launcher
+
+    port = _free_tcp_port()
+    client = LiveClient(port, {"/robot_1/pose", "/allocation"})
+    seen = {}
+    logs = LogCapture()
+    logging.getLogger("mrta.daemon").addHandler(logs)
+
+    def on_step(f):
+        if not client.is_alive() and client.error is None and "started" not in seen:
+            seen["started"] = True
+            client.start()
+            deadline = time.monotonic() + 20          # the run waits (bounded) until the client has subscribed
+            while len(client.subscribed) < 2 and time.monotonic() < deadline and client.error is None:
+                time.sleep(0.02)
+        if f.world.t >= 5.0 and "mid_run" not in seen:
+            deadline = time.monotonic() + 20
+            while not {"/robot_1/pose", "/allocation"} <= {g[0] for g in client.got} and \
+                    time.monotonic() < deadline and client.error is None:
+                time.sleep(0.02)
+            seen["mid_run"] = (f.world.t, len(client.got))
+
+    f = launcher.build(worker_fleet(tmp, "create2_4.yaml", seed=1), tmp / "run")
+    try:
+        res = launcher.run_lockstep(f, record=True, live=("127.0.0.1", port), on_step=on_step)
+        cycles = {rid: r.daemon.stats.cycles for rid, r in f.robots.items()}
+        period = min(r.daemon.period for r in f.robots.values())
+    finally:
+        f.close()
+        logging.getLogger("mrta.daemon").removeHandler(logs)
+        client.stop.set()
+        client.join(timeout=10)
+    rec = read_messages(res["recording"])
+    return {"res": res, "rec": rec, "cycles": cycles, "period": period, "client": client, "seen": seen,
+            "logs": logs.lines, "dir": tmp / "run"}
+
+
+def _by_topic(rec) -> dict[str, list]:
+    out = defaultdict(list)
+    for m in rec.messages:
+        out[m.topic].append(m)
+    return out
+
+
+@pytest.mark.slow
+def test_a_recorded_lock_step_run_read_back_and_watched_live(tmp_path, capsys):
+    """One run for every check (a module-scoped fixture would run once per xdist worker the checks land on)."""
+    run = recorded_run(tmp_path)
+    _every_channel_is_there_with_its_schema_and_time_never_goes_back(run)
+    _one_pose_per_robot_per_control_period(run)
+    _every_award_and_every_daemon_log_line_is_in_the_recording(run)
+    _the_picture_from_the_recording_is_the_one_from_the_trace(run)
+    _the_summary_says_who_held_which_task(run, capsys)
+    _a_live_client_gets_poses_and_allocation_events_in_order_while_the_run_goes(run)
+
+
+def _every_channel_is_there_with_its_schema_and_time_never_goes_back(run):
+    rec, res = run["rec"], run["res"]
+    assert res["goal_met"] and rec.truncated is None and rec.dropped == 0
+    want = {"/tf": TOPICS["/tf"], "/world": TOPICS["/world"], "/allocation": TOPICS["/allocation"],
+            "/log": TOPICS["/log"]}
+    for rid in run["cycles"]:
+        want.update({f"/robot_{rid}/{t}": TOPICS[f"/robot_{{id}}/{t}"] for t in ROBOT_TOPICS})
+    assert {t: rec.channels.get(t) for t in want} == want
+    by = _by_topic(rec)
+    for topic, msgs in by.items():
+        times = [m.ns for m in msgs]
+        assert times == sorted(times), topic
+    assert all(by[t] for t in want), [t for t in want if not by[t]]
+    # sim time: the last pose is stamped with the run's last sim time
+    assert by["/robot_1/truth"][-1].ns == pytest.approx(res["sim_time"] * 1e9, abs=1e3)
+
+
+def _one_pose_per_robot_per_control_period(run):
+    by = _by_topic(run["rec"])
+    for rid, cycles in run["cycles"].items():
+        for kind in ("pose", "truth", "command"):
+            msgs = by[f"/robot_{rid}/{kind}"]
+            assert len(msgs) == cycles, (rid, kind)
+            steps = {round((b.ns - a.ns) / 1e9, 6) for a, b in zip(msgs, msgs[1:])}
+            assert steps == {run["period"]}, (rid, kind, steps)
+
+
+def _every_award_and_every_daemon_log_line_is_in_the_recording(run):
+    by = _by_topic(run["rec"])
+    events = [m.data for m in by["/allocation"]]
+    committed = {(e["robot"], e["task"]) for e in events if e["event"] == "committed"}
+    trace = json.loads((run["dir"] / "trace.json").read_text())
+    awarded = {(r, e["task"]) for e in trace["events"] if e["what"] == "awarded" for r in e["robots"]}
+    assert awarded and awarded <= committed
+    assert {e["message"] for e in events if e["event"] == "sent"} >= {"Price", "RobotState", "TaskInfo"}
+    # every record the daemons logged, in order, on /log
+    recorded = [m.data.message for m in by["/log"]]
+    it = iter(recorded)
+    assert run["logs"] and all(line in it for line in run["logs"])
+
+
+def _the_picture_from_the_recording_is_the_one_from_the_trace(run):
+    from sitl.recording import trace_from_mcap
+    from sitl.run_trace import RunTrace
+
+    from_json = RunTrace.read(run["dir"] / "trace.json").to_dict()
+    from_mcap = trace_from_mcap(run["dir"] / "run.mcap").to_dict()
+    assert from_mcap == from_json
+    assert from_json["events"] and all(r["samples"] for r in from_json["robots"])
+
+
+def _the_summary_says_who_held_which_task(run, capsys):
+    from runtime import cli
+
+    s = summary.summarize(run["dir"] / "run.mcap")
+    assert sorted(s["robots"]) == sorted(run["cycles"])
+    assert all(r["poses"] == run["cycles"][rid] for rid, r in s["robots"].items())
+    assert len(s["tasks"]) == 4 and all(t["held"] for t in s["tasks"].values())
+    assert cli.main(["log", "summary", str(run["dir"] / "run.mcap")]) == 0
+    out = capsys.readouterr().out
+    assert "robot 4:" in out and "held by robot" in out and "sent: Price" in out
+
+
+def _a_live_client_gets_poses_and_allocation_events_in_order_while_the_run_goes(run):
+    client = run["client"]
+    assert client.error is None, client.error
+    t_mid, n_mid = run["seen"]["mid_run"]
+    assert t_mid < run["res"]["sim_time"] and n_mid > 0         # messages arrived before the run ended
+    got = defaultdict(list)
+    for topic, ns, payload in client.got:
+        got[topic].append((ns, payload))
+    for topic in ("/robot_1/pose", "/allocation"):
+        times = [ns for ns, _ in got[topic]]
+        assert times and times == sorted(times), topic
+    # what the client got is what the file has, message for message
+    by = _by_topic(run["rec"])
+    file_events = [json.dumps(m.data, sort_keys=True) for m in by["/allocation"]]
+    live_events = [json.dumps(json.loads(p), sort_keys=True) for _, p in got["/allocation"]]
+    it = iter(file_events)
+    assert all(e in it for e in live_events)
+    file_poses = {m.ns for m in by["/robot_1/pose"]}
+    assert {ns for ns, _ in got["/robot_1/pose"]} <= file_poses
+
+
+# ---------------------------------------------------------------------- the recorder's bounds, the reader
+
+def _poses(rec: Recorder, n: int, t0: float = 0.0) -> None:
+    for k in range(n):
+        rec.pose(1, t0 + 0.05 * k, (0.01 * k, 0.0, 0.1 * k))
+        rec.event(t0 + 0.05 * k, 1, "sent", "Bid", 65537, (1,), {"cost": 0.5 * k})
+        rec.check()
+
+
+def test_at_the_size_limit_the_recording_stops_or_rotates(tmp_path, caplog):
+    stop = Recorder(tmp_path / "stop.mcap", limit=20_000, chunk_size=4096)
+    _poses(stop, 2000)
+    stop.close()
+    assert stop.stopped and "size limit" in stop.stopped and stop.files == [tmp_path / "stop.mcap"]
+    assert read_messages(tmp_path / "stop.mcap").truncated is None
+    assert (tmp_path / "stop.mcap").stat().st_size < 20_000 + 3 * 4096
+
+    rot = Recorder(tmp_path / "rot.mcap", limit=20_000, rotate=True, chunk_size=4096)
+    rot.metadata("robot", {"id": "1"})
+    _poses(rot, 2000)
+    rot.close()
+    assert rot.stopped is None and len(rot.files) >= 3
+    assert rot.files[1] == tmp_path / "rot.1.mcap"
+    poses = []
+    for path in rot.files:
+        r = read_messages(path)
+        assert r.truncated is None and r.metadata["robot"] == {"id": "1"}
+        assert r.channels["/robot_1/pose"] == "foxglove.PoseInFrame"
+        poses += [m.ns for m in r.messages if m.topic == "/robot_1/pose"]
+    assert poses == [round(0.05 * k * 1e9) for k in range(2000)]      # nothing lost between files
+
+
+class FullDisk:
+    """A file whose disk fills after ``room`` bytes."""
+
+    def __init__(self, fh, room: int):
+        self.fh, self.room = fh, room
+
+    def write(self, data):
+        if len(data) > self.room:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        self.room -= len(data)
+        return self.fh.write(data)
+
+    def __getattr__(self, name):
+        return getattr(self.fh, name)
+
+
+def test_a_full_disk_ends_the_recording_with_one_warning_and_nothing_else(tmp_path, caplog):
+    rec = Recorder(tmp_path / "full.mcap", chunk_size=2048)
+    rec._file.fh = FullDisk(rec._file.fh, 10_000)
+    with caplog.at_level(logging.WARNING, logger="mrta.recording"):
+        _poses(rec, 3000)             # never raises
+        rec.close()
+    warnings = [r for r in caplog.records if r.name == "mrta.recording"]
+    assert len(warnings) == 1 and "No space left on device" in warnings[0].getMessage()
+    assert rec.stopped
+    r = read_messages(tmp_path / "full.mcap")       # what fitted is readable; the end is missing
+    assert r.truncated is not None and r.messages
+
+
+def _small_recording(path) -> bytes:
+    rec = Recorder(path, chunk_size=1024)
+    rec.metadata("run", {"fleet": "test"})
+    _poses(rec, 200)
+    rec.text(1.0, logging.INFO, "mrta.daemon robot=1", "hello")
+    rec.close()
+    return path.read_bytes()
+
+
+def test_a_recording_cut_short_reads_up_to_its_last_whole_chunk(tmp_path):
+    data = _small_recording(tmp_path / "whole.mcap")
+    whole = read_messages(tmp_path / "whole.mcap")
+    assert whole.truncated is None and len(whole.messages) == 401
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) // 2])
+    r = read_messages(cut)
+    assert r.truncated and 0 < len(r.messages) < len(whole.messages)
+    assert [m.ns for m in r.messages] == [m.ns for m in whole.messages[: len(r.messages)]]
+    s = summary.summarize(cut)
+    assert s["truncated"] and s["robots"][1]["poses"] > 0
+    for bad, why in ((b"", "empty"), (b"not an mcap file at all", "text")):
+        p = tmp_path / f"{why}.mcap"
+        p.write_bytes(bad)
+        with pytest.raises(InputError, match=str(p)):
+            read_messages(p)
+    with pytest.raises(InputError, match="missing.mcap"):
+        read_messages(tmp_path / "missing.mcap")
+
+
+@pytest.fixture(scope="module")
+def sample(tmp_path_factory) -> bytes:
+    return _small_recording(tmp_path_factory.mktemp("sample") / "s.mcap")
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.data())
+def test_the_reader_never_raises_but_input_error_on_random_cut_or_bit_flipped_files(sample, tmp_path, data):
+    kind = data.draw(st.sampled_from(["random", "cut", "flip"]))
+    if kind == "random":
+        blob = data.draw(st.binary(max_size=2000))
+    elif kind == "cut":
+        blob = sample[: data.draw(st.integers(0, len(sample)))]
+    else:
+        blob = bytearray(sample)
+        for i in data.draw(st.lists(st.integers(0, len(sample) * 8 - 1), min_size=1, max_size=8)):
+            blob[i // 8] ^= 1 << (i % 8)
+        blob = bytes(blob)
+    p = tmp_path / "x.mcap"
+    p.write_bytes(blob)
+    try:
+        s = summary.summarize(p)          # reads it (read_messages) and tallies what it can
+    except InputError as exc:
+        assert str(p) in str(exc)
+        return
+    assert s["messages"] <= 401
+    summary.print_summary(s, io.StringIO())
+
+
+@pytest.mark.slow
+def test_a_killed_daemon_leaves_a_readable_recording(tmp_path):
+    """``mrta daemon --record`` on a real-time SITL robot (the world and devices of ``--devices-only``), killed
+    with SIGKILL: the summary reads the file, at most the last chunk lost."""
+    import signal
+    import subprocess
+    import sys
+
+    from tests.sitl_util import ROOT, devices_only
+
+    world, robots = devices_only(worker_fleet(tmp_path, "create2_4.yaml", seed=1), tmp_path)   # ports of its own
+    daemon = None
+    out = tmp_path / "robot_1.mcap"
+    try:
+        config = robots[0]["config"]
+        daemon = subprocess.Popen([sys.executable, "-m", "runtime.cli", "daemon", config, "--record", str(out)],
+                                  cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        deadline = time.monotonic() + 60         # a flush (every 2 s) has put poses on disk
+        while time.monotonic() < deadline:
+            assert daemon.poll() is None, daemon.stdout.read()
+            if out.exists() and out.stat().st_size > 2000:
+                try:
+                    if read_messages(out).messages:
+                        break
+                except InputError:
+                    pass
+            time.sleep(0.2)
+        time.sleep(0.5)
+        daemon.send_signal(signal.SIGKILL)
+        daemon.wait(timeout=10)
+    finally:
+        if daemon is not None and daemon.poll() is None:
+            daemon.kill()
+        world.send_signal(signal.SIGINT)
+        world.communicate(timeout=20)
+    s = summary.summarize(out)
+    assert s["truncated"] is not None                      # killed: no summary section
+    assert s["robots"][1]["poses"] > 0 and s["metadata"]["robot"]["id"] == "1"
+    assert s["metadata"]["robot"]["clock"] == "system"
+    wall = time.time()
+    assert abs(s["end"] - wall) < 120                      # stamped with the system clock
+    from runtime import cli
+    assert cli.main(["log", "summary", str(out)]) == 0
+    shutil.rmtree(tmp_path / "run", ignore_errors=True)
+
+
+def test_the_shipped_foxglove_layout_is_the_one_the_code_builds():
+    from runtime.recording.layout import layout_json
+    from tests.sitl_util import ROOT
+
+    shipped = (ROOT / "docs" / "foxglove_layout.json").read_text()
+    assert shipped == layout_json(10), "regenerate: python -m runtime.recording.layout > docs/foxglove_layout.json"
+    topics = json.loads(shipped)["content"]["items"][0]["content"]["items"][0]["content"]["config"]["topics"]
+    known = {t.replace("{id}", "1") for t in TOPICS}
+    assert {t for t in topics if t.startswith("/robot_1/") or not t.startswith("/robot_")} <= known
+
+
+def test_the_feed_records_an_in_process_fleet_doing_its_tasks(tmp_path):
+    """Three robot cores on the in-process host (no physics, no sockets), each fed to one recording: every task
+    done shows as committed by its doer, done in the tables, and on the world scene."""
+    import math
+
+    from runtime.inprocess import kinematic
+    from runtime.recording.feed import CoreFeed
+    from runtime.tasks.goto import Goto
+
+    f = kinematic({1: (0.0, 0.0, 0.0), 2: (2.0, 0.0, math.pi), 3: (0.0, 2.0, 0.0)}, "auction")
+    rec = Recorder(tmp_path / "fleet.mcap")
+    feeds = {rid: CoreFeed(rec, h.core, scene=rid == 1) for rid, h in f.robots.items()}
+    f.on_output = lambda rid, out, now: feeds[rid].cycle(now, out)
+    ids = f.hand_in(1, [Goto(1.0, 1.0, hold=1.0), Goto(-1.0, 0.5, hold=1.0), Goto(0.5, 2.5, hold=1.0)])
+    f.run(120.0, stop=lambda fl: set(fl.done()) == set(ids))
+    rec.close()
+    assert set(f.done()) == set(ids)
+    by = _by_topic(read_messages(tmp_path / "fleet.mcap"))
+    events = [m.data for m in by["/allocation"]]
+    for tid, doers in f.done().items():
+        assert {(e["robot"], e["task"]) for e in events if e["event"] == "committed"} >= {(r, tid) for r in doers}
+        assert any(e["event"] == "task" and e["task"] == tid and e["message"] == "done"
+                   and set(e["robots"]) == set(doers) for e in events)
+        assert any(e["event"] == "progress" and e["task"] == tid and e["message"] == "arrived" for e in events)
+    last = by["/world"][-1].data
+    states = {ent.id: dict((kv.key, kv.value) for kv in ent.metadata)["state"] for ent in last.entities
+              if ent.id.startswith("task_")}
+    assert states == {f"task_{tid}": "done" for tid in ids}
+    assert len(by["/robot_2/pose"]) == len(by["/robot_2/command"]) > 0
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["daemon", "robot.yaml", "--live", "nohost"], "--live: expected HOST:PORT"),
+    (["daemon", "robot.yaml", "--record", "x.mcap", "--record-limit", "0"], "--record-limit: expected a number > 0"),
+    (["daemon", "robot.yaml", "--record", "/no/such/folder/x.mcap"], "--record /no/such/folder/x.mcap: expected"),
+    (["sitl", "run", "create2_4", "--live", "127.0.0.1:99999"], "--live: expected HOST:PORT"),
+    (["log", "summary", "missing.mcap"], "missing.mcap: expected a recording"),
+])
+def test_bad_recording_options_are_one_line_and_exit_2(argv, says, capsys, tmp_path, monkeypatch):
+    from runtime import cli
+
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and says in err[0], err
+
+
+def test_a_live_address_in_use_is_one_line_and_the_file_is_closed(tmp_path):
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        with pytest.raises(InputError, match=f"--live 127.0.0.1:{port}: expected an address free to serve on"):
+            Recorder(tmp_path / "x.mcap", live=("127.0.0.1", port))
+    assert read_messages(tmp_path / "x.mcap").truncated is None          # closed: a whole (empty) recording

@@ -160,6 +160,7 @@ def test_run_length_leaves_the_start_out():
     rate, until = C.run_length([250.0, 400.0, 550.0], 600.0, 400)     # one object per 150 s after the first
     assert rate == pytest.approx(1 / 150) and until == pytest.approx(250 + 399 * 150)
     assert C.run_length([300.0], 600.0, 10) == (1 / 600, 6000.0)      # one: the whole run's rate
+    assert C.run_length([250.0, 400.0, 550.0], 600.0, 400, steady=False) == (3 / 600, 80000.0)   # start included
     assert C.run_length([], 600.0, 10) == (0.0, float("inf"))
     assert C.run_length([100.0, 200.0], 600.0, None) == (0.01, 600.0)  # no --objects: the time limit decides
 
@@ -169,5 +170,5 @@ def test_estimate_runs_one_calibration_run_per_kind_and_writes_nothing(tmp_path,
                      "--jobs", "2", "--out", str(tmp_path / "t5")]) == 0
     out = capsys.readouterr().out
     assert out.count("calibration: ") == 2                  # off-line and on-line cells cost apart
-    assert "dr: 6 runs x" in out and "dr on-line: 6 runs x" in out and "CPU h" in out
+    assert "dr: 6 runs x" in out and "dr on-line: 6 runs x" in out and "CPU h" in out and "steady" in out
     assert not (tmp_path / "t5" / "dr_table5_runs.csv").exists()

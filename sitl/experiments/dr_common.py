@@ -314,39 +314,45 @@ def estimate(args, name: str, cells: Sequence[Cell], setup: Setup) -> int:
                                 "finished": sorted(o["finished_s"] for o in res["objects"] if o["done"])}
         print(f"calibration: {cell.label} seed 1, {r['sim_s']:.0f} simulated s: {cpu:.1f} CPU s "
               f"({r['sim_s'] / cpu:.1f}x real time per core), {r['objects_done']} objects done")
-    total, lines = 0.0, []
+    # two readings of one short run bracket the rate: the whole run's (its start included: slow) and the steady
+    # one (first finish to last: few objects, so it can run fast); the estimate is the range between them
+    total, lines = [0.0, 0.0], []
     for kind, k in kinds.items():
         n = sum(1 for c in cells if kind_of(c) == kind) * args.seeds
         want = setup.max_objects
-        rate, needed = run_length(k["finished"], k["sim"], want)
-        sim = min(setup.time_limit, needed)
-        cpu = k["cpu"] / k["sim"] * sim
-        total += n * cpu
+        both = [run_length(k["finished"], k["sim"], want, steady) for steady in (True, False)]
+        sims = [min(setup.time_limit, needed) for _, needed in both]
+        cpus = [k["cpu"] / k["sim"] * sim for sim in sims]
+        total = [t + n * c for t, c in zip(total, cpus)]
+        rate, needed = both[1]
         note = ""
         if want and needed > setup.time_limit:
             need = f"about {needed:.0f}" if math.isfinite(needed) else "more (no object was done in the calibration)"
-            note = (f"; ends at --time-limit {setup.time_limit:g} s with about "
+            note = (f"; at the whole run's rate it ends at --time-limit {setup.time_limit:g} s with about "
                     f"{min(want, rate * setup.time_limit):.0f} of {want} objects done: --time-limit {need} s "
                     f"reaches {want}")
-        lines.append(f"  {kind}: {n} runs x {cpu:.0f} CPU s ({sim:.0f} simulated s each at "
-                     f"{rate * 3600:.1f} objects done per simulated hour){note}")
+        lines.append(f"  {kind}: {n} runs x {cpus[0]:.0f}-{cpus[1]:.0f} CPU s ({sims[0]:.0f}-{sims[1]:.0f} simulated s "
+                     f"each at {both[0][0] * 3600:.1f} steady - {rate * 3600:.1f} whole-run objects done per "
+                     f"simulated hour){note}")
     command = (f"mrta experiment {name.replace('_', '-')} --seeds {args.seeds}"
                + (f" --objects {args.objects}" if hasattr(args, "objects") else "")
                + (f" --time-limit {args.time_limit:g}" if args.time_limit else "")
                + (f" --deadline {args.deadline:g}" if args.deadline else "") + (" --quick" if args.quick else ""))
     print(f"estimate for {command} (model: {source}):\n" + "\n".join(lines))
-    print(f"total: {total:.0f} CPU s = {total / 3600:.1f} CPU h; wall about {total / args.jobs / 3600:.1f} h on "
-          f"--jobs {args.jobs}, {total / 3600 / 16:.1f} h on 16 cores of a --cluster")
+    lo, hi = total
+    print(f"total: {lo:.0f}-{hi:.0f} CPU s = {lo / 3600:.1f}-{hi / 3600:.1f} CPU h; wall about "
+          f"{lo / args.jobs / 3600:.1f}-{hi / args.jobs / 3600:.1f} h on --jobs {args.jobs}, "
+          f"{lo / 3600 / 16:.1f}-{hi / 3600 / 16:.1f} h on 16 cores of a --cluster")
     return 0
 
 
-def run_length(finished: Sequence[float], sim: float, want: int | None) -> tuple[float, float]:
+def run_length(finished: Sequence[float], sim: float, want: int | None, steady: bool = True) -> tuple[float, float]:
     """(objects done per simulated s, simulated s until ``want`` are done: inf if none was done, ``sim`` with no
-    ``want``) from one calibration run of ``sim`` s whose objects finished at ``finished`` s.  The steady rate
+    ``want``) from one calibration run of ``sim`` s whose objects finished at ``finished`` s.  ``steady``: the rate
     leaves out the start (robots drive out to the first objects): from the first finish to the last, when two or
-    more finished; else what was done over the whole run."""
+    more finished; else (or not ``steady``) what was done over the whole run."""
     done = len(finished)
-    if done >= 2 and finished[-1] > finished[0]:
+    if steady and done >= 2 and finished[-1] > finished[0]:
         rate = (done - 1) / (finished[-1] - finished[0])
         return rate, (finished[0] + (want - 1) / rate) if want else sim
     rate = done / sim if sim > 0 else 0.0

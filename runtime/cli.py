@@ -27,6 +27,7 @@ COMMANDS = {
     "experiment": "sitl.experiments.cli",                    # mrta experiment NAME
     "mission": "runtime.comms.mission_cli",                  # mrta mission upload|download|status TARGET ...
     "key": "runtime.comms.key_cli",                          # mrta key FILE
+    "router": "runtime.comms.router_cli",                    # mrta router --listen tcp/HOST:PORT [--connect ...]
 }
 SIMULATOR = ("pybullet", "matplotlib")       # the [sitl] extra
 NEEDS_SIMULATOR = "the simulator is not installed: pip install 'mrta-runtime[sitl]'"

@@ -307,14 +307,15 @@ class Fleet:
         self.period = float(period)
         self.talk = bool(bus)
         self.bus = InMemoryBus(dict(self.robots), delay=delay, jitter=jitter, drop=drop, duplicate=duplicate, seed=seed)
+        self.heartbeat_period = float(heartbeat_period)
         self.beats = InMemoryBus({r: Beats(r, h.liveness) for r, h in self.robots.items()}, delay=delay, jitter=jitter,
                                  drop=drop, seed=seed + 0x5EED, down=self.bus.down)     # the links' heartbeats
         if links is not None:             # real links (and their transports) instead of the in-memory buses
             self.bus = LinkBus(self.robots, links)
-            self.beats = LinkBus({}, {}, down=self.bus.down)
+            self.beats = LinkBus({}, {}, down=self.bus.down)      # the links heartbeat themselves
+            self.heartbeat_period = math.inf
             for r, h in self.robots.items():
                 h.liveness = LinkLiveness(links[r])
-        self.heartbeat_period = float(heartbeat_period)
         self._next_beat = dict.fromkeys(self.robots, 0.0)
         self.on_output, self.after_cycle, self.after_advance = on_output, after_cycle, after_advance
         self.steps = 0
@@ -343,7 +344,7 @@ class Fleet:
         for r in live:
             h = self.robots[r]
             pose, sensors = sensed[r]
-            if self.talk and now >= self._next_beat[r] - 1e-9:
+            if self.talk and now >= self._next_beat[r] - 1e-9 and self.heartbeat_period < math.inf:
                 self.beats.send([Heartbeat(r)], now)
                 nxt = self._next_beat[r] + self.heartbeat_period      # the link's schedule: on time, or from now
                 self._next_beat[r] = nxt if nxt > now else now + self.heartbeat_period

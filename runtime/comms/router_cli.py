@@ -20,6 +20,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="where robots connect, e.g. tcp/0.0.0.0:7447 (repeatable)")
     p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
                    help="another segment's router to link to, e.g. tcp/10.0.2.1:7447 (repeatable)")
+    p.add_argument("--config", default=None, metavar="FILE",
+                   help="a Zenoh JSON5 config file under --listen/--connect: TLS, access control (docs/transport.md)")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     p.set_defaults(func=_main)
 
@@ -47,7 +49,7 @@ def _main(args) -> int:
     before = {s: signal.signal(s, _stop) for s in (signal.SIGTERM, signal.SIGINT)}
     session = None
     try:
-        session = open_router(args.listen, args.connect)
+        session = open_router(args.listen, args.connect, file=args.config)
         print(f"router {session.info.zid()} listening on {', '.join(args.listen)}"
               + (f", linked to {', '.join(args.connect)}" if args.connect else ""), flush=True)
         end = None if args.duration is None else time.monotonic() + args.duration

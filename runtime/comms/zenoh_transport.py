@@ -66,11 +66,16 @@ def load_zenoh():
     return zenoh
 
 
-def session_config(mode: str, connect=(), listen=(), lease: float | None = None):
+def session_config(mode: str, connect=(), listen=(), lease: float | None = None, file: str | None = None):
     """A Zenoh config: ``mode`` (client, peer, router), endpoints, multicast scouting off (no multicast on the
-    networks this runs on; routers and seed peers are named); ``lease`` s before a silent session is dropped."""
+    networks this runs on; routers and seed peers are named); ``lease`` s before a silent session is dropped.
+    ``file``: a Zenoh JSON5 config file to start from (TLS certificates, access control, user/password: Zenoh's own
+    keys, docs/transport.md); the keys above are set over it."""
     zenoh = load_zenoh()
-    conf = zenoh.Config()
+    try:
+        conf = zenoh.Config.from_file(file) if file else zenoh.Config()
+    except zenoh.ZError as e:
+        raise InputError(f"{file}: expected a Zenoh JSON5 config file ({str(e).split(' at ')[0]})") from None
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
@@ -89,9 +94,10 @@ def open_session(conf, what: str):
         raise InputError(f"{what}: cannot open a Zenoh session ({str(e).split(' at ')[0]})") from None
 
 
-def open_router(listen, connect=(), what: str = "mrta router"):
-    """A Zenoh session in router mode listening on ``listen`` and linked to the routers at ``connect``."""
-    return open_session(session_config("router", connect, listen), what)
+def open_router(listen, connect=(), what: str = "mrta router", file: str | None = None):
+    """A Zenoh session in router mode listening on ``listen`` and linked to the routers at ``connect`` (``file``: a
+    Zenoh config file under them, :func:`session_config`)."""
+    return open_session(session_config("router", connect, listen, file=file), what)
 
 
 class ZenohTransport:
@@ -100,7 +106,7 @@ class ZenohTransport:
     copies = False           # a frame is published once: the link draws its loss model per sender on receipt
 
     def __init__(self, robot_id: int, fleet: str = "fleet", *, mode: str = "client", connect=(), listen=(),
-                 congestion: str = "drop", lease: float | None = None, queue: int = QUEUE):
+                 congestion: str = "drop", lease: float | None = None, queue: int = QUEUE, file: str | None = None):
         zenoh = load_zenoh()
         self.robot_id = int(robot_id)
         self.prefix = f"mrta/{parse_fleet(fleet)}"
@@ -109,7 +115,7 @@ class ZenohTransport:
         self._cap = int(queue)
         self._overflow = 0
         self._members: deque = deque()
-        self.session = open_session(session_config(mode, connect, listen, lease), "comms.zenoh.connect")
+        self.session = open_session(session_config(mode, connect, listen, lease, file), "comms.zenoh.connect")
         s, me, remote = self.session, self.robot_id, zenoh.Locality.REMOTE
         self._all = s.declare_publisher(f"{self.prefix}/all/{me}", congestion_control=self._cc)
         self._to: dict[int, object] = {}
@@ -123,7 +129,7 @@ class ZenohTransport:
     def from_config(cls, comms, robot_id: int) -> "ZenohTransport":
         z = comms.zenoh
         return cls(robot_id, z.fleet, mode=z.mode, connect=z.connect, listen=z.listen, congestion=z.congestion,
-                   lease=comms.heartbeat_timeout)
+                   lease=comms.heartbeat_timeout, file=z.config)
 
     # ------------------------------------------------------------------ the session's thread
     def _on_frame(self, sample) -> None:

@@ -80,6 +80,7 @@ class ZenohConfig:
     listen: tuple[str, ...] = field(default=(), metadata={"check": (_endpoint, "a Zenoh endpoint PROTO/HOST:PORT")})
     fleet: str = field(default="fleet", metadata={"check": (_fleet, "a fleet name for the keys mrta/<fleet>/...")})
     congestion: Literal["drop", "block"] = "drop"
+    config: Optional[str] = None     # a Zenoh JSON5 config file under these keys: TLS, access control (docs/transport.md)
 
 
 @dataclass(frozen=True)

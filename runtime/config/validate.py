@@ -39,6 +39,8 @@ def validate(cfg) -> None:
             resolve_address(peer.address, file, f"comms.peers[{i}].address")
     if comms.transport == "zenoh" and comms.zenoh.mode == "client" and not comms.zenoh.connect:
         raise ConfigError(file, "comms.zenoh.connect", "the segment's router endpoint(s) (client mode)", [])
+    if comms.transport == "zenoh" and comms.zenoh.config is not None and not Path(comms.zenoh.config).is_file():
+        raise ConfigError(file, "comms.zenoh.config", "a Zenoh JSON5 config file", comms.zenoh.config)
     if comms.gcs is not None:
         resolve_address(comms.gcs, file, "comms.gcs")
     if cfg.planning.map is not None:

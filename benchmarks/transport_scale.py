@@ -5,8 +5,9 @@ Each robot is a real :class:`runtime.comms.link.MavlinkLink` (signed, the fleet 
 socket each, every frame sent to the N-1 peer addresses), ``zenoh-client`` (one Zenoh session each, a client of one
 router, a Python session in router mode in the same process; each frame published once) or ``zenoh-peer`` (sessions
 in peer mode, each listening on loopback and seeded with robot 1's endpoint; Zenoh's gossip builds the mesh).  All in
-this one process (N links polled in turn by one thread; Zenoh's own threads beside it), so CPU is the whole process's
-(the router's included) and latency includes the wait for the polling loop to come round.
+this one process (N links polled in turn by one thread, which sleeps 1 ms when a pass brought nothing; Zenoh's own
+threads beside it), so CPU is the whole process's (the router's included) and latency includes the wait for the
+polling loop to come round (with N links, one pass of N polls and the N sends).
 
 Per transport and N: time until every robot counts every other alive (membership: heartbeats over UDP, liveliness
 tokens over Zenoh), then ``--seconds`` of traffic, every robot sending one Bid (a 39-byte signed MAVLink 2 frame) to
@@ -63,10 +64,10 @@ class Net:
         from runtime.comms.zenoh_transport import ZenohTransport, open_router
 
         if kind == "udp":
-            ports = {r: free_port() for r in ids}
-            for r in ids:
-                self.links[r] = MavlinkLink(r, f"127.0.0.1:{ports[r]}",
-                                            [f"127.0.0.1:{ports[o]}" for o in ids if o != r], None, signing_key=KEY)
+            for r in ids:                # bound to free ports first, then told each other's addresses
+                self.links[r] = MavlinkLink(r, "127.0.0.1:0", [], None, signing_key=KEY)
+            for r, link in self.links.items():
+                link.udp.peers = [o.address for q, o in self.links.items() if q != r]
             return
         if kind == "zenoh-client":
             ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
@@ -122,10 +123,13 @@ def traffic(net: Net, seconds: float, rate: float) -> dict:
                 sent[(r, seq)] = time.monotonic()
                 link.send_agent([M.Bid(r, 0, 1, seq, 0.5)], now)
             next_send += period
+        got = len(lat)
         for link in links.values():
             for m in link.poll(now):
                 if isinstance(m, M.Bid) and m.auction == 1:
                     lat.append(time.monotonic() - sent[(m.sender, m.task)])
+        if len(lat) == got:
+            time.sleep(0.001)           # nothing came: wait as a daemon between cycles does, not spin
     cpu = time.process_time() - cpu0
     expected = seq * n * (n - 1)
     lat.sort()

@@ -171,7 +171,7 @@ def test_a_forged_frame_published_by_another_session_is_dropped_and_counted(segm
 
 # ---------------------------------------------------------------------------------------- a fleet of cores
 
-def zenoh_fleet(seg, method="auction") -> Fleet:
+def zenoh_fleet(seg, method="auction", **link) -> Fleet:
     """In-process robot cores (kinematic motion), each on a real link whose Zenoh session is a client of its
     segment's router."""
     m = registry.method(method)
@@ -181,7 +181,7 @@ def zenoh_fleet(seg, method="auction") -> Fleet:
              for r in ids}
     links = {r: MavlinkLink(r, "127.0.0.1:0", [], None, signing_key=KEY,
                             transport=ZenohTransport(r, seg.fleet, connect=[seg.endpoints[seg.segment[r]]],
-                                                     lease=3.0))
+                                                     lease=3.0), loss_seed=r, **link)
              for r in ids}
     return Fleet(cores, Kinematic(STARTS, 0.5), period=0.1, links=links)
 
@@ -220,8 +220,8 @@ def assignment(f: Fleet) -> dict:
 def fleets():
     made = []
 
-    def make(seg, method="auction"):
-        f = zenoh_fleet(seg, method)
+    def make(seg, method="auction", **link):
+        f = zenoh_fleet(seg, method, **link)
         made.append(f)
         return f
 
@@ -255,6 +255,23 @@ def test_a_fleet_over_routers_reaches_the_in_memory_assignment(segments, fleets,
     assert all(h.core.stats.peers_lost == [] for h in f.robots.values())
 
 
+@pytest.mark.slow
+def test_a_robot_whose_session_is_cut_is_lost_and_its_task_reauctioned_under_10_percent_loss(segments, fleets):
+    seg = segments(1)
+    f = fleets(seg, peer_loss=0.1)             # the link's loss model, drawn on receipt
+    joined(f)
+    ids = f.hand_in(1, TASKS[:3])              # three tasks, four robots: one is free
+    run_paced(f, f.now + 20.0, stop=lambda fl: held_once(fl, ids))
+    assert held_once(f, ids)
+    (victim,) = f.holders()[ids[0]]
+    f.kill(victim)                             # its session closes with it
+    run_paced(f, f.now + 20.0, stop=lambda fl: held_once(fl, ids))
+    assert held_once(f, ids) and victim not in f.holders()[ids[0]]
+    assert all(victim in f.robots[r].core.stats.peers_lost for r in f.live())
+    assert sum(f.bus.links[r].counters.loss_injected for r in f.live()) > 0
+
+
+@pytest.mark.slow
 def test_a_router_restarted_mid_auction_loses_no_task_and_none_is_held_twice(segments, fleets):
     seg = segments(1)
     f = fleets(seg)

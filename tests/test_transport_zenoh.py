@@ -11,6 +11,7 @@ import time
 from types import SimpleNamespace
 
 import pytest
+from hypothesis import example, given, settings, strategies as st
 
 zenoh = pytest.importorskip("zenoh", reason="the [zenoh] extra is not installed: pip install 'mrta-runtime[zenoh]'")
 
@@ -103,10 +104,9 @@ def test_a_frame_is_published_once_and_addressed_frames_reach_only_their_robot(s
 def test_liveliness_reports_a_peer_joining_at_once_and_a_closed_session_lost(segments, links):
     seg = segments(1)
     a = links(1, seg)
-    b = links(2, seg)
-    t0 = time.monotonic()
+    b = links(2, seg)                                       # never polled: it sends no heartbeat
     pump([a], lambda g: 2 in a.peers_alive, now=0.0)
-    assert 2 in a.peers_alive and a.counters.heartbeats == 0 or 2 in a.peers_alive     # by its token
+    assert 2 in a.peers_alive and a.counters.heartbeats == 0          # alive by its liveliness token alone
     b.close()
     lost: list = []
     t0 = time.monotonic()
@@ -328,3 +328,24 @@ def test_a_router_with_access_control_refuses_what_its_rules_deny(tmp_path, link
         assert [m.task for m in got[id(a)] if m.task in (5, 6)] == [6]
     finally:
         router.close()
+
+
+@settings(max_examples=40, deadline=None)
+@example([("²", True), ("007", True), ("9" * 5000, False), ("", True), ("2/3", False)])
+@given(st.lists(st.tuples(st.text(max_size=30), st.booleans()), max_size=20))
+def test_membership_keys_of_any_shape_never_raise_and_only_robot_ids_count(events):
+    """Liveliness keys come from the network: whatever their last part, membership() never raises, and the link
+    takes only robot ids 1..250 other than its own."""
+    from collections import deque
+
+    t = ZenohTransport.__new__(ZenohTransport)          # the parsing only: no session
+    t._members, t._put = deque(), zenoh.SampleKind.PUT
+    for key, put in events:
+        t._on_token(SimpleNamespace(key_expr=f"mrta/f/alive/{key}",
+                                    kind=zenoh.SampleKind.PUT if put else zenoh.SampleKind.DELETE))
+    out = t.membership()
+    assert all(isinstance(r, int) and r >= 0 for r, _ in out)
+    link = SimpleNamespace(robot_id=1, _left=set(), _beats=SimpleNamespace(lost=set(), hear=lambda r, now: None))
+    for robot, joined in out:
+        MavlinkLink._member(link, robot, joined, 0.0)
+    assert all(1 < r <= 250 for r in link._left)

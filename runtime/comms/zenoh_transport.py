@@ -171,7 +171,7 @@ class ZenohTransport:
         while self._members:
             key, joined = self._members.popleft()
             tail = key.rpartition("/")[2]
-            if tail.isdigit():
+            if tail.isascii() and tail.isdigit() and len(tail) <= 3:        # a robot id, 1..250 taken by the link
                 out.append((int(tail), joined))
         return out
 

@@ -20,6 +20,7 @@ from runtime.allocation.formation import messages as M  # noqa: E402
 from runtime.comms import codec, dialect  # noqa: E402
 from runtime.comms.link import COMPONENT_ID, PEER_LINK, MavlinkLink, signing_guard, signing_timestamp  # noqa: E402
 from runtime.comms.zenoh_transport import ZenohTransport, open_router, session_config  # noqa: E402
+from runtime.config.robot import CommsConfig, Peer, ZenohConfig  # noqa: E402
 from runtime.inprocess import Fleet, Kinematic, kinematic, robot_config  # noqa: E402
 from runtime.robot.core import RobotCore  # noqa: E402
 from runtime.robot.ports import BaseFacts  # noqa: E402
@@ -349,3 +350,16 @@ def test_membership_keys_of_any_shape_never_raise_and_only_robot_ids_count(event
     for robot, joined in out:
         MavlinkLink._member(link, robot, joined, 0.0)
     assert all(1 < r <= 250 for r in link._left)
+
+
+def test_sitl_segments_split_the_robots_and_their_configs_carry_no_peer_addresses(segments):
+    seg = segments(2, robots={1: None, 2: None, 3: None, 4: None, 5: None})
+    assert seg.segment == {1: 0, 2: 0, 3: 0, 4: 1, 5: 1} and seg.links == [[], [seg.endpoints[0]]]
+    comms = seg.comms(4)
+    assert comms["transport"] == "zenoh" and comms["zenoh"]["connect"] == [seg.endpoints[1]]
+    assert comms["peers"] == [{"id": 1}, {"id": 2}, {"id": 3}, {"id": 5}]        # ids only
+    cfg = CommsConfig(**{**comms, "zenoh": ZenohConfig(**{k: tuple(v) if isinstance(v, list) else v
+                                                          for k, v in comms["zenoh"].items()}),
+                         "peers": tuple(Peer(**p) for p in comms["peers"])})
+    t = ZenohTransport.from_config(cfg, 4)                 # the config opens a session on its segment's router
+    t.close()

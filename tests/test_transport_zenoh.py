@@ -363,3 +363,25 @@ def test_sitl_segments_split_the_robots_and_their_configs_carry_no_peer_addresse
                          "peers": tuple(Peer(**p) for p in comms["peers"])})
     t = ZenohTransport.from_config(cfg, 4)                 # the config opens a session on its segment's router
     t.close()
+
+
+def _zlink(rid, fleet, **zenoh_kw) -> MavlinkLink:
+    return MavlinkLink(rid, "127.0.0.1:0", [], None, signing_key=KEY,
+                       transport=ZenohTransport(rid, fleet, lease=3.0, **zenoh_kw))
+
+
+def test_peer_mode_needs_no_router_and_a_client_takes_its_second_router_when_the_first_is_down(segments):
+    fleet = f"t{next(_fleets)}"
+    seed = f"tcp/127.0.0.1:{free_tcp_port()}"
+    made = [_zlink(1, fleet, mode="peer", listen=[seed])]
+    try:
+        made += [_zlink(r, fleet, mode="peer", listen=["tcp/127.0.0.1:0"], connect=[seed]) for r in (2, 3)]
+        wait_routes(made[2], made[:2])                     # 3 reaches 2 through the mesh gossip built
+        seg = segments(1)
+        dead = f"tcp/127.0.0.1:{free_tcp_port()}"         # nothing listens there
+        a, b = (_zlink(r, seg.fleet, connect=[dead, seg.endpoints[0]]) for r in (1, 2))
+        made += [a, b]
+        wait_routes(b, [a])
+    finally:
+        for link in made:
+            link.close()

@@ -11,7 +11,7 @@ import time
 from types import SimpleNamespace
 
 import pytest
-from hypothesis import example, given, settings, strategies as st
+from hypothesis import HealthCheck, example, given, settings, strategies as st
 
 zenoh = pytest.importorskip("zenoh", reason="the [zenoh] extra is not installed: pip install 'mrta-runtime[zenoh]'")
 
@@ -385,3 +385,49 @@ def test_peer_mode_needs_no_router_and_a_client_takes_its_second_router_when_the
     finally:
         for link in made:
             link.close()
+
+
+def _sessionless(rid: int, cap: int = 64) -> ZenohTransport:
+    """A ZenohTransport's receiving half without a session (frames go in through the session thread's callback),
+    sending nowhere."""
+    from collections import deque
+
+    t = ZenohTransport.__new__(ZenohTransport)
+    t._queue, t._cap, t._overflow, t._members, t._put = deque(), cap, 0, deque(), zenoh.SampleKind.PUT
+    t.destinations = lambda dest: []
+    return t
+
+
+@pytest.fixture(scope="module")
+def sessionless_link():
+    t = _sessionless(1, cap=64)
+    link = MavlinkLink(1, "127.0.0.1:0", [], None, signing_key=KEY, transport=t)
+    yield link
+    link.close()
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.one_of(st.binary(max_size=300),
+                          st.tuples(st.integers(0, 10**6), st.integers(1, 64)).map(lambda ft: _flip_cut(*ft))),
+                max_size=80))
+def test_published_payloads_of_any_shape_are_counted_never_raised(sessionless_link, payloads):
+    link, t = sessionless_link, sessionless_link.transport
+    before = link.counters.as_dict()
+    t._overflow = 0
+    for p in payloads:
+        t._on_frame(SimpleNamespace(payload=SimpleNamespace(to_bytes=lambda p=p: p), key_expr="mrta/f/all/2"))
+    link.poll(0.0)
+    link.check_kernel_drops()
+    c = link.counters
+    taken = min(len(payloads), 64)
+    assert c.datagrams - before["datagrams"] == taken
+    assert c.datagrams == c.received + c.dropped
+    assert c.queue_dropped == len(payloads) - taken
+
+
+def _flip_cut(bit: int, keep: int) -> bytes:
+    """Robot 2's signed Status frame with one bit flipped, cut to ``keep`` bytes."""
+    frame = bytearray(_forged(KEY))
+    bit %= len(frame) * 8
+    frame[bit // 8] ^= 1 << (bit % 8)
+    return bytes(frame[:keep])

@@ -47,7 +47,11 @@ class Daemon:
         self.gps = gps
         if link is None:
             from runtime.comms.link import open_link
-            link = open_link(cfg.comms, self.id)
+            from runtime.errors import InputError
+            try:
+                link = open_link(cfg.comms, self.id)
+            except InputError as exc:            # a socket that will not bind, no Zenoh router answering
+                raise InputError(f"{cfg.source or '<config>'}: {exc}") from None
         self.link = link
         fp = base.footprint
         facts = BaseFacts(float(fp.radius), float(getattr(fp, "max_speed", 0.5)), bool(base.ranging),

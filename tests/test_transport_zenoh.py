@@ -449,3 +449,23 @@ def _flip_cut(bit: int, keep: int) -> bytes:
     bit %= len(frame) * 8
     frame[bit // 8] ^= 1 << (bit % 8)
     return bytes(frame[:keep])
+
+
+def free_udp_port() -> int:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def test_a_daemon_whose_router_does_not_answer_exits_2_naming_its_config(tmp_path, capsys):
+    from runtime import cli
+
+    robot = tmp_path / "robot.yaml"
+    robot.write_text("robot: {id: 1}\ngps: {enabled: false}\nbase: {type: create_oi, port: 'loop://'}\n"
+                     f"comms: {{listen: '127.0.0.1:{free_udp_port()}', gcs: null, transport: zenoh,\n"
+                     f"        zenoh: {{connect: ['tcp/127.0.0.1:{free_tcp_port()}']}}}}\n")
+    assert cli.main(["daemon", str(robot), "--duration", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{robot}: comms.zenoh.connect: cannot open a Zenoh session" in err, err

@@ -91,7 +91,7 @@ def open_session(conf, what: str):
     try:
         return zenoh.open(conf)
     except zenoh.ZError as e:
-        raise InputError(f"{what}: cannot open a Zenoh session ({str(e).split(' at ')[0]})") from None
+        raise InputError(f"{what}: cannot open a Zenoh session ({str(e).split(' at ')[0].strip()})") from None
 
 
 def open_router(listen, connect=(), what: str = "mrta router", file: str | None = None):

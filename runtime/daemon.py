@@ -48,14 +48,12 @@ class Daemon:
             gps = NmeaGps(cfg.gps.port, baudrate=cfg.gps.baudrate, robot_id=self.id)
         self.gps = gps
         if link is None:
-            from runtime.comms.link import MavlinkLink, load_key
-            key = load_key(cfg.comms.signing_key) if cfg.comms.signing_key else None
-            link = MavlinkLink(self.id, cfg.comms.listen, [p.address for p in cfg.comms.peers],
-                               cfg.comms.gcs, signing_key=key,
-                               heartbeat_timeout=cfg.comms.heartbeat_timeout, peer_loss=cfg.comms.peer_loss,
-                               loss_burst=cfg.comms.loss_burst, loss_seed=cfg.comms.loss_seed,
-                               unsigned_gcs=cfg.comms.unsigned_gcs, fleet=[p.id for p in cfg.comms.peers],
-                               sock=listen_socket)
+            from runtime.comms.link import open_link
+            from runtime.errors import InputError
+            try:
+                link = open_link(cfg.comms, self.id, sock=listen_socket)
+            except InputError as exc:            # a socket that will not bind, no Zenoh router answering
+                raise InputError(f"{cfg.source or '<config>'}: {exc}") from None
         self.link = link
         self.guard = None                 # the base's stop guard (start_guard), in a daemon of its own process
         fp = base.footprint
@@ -72,8 +70,9 @@ class Daemon:
         self.base.open(now)
         if self.gps is not None and hasattr(self.gps, "open"):
             self.gps.open(now)
-        self.log.info("open: base %s, gps %s, listening %s, allocation %s%s", self.cfg.base.type,
-                      self.cfg.gps.port if self.gps else "off", self.cfg.comms.listen, self.core.method.name,
+        self.log.info("open: base %s, gps %s, listening %s, peers over %s, allocation %s%s", self.cfg.base.type,
+                      self.cfg.gps.port if self.gps else "off", self.cfg.comms.listen, self.cfg.comms.transport,
+                      self.core.method.name,
                       "" if self.core.node.armed else " (disarmed)")
         nets = getattr(self.link, "unsigned_gcs", None)
         if nets and self.link.signing:

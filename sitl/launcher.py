@@ -76,6 +76,7 @@ class Fleet:
     events: list[str] = field(default_factory=list)
     device_hook: object = None          # called with the sim time after every device service
     withdrawn: set[int] = field(default_factory=set)     # robots taken out of the arena
+    segments: object = None             # the Zenoh routers (comms.transport zenoh): a sitl.segments.Segments
     stopped: set[int] = field(default_factory=set)       # robots whose lock-step daemon no longer runs (killed)
     held: dict = field(default_factory=dict)             # robot id -> its MAVLink port's socket, bound since the check
 
@@ -134,6 +135,8 @@ class Fleet:
                 if hasattr(dev, "close"):
                     dev.close()
         self.world.close()
+        if self.segments is not None:
+            self.segments.close()
         if self.fresh_key is not None and not keep_key:
             self.fresh_key.unlink(missing_ok=True)
 
@@ -171,17 +174,18 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
           seed: int | None = None, signing: bool = True, method: str | None = None,
           speedup: float | None = None, instance: int = 0, peer_loss: float | None = None,
           loss_burst: float | None = None, key: str | Path | None = None,
-          unsigned_gcs: list[str] | None = None) -> Fleet:
+          unsigned_gcs: list[str] | None = None, transport: str = "udp", segments: int = 1) -> Fleet:
     """Load the fleet, hold its robots' ports, build the world and devices, write robot configs and the manifest.
     ``peer_loss`` and ``loss_burst`` (else the fleet's, else each template's) become every robot's
     ``comms.peer_loss`` and ``comms.loss_burst``.  The fleet signs with the key file ``key`` (``--key``), else the
     fleet's ``signing_key``, else (``signing``) a fresh key in the run directory, removed by :meth:`Fleet.close`
     unless kept.  ``unsigned_gcs`` (``--unsigned-gcs``; networks in CIDR form) becomes every robot's
-    ``comms.unsigned_gcs``."""
+    ``comms.unsigned_gcs``.  ``transport`` ``zenoh`` starts ``segments`` linked Zenoh routers on loopback and points
+    each robot at its segment's (robot configs then name their peers by id only: no addresses)."""
     fleet, held = claim_ports(FC.load_fleet(fleet_path), instance)
     try:
         return _build(fleet, held, run_dir, manifest, seed, signing, method, speedup, peer_loss, loss_burst, key,
-                      unsigned_gcs)
+                      unsigned_gcs, transport, segments, instance)
     except BaseException:
         for sock in held.values():
             sock.close()
@@ -189,7 +193,7 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
 
 
 def _build(fleet, held, run_dir, manifest, seed, signing, method, speedup, peer_loss, loss_burst, key,
-           unsigned_gcs) -> Fleet:
+           unsigned_gcs, transport, segments, instance) -> Fleet:
     from sitl import scenarios
 
     world_cfg = C.load_world(fleet.world)
@@ -219,6 +223,10 @@ def _build(fleet, held, run_dir, manifest, seed, signing, method, speedup, peer_
         from runtime.comms.link import load_key
         key = load_key(key_path)
 
+    zenoh = None
+    if transport == "zenoh":
+        from sitl.segments import Segments
+        zenoh = Segments(segments, [r.id for r in fleet.robots], fleet=f"sitl{instance}")
     world = World(world_cfg, seed=seed)
     robots: dict[int, SimRobot] = {}
     ports = {r.id: fleet.base_port + r.id for r in fleet.robots}
@@ -247,6 +255,8 @@ def _build(fleet, held, run_dir, manifest, seed, signing, method, speedup, peer_
                 overrides["comms"][name] = value
         if unsigned_gcs:
             overrides["comms"]["unsigned_gcs"] = list(unsigned_gcs)
+        if zenoh is not None:
+            overrides["comms"].update(zenoh.comms(r.id))
         if method:
             overrides["allocation"] = {"method": method}
         data = C.deep_merge(template, overrides)
@@ -261,7 +271,7 @@ def _build(fleet, held, run_dir, manifest, seed, signing, method, speedup, peer_
 
     manifest_path = Path(manifest) if manifest else run_dir / "manifest.json"
     out = Fleet(fleet, world_cfg, robots, world, run_dir, manifest_path, key=key,
-                fresh_key=key_path if fresh_key else None, key_path=key_path, held=held)
+                fresh_key=key_path if fresh_key else None, key_path=key_path, held=held, segments=zenoh)
     out.scenario = scenarios.module(fleet.scenario.type).Scenario(fleet, world_cfg)
     if hasattr(out.scenario, "build"):
         out.scenario.build(world)                 # the scenario's own bodies (unmapped obstacles)
@@ -772,6 +782,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --peer-loss: the losses come in spells of this mean length in seconds, as fading "
                         "brings them (%g..%g; default: the fleet's loss_burst, else 0: each on its own)"
                         % fleet_range("loss_burst"))
+    r.add_argument("--transport", choices=("udp", "zenoh"), default="udp",
+                   help="what carries the robots' peer frames: udp (default) or zenoh through routers on loopback "
+                        "(needs the [zenoh] extra)")
+    r.add_argument("--segments", type=int, default=1, metavar="K",
+                   help="with --transport zenoh: K linked routers, the robots split among them (default 1)")
     r.add_argument("--json", default=None, help="write the result here as JSON")
     r.add_argument("--no-record", dest="record", action="store_false",
                    help="write no recording (default: RUN_DIR/run.mcap, and each daemon process its "
@@ -790,7 +805,8 @@ def _main(args) -> int:
     run_args.check(args)          # every option, before the world is built
     live = live_address(args.live)
     f = build(args.fleet, args.run_dir, args.manifest, args.seed, args.signing, args.method, args.speedup,
-              args.instance, args.peer_loss, args.loss_burst, args.key, args.unsigned_gcs)
+              args.instance, args.peer_loss, args.loss_burst, args.key, args.unsigned_gcs,
+              transport=args.transport, segments=args.segments)
     speedup = args.speedup or f.fleet.speedup
     stop = {"flag": False}
 

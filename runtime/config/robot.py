@@ -61,8 +61,32 @@ class Peer:
     address: str = field(default="127.0.0.1:14601")
 
 
+def _endpoint(text: str) -> str:
+    from runtime.comms.zenoh_transport import parse_endpoint      # no zenoh import: only the pattern
+    return parse_endpoint(text)
+
+
+def _fleet(text: str) -> str:
+    from runtime.comms.zenoh_transport import parse_fleet
+    return parse_fleet(text)
+
+
+@dataclass(frozen=True)
+class ZenohConfig:
+    """``comms.zenoh``: used when ``comms.transport`` is ``zenoh`` (runtime/comms/zenoh_transport.py)."""
+    mode: Literal["client", "peer"] = "client"
+    # endpoints (tcp/HOST:PORT): client, the segment's router(s) (more than one: failover); peer, seed peers
+    connect: tuple[str, ...] = field(default=(), metadata={"check": (_endpoint, "a Zenoh endpoint PROTO/HOST:PORT")})
+    listen: tuple[str, ...] = field(default=(), metadata={"check": (_endpoint, "a Zenoh endpoint PROTO/HOST:PORT")})
+    fleet: str = field(default="fleet", metadata={"check": (_fleet, "a fleet name for the keys mrta/<fleet>/...")})
+    congestion: Literal["drop", "block"] = "drop"
+    config: Optional[str] = None     # a Zenoh JSON5 config file under these keys: TLS, access control (docs/transport.md)
+
+
 @dataclass(frozen=True)
 class CommsConfig:
+    transport: Literal["udp", "zenoh"] = "udp"     # what moves peer frames (runtime/comms/transport.py)
+    zenoh: ZenohConfig = ZenohConfig()
     listen: str = "127.0.0.1:14601"
     peers: tuple[Peer, ...] = ()
     gcs: Optional[str] = "127.0.0.1:14550"

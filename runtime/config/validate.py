@@ -2,7 +2,8 @@
 start-up and `mrta daemon CONFIG --check` runs alone, without opening a device or a socket.
 
 * every address parses (``host:port``, port 1..65535; IPv6 as ``[::1]:port``) and resolves; a peer or ground
-  station is a unicast address;
+  station is a unicast address (peers' addresses only over ``udp``: over ``zenoh`` a peer is its id, and a client
+  names at least one router in ``comms.zenoh.connect``);
 * no peer is the robot itself, no peer id is listed twice;
 * the map file exists (relative to the config file) and loads, and ``localization.initial_pose`` lies inside it;
 * the signing key file loads;
@@ -34,7 +35,12 @@ def validate(cfg) -> None:
         if peer.id in seen:
             raise ConfigError(file, f"comms.peers[{i}].id", "a peer id listed once", peer.id)
         seen.add(peer.id)
-        resolve_address(peer.address, file, f"comms.peers[{i}].address")
+        if comms.transport == "udp":           # over zenoh a peer is an id: its frames come through the router
+            resolve_address(peer.address, file, f"comms.peers[{i}].address")
+    if comms.transport == "zenoh" and comms.zenoh.mode == "client" and not comms.zenoh.connect:
+        raise ConfigError(file, "comms.zenoh.connect", "the segment's router endpoint(s) (client mode)", [])
+    if comms.transport == "zenoh" and comms.zenoh.config is not None and not Path(comms.zenoh.config).is_file():
+        raise ConfigError(file, "comms.zenoh.config", "a Zenoh JSON5 config file", comms.zenoh.config)
     if comms.gcs is not None:
         resolve_address(comms.gcs, file, "comms.gcs")
     if cfg.planning.map is not None:

@@ -1,7 +1,8 @@
 """The robot daemon: the I/O shell around one robot core.  poll -> core -> send.
 
-One :class:`Daemon` per robot.  It opens the base (chosen by ``base.type``), the GPS and the MAVLink link, and
-each control cycle (:meth:`Daemon.step`, never blocking) polls them, hands what it read to the robot's
+One :class:`Daemon` per robot.  It opens the base (chosen by ``base.type``), the sensors the config lists (each
+chosen by its ``type``: a GPS, a laser scanner) and the MAVLink link, and each control cycle (:meth:`Daemon.step`,
+never blocking) polls them, hands what it read to the robot's
 :class:`~runtime.robot.core.RobotCore` (the robot's logic, sans-IO: allocation, execution, pose estimate, ground
 services), then gives the base the core's command and sends the core's frames on the link.  The same object runs
 in its own process against real devices (:func:`run`, wall or scaled clock) or lock-stepped inside the SITL
@@ -43,10 +44,11 @@ class Daemon:
             from runtime.drivers.registry import open_base
             base = open_base(cfg.base, self.id)
         self.base = base
-        if gps is None and cfg.gps.enabled:
-            from runtime.drivers.nmea_gps import NmeaGps
-            gps = NmeaGps(cfg.gps.port, baudrate=cfg.gps.baudrate, robot_id=self.id)
-        self.gps = gps
+        from runtime.drivers.registry import open_sensor
+        # the sensors: entries (and an older config's gps: section); ``gps`` given stands for the GPS entries
+        self.sensor_parts = [gps if gps is not None and e.type == "nmea_gps" else open_sensor(e, self.id)
+                             for e in cfg.sensor_list()]
+        self.gps = next((s for s in self.sensor_parts if s.reports == "fixes"), None)
         if link is None:
             from runtime.comms.link import open_link
             from runtime.errors import InputError
@@ -57,8 +59,10 @@ class Daemon:
         self.link = link
         self.guard = None                 # the base's stop guard (start_guard), in a daemon of its own process
         fp = base.footprint
-        facts = BaseFacts(float(fp.radius), float(getattr(fp, "max_speed", 0.5)), bool(base.ranging),
-                          bool(base.latches_faults))
+        lasers = [s for s in self.sensor_parts if s.reports == "ranges"]
+        kinds = tuple(sorted(set(getattr(base, "sensor_kinds", ())) | {s.kind for s in self.sensor_parts}))
+        facts = BaseFacts(float(fp.radius), float(getattr(fp, "max_speed", 0.5)), bool(base.ranging or lasers),
+                          bool(base.latches_faults), kinds)
         self.core = RobotCore(cfg, facts, mavlink=(link.mav, link.module, link.counters))
         self.period = self.core.period
         self.feed = None                  # a recording's CoreFeed (runtime.recording.feed): told every cycle
@@ -68,11 +72,12 @@ class Daemon:
     def open(self, now: float) -> None:
         self.core.prepare()               # before the base runs: its watchdogs start with it
         self.base.open(now)
-        if self.gps is not None and hasattr(self.gps, "open"):
-            self.gps.open(now)
-        self.log.info("open: base %s, gps %s, listening %s, peers over %s, allocation %s%s", self.cfg.base.type,
-                      self.cfg.gps.port if self.gps else "off", self.cfg.comms.listen, self.cfg.comms.transport,
-                      self.core.method.name,
+        for part in self.sensor_parts:
+            if hasattr(part, "open"):
+                part.open(now)
+        self.log.info("open: base %s, sensors %s, listening %s, peers over %s, allocation %s%s", self.cfg.base.type,
+                      ", ".join(f"{e.type} {e.port}" for e in self.cfg.sensor_list()) or "none",
+                      self.cfg.comms.listen, self.cfg.comms.transport, self.core.method.name,
                       "" if self.core.node.armed else " (disarmed)")
         nets = getattr(self.link, "unsigned_gcs", None)
         if nets and self.link.signing:
@@ -96,7 +101,7 @@ class Daemon:
             if self.guard is not None:
                 self.guard.close(goodbye=stopped)      # no goodbye: the guard stops the base itself
                 self.guard = None
-            for part in (self.gps, self.link):
+            for part in (*self.sensor_parts, self.link):
                 if part is not None and hasattr(part, "close"):
                     part.close()
 
@@ -105,11 +110,17 @@ class Daemon:
         self.stats.cycles += 1
         base, link = self.base, self.link
         odometry = (base.odometry.v, base.odometry.w) if base.poll(now) else None
-        fixes = self.gps.poll(now) if self.gps is not None else ()
+        fixes, ranges = [], []
+        for part in self.sensor_parts:
+            got = part.poll(now)
+            if part.reports == "fixes":
+                fixes += got
+            else:
+                ranges += part.ranges()          # empty while the sensor is unusable (stalled, failed, lost)
         peers = link.poll(now)
         lost = link.peers_lost(now)
         inbox = self._inbox(peers, lost)
-        out = self.core.step(now, Sensed(odometry, fixes, base.sensors), inbox)
+        out = self.core.step(now, Sensed(odometry, fixes, base.sensors, ranges=ranges), inbox)
         if out.reset_faults:
             base.reset_faults(now)
         base.set_velocity(*out.command, now)
@@ -164,6 +175,8 @@ class Daemon:
             "missed_deadlines": s.missed_deadlines, "worst_lateness": s.worst_lateness,
             "cpu_seconds": s.cpu_seconds, "wall_seconds": s.wall_seconds,
             "base": vars(self.base.stats) if hasattr(self.base, "stats") else {},
+            "sensors": [{"type": e.type, "usable": bool(getattr(p, "usable", False))}
+                        for e, p in zip(self.cfg.sensor_list(), self.sensor_parts)],
             "link": self.link.counters.as_dict() if hasattr(self.link, "counters") else {},
         })
         return snap

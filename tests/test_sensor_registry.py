@@ -57,5 +57,5 @@ def test_an_unknown_sensor_type_has_no_device():
     class Nope:
         type: str = "sonar_x"
 
-    with pytest.raises(InputError, match="sensors type 'sonar_x': expected one with a SITL device, one of rplidar"):
+    with pytest.raises(InputError, match="sensors type 'sonar_x': expected one with a SITL device, one of nmea_gps, rplidar"):
         devices.make_sensor_device(Nope(), None, 1)

@@ -7,7 +7,8 @@ start-up and `mrta daemon CONFIG --check` runs alone, without opening a device o
 * no peer is the robot itself, no peer id is listed twice;
 * the map file exists (relative to the config file) and loads, and ``localization.initial_pose`` lies inside it;
 * the signing key file loads;
-* the base driver accepts its options (e.g. a Create's baud rate): it is built, not opened.
+* the base driver accepts its options (e.g. a Create's baud rate): it is built, not opened;
+* every ``sensors:`` entry's port is a device file that exists or a pyserial URL (``socket://``, ``loop://``).
 
 The allocation method's options are the schema of ``allocation:`` and were checked when the config was built.
 """
@@ -61,6 +62,11 @@ def validate(cfg) -> None:
         open_base(cfg.base, cfg.robot.id)          # built (its options checked), not opened
     except InputError as exc:
         raise InputError(f"{file}: base: {exc}") from None
+    for i, entry in enumerate(cfg.sensors):
+        port = getattr(entry, "port", None)
+        if isinstance(port, str) and "://" not in port and not Path(port).exists():
+            raise ConfigError(file, f"sensors[{i}].port", f"a serial device that exists or a pyserial URL "
+                              f"(type {entry.type})", port)
 
 
 def map_path(cfg) -> Path:

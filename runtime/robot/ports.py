@@ -18,6 +18,9 @@ class BaseFacts:
     max_speed: float = 0.5            # m/s
     ranging: bool = False             # range sensors: an empty reading means nothing in range
     latches_faults: bool = False      # faults stay, and the base stands, until reset
+    # the sensor kinds the robot carries (its base's and its sensors: entries', e.g. ("laser", "sonar")), which
+    # the allocation is told; None: not known to the host (the agent reads them from the config)
+    kinds: tuple[str, ...] | None = None
 
 
 class RobotPort:

@@ -553,8 +553,11 @@ class ComutarAgent:
 
 
 def make_agent(ctx: AgentContext, sensors: Sequence[str] | None = None) -> ComutarAgent:
-    """The agent for a robot; ``sensors`` default to what its base has (``ctx.base``: a Pioneer's sonar ring)
-    plus ``ctx.options.sensors`` (:func:`~runtime.allocation.comutar.actions.sensors_of`)."""
+    """The agent for a robot; ``sensors`` default to the kinds its host found (``ctx.sensors``: the base's and
+    the ``sensors:`` entries'), else to what its base config has (``ctx.base``: a Pioneer's sonar ring), plus
+    ``ctx.options.sensors`` (:func:`~runtime.allocation.comutar.actions.sensors_of`)."""
+    if sensors is None and ctx.sensors is not None:
+        sensors = tuple(sorted(set(ctx.sensors) | set(getattr(ctx.options, "sensors", ()) or ())))
     if sensors is None and ctx.base is not None:
         sensors = A.sensors_of(ctx.base, ctx.options)
     return ComutarAgent(ctx, sensors)

@@ -54,6 +54,7 @@ class SimRobot:
     config_path: Path
     base_type: str
     radius: float                       # m, the body's footprint (for the run's picture)
+    sensor_devs: list = field(default_factory=list)     # (type, emulator) of its sensors: entries but the GPS
     proc: subprocess.Popen | None = None
     daemon: object = None
     exit_reported: bool = False
@@ -97,6 +98,8 @@ class Fleet:
         for r in self.robots.values():
             r.base_dev.service(t)
             r.gps_dev.service(t)
+            for _, dev in r.sensor_devs:
+                dev.service(t)
 
     def advance_to(self, t_target: float) -> None:
         """Step physics (and service the devices every ``device_period``) up to ``t_target``."""
@@ -131,7 +134,7 @@ class Fleet:
                 except subprocess.TimeoutExpired:
                     r.proc.kill()
         for r in self.robots.values():
-            for dev in (r.base_dev, r.gps_dev):
+            for dev in (r.base_dev, r.gps_dev, *(d for _, d in r.sensor_devs)):
                 if hasattr(dev, "close"):
                     dev.close()
         self.world.close()
@@ -212,7 +215,7 @@ def _build(fleet, held, run_dir, manifest, seed, signing, method, speedup, peer_
     dialect.load()      # the MAVLink bindings (and their bytecode, in a fresh tree) before any device serves: a first
     #                     compile of them in this process later would hold the emulators' threads for seconds
     from sitl.devices.nmea_gps import NmeaGpsDevice      # pybullet only once the configs are good
-    from sitl.devices.registry import body_kind, make_device
+    from sitl.devices.registry import body_kind, make_device, make_sensor_device
     from sitl.world import World
     seed = fleet.seed if seed is None else seed
     run_dir = Path(run_dir or tempfile.mkdtemp(prefix="mrta-sitl-"))
@@ -231,16 +234,22 @@ def _build(fleet, held, run_dir, manifest, seed, signing, method, speedup, peer_
     robots: dict[int, SimRobot] = {}
     ports = {r.id: fleet.base_port + r.id for r in fleet.robots}
     for r in fleet.robots:
-        template = templates[fleet.template(r.id)]
-        base_cfg = C.load_robot(fleet.template(r.id)).base
+        template = dict(templates[fleet.template(r.id)])
+        robot_cfg = C.load_robot(fleet.template(r.id))
+        base_cfg = robot_cfg.base
         body = world.add_body(r.id, r.start, body_kind(base_cfg))
         base_dev = make_device(base_cfg, body, r.id)
+        # every robot has the world's GPS (whatever its template says); its other sensors: entries their twins
         gps_dev = NmeaGpsDevice(body, world_cfg.datum, noise_sigma=fleet.gps_noise, seed=seed * 1000 + r.id,
                                 robot_id=r.id)
+        entries = [e for e in robot_cfg.sensors if e.type != "nmea_gps"]
+        sensor_devs = [(e.type, make_sensor_device(e, body, r.id)) for e in entries]
+        template.pop("gps", None)
+        template["sensors"] = [{**C.to_dict(e), **dev.endpoint()} for e, (_, dev) in zip(entries, sensor_devs)] + \
+            [{"type": "nmea_gps", **gps_dev.endpoint()}]
         overrides = {
             "robot": {"id": r.id, "name": f"{template.get('robot', {}).get('name', 'robot')}-{r.id}"},
             "base": base_dev.endpoint(),
-            "gps": {"port": gps_dev.path, "enabled": True},
             "localization": {"initial_pose": list(r.start)},
             "comms": {"listen": f"127.0.0.1:{ports[r.id]}", "gcs": fleet.gcs,
                       "peers": [{"id": o, "address": f"127.0.0.1:{p}"} for o, p in ports.items() if o != r.id],
@@ -267,7 +276,7 @@ def _build(fleet, held, run_dir, manifest, seed, signing, method, speedup, peer_
         cfg_path.write_text(yaml.safe_dump(data, sort_keys=False))
         C.load_robot(cfg_path)   # what we wrote must load
         robots[r.id] = SimRobot(r.id, body, base_dev, gps_dev, ports[r.id], cfg_path, base_cfg.type,
-                                float(body.radius))
+                                float(body.radius), sensor_devs)
 
     manifest_path = Path(manifest) if manifest else run_dir / "manifest.json"
     out = Fleet(fleet, world_cfg, robots, world, run_dir, manifest_path, key=key,
@@ -323,6 +332,7 @@ def write_manifest(f: Fleet, speedup: float, seed: int, key_path: Path | None) -
                 "id": r.id, "system_id": r.id, "component_id": 1,
                 "base": {"type": r.base_type, **r.base_dev.endpoint()},
                 "gps": {"protocol": "nmea0183", "device": r.gps_dev.path, "baudrate": 9600},
+                "sensors": [{"type": kind, **d.endpoint()} for kind, d in r.sensor_devs],
                 "mavlink_udp": f"127.0.0.1:{r.udp_port}",
                 "config": str(r.config_path),
                 "start": list(next(x.start for x in f.fleet.robots if x.id == r.id)),

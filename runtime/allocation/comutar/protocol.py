@@ -68,7 +68,7 @@ class ComutarAgent:
         self.log = get_logger("alloc.comutar", self.robot_id)
         self.peers = frozenset(int(p) for p in ctx.peers) - {self.robot_id}
         self.lost: set[int] = set()
-        self.catalogue = A.catalogue(self.options.sensors if sensors is None else sensors)
+        self.catalogue = A.catalogue(sensors or ())
         self.window = C.Window(v_max=self.options.speed, w_max=self.options.turn_rate)
         self.ledger = Ledger()
         me = self.robot_id
@@ -433,7 +433,8 @@ class ComutarAgent:
 
     def _streams(self, now: float) -> list:
         """What my readers and detectors serving other robots send them: my sensor's discs (range data: one per
-        echo; the obstacle list: the same discs, and my own body), at 10 Hz and 5 Hz, from a fresh reading."""
+        echo; the obstacle list: the same discs, and my own body), at 10 Hz and 5 Hz, from a fresh reading, nearest
+        me first; when they are more than one stream carries (a laser's), nearest the region I keep in view."""
         if self.pose is None or now - self.sensed_at > SENSE_FRESH:
             return []
         out = []
@@ -450,7 +451,11 @@ class ComutarAgent:
                 if info == A.OBSTACLE_LIST:
                     discs = np.vstack([discs, [[self.pose[0], self.pose[1], self.estimator.profile.radius]]])
                 ox, oy = self.position
-                order = np.argsort(np.hypot(discs[:, 0] - ox, discs[:, 1] - oy))
+                near = (ox, oy)
+                region = self.region(tid) if len(discs) > MAX_DISCS else None
+                if region is not None:         # a laser hears more than a stream carries: those nearest the consumer
+                    near = region[1:3]
+                order = np.argsort(np.hypot(discs[:, 0] - near[0], discs[:, 1] - near[1]))
                 packed = [v for v in (pack_disc(*discs[i], ox, oy) for i in order) if v is not None]
                 out.append(CmStream(self.robot_id, consumer, tid, A.INFO[info], float(now), ox, oy,
                                     tuple(packed[:MAX_DISCS])))
@@ -554,12 +559,12 @@ class ComutarAgent:
 
 def make_agent(ctx: AgentContext, sensors: Sequence[str] | None = None) -> ComutarAgent:
     """The agent for a robot; ``sensors`` default to the kinds its host found (``ctx.sensors``: the base's and
-    the ``sensors:`` entries'), else to what its base config has (``ctx.base``: a Pioneer's sonar ring), plus
-    ``ctx.options.sensors`` (:func:`~runtime.allocation.comutar.actions.sensors_of`)."""
+    the ``sensors:`` entries'), else to what its base config has (``ctx.base``: a Pioneer's sonar ring,
+    :func:`~runtime.allocation.comutar.actions.sensors_of`)."""
     if sensors is None and ctx.sensors is not None:
-        sensors = tuple(sorted(set(ctx.sensors) | set(getattr(ctx.options, "sensors", ()) or ())))
+        sensors = tuple(ctx.sensors)
     if sensors is None and ctx.base is not None:
-        sensors = A.sensors_of(ctx.base, ctx.options)
+        sensors = A.sensors_of(ctx.base)
     return ComutarAgent(ctx, sensors)
 
 

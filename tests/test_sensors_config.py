@@ -21,14 +21,13 @@ from runtime.robot.core import sensors_with
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _run(tmp_path, data) -> tuple[int, str]:
-    import subprocess
-    import sys
+def _run(tmp_path, data, capsys) -> tuple[int, str]:
+    """``mrta daemon FILE --check`` in this process: its exit code and what it printed on stderr."""
+    from runtime.cli import main
     p = tmp_path / "robot.yaml"
     p.write_text(yaml.safe_dump(data))
-    r = subprocess.run([sys.executable, "-m", "runtime.cli", "daemon", str(p), "--check"], capture_output=True,
-                       text=True, timeout=120, cwd=ROOT)
-    return r.returncode, r.stderr
+    code = main(["daemon", str(p), "--check"])
+    return code, capsys.readouterr().err
 
 
 @pytest.mark.parametrize("entry, says", [
@@ -37,8 +36,8 @@ def _run(tmp_path, data) -> tuple[int, str]:
     ({"type": "rplidar", "port": "loop://", "mount": [0, 0, 9]}, "sensors[0].mount[2]: expected a number in"),
     ({"type": "rplidar", "port": "loop://", "mount": [0, 0]}, "sensors[0].mount: expected a list of 3 numbers"),
 ])
-def test_a_bad_sensor_entry_is_one_line_and_exit_2(tmp_path, entry, says):
-    code, err = _run(tmp_path, {"robot": {"id": 3}, "base": {"port": "loop://"}, "sensors": [entry]})
+def test_a_bad_sensor_entry_is_one_line_and_exit_2(tmp_path, capsys, entry, says):
+    code, err = _run(tmp_path, {"robot": {"id": 3}, "base": {"port": "loop://"}, "sensors": [entry]}, capsys)
     assert code == 2 and len(err.strip().splitlines()) == 1 and says in err, err
 
 

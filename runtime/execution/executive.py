@@ -148,7 +148,8 @@ class Executive:
     # ------------------------------------------------------------------ one control cycle
     def step(self, pose, sensors, now: float, guidance: Mapping = NONE) -> tuple[tuple[float, float], list[Progress]]:
         """The command for this cycle and the progress to report.  ``pose`` None or no executor: stand still.
-        ``guidance``: as for :meth:`sync`."""
+        ``sensors``: a :class:`~runtime.drivers.base.BaseSensors` (the core's: the base's readings and its range
+        sensors').  ``guidance``: as for :meth:`sync`."""
         if pose is None or not self.executors:
             return self._make_way(sensors, now), []
         for tid, e in self.executors.items():

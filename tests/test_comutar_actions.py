@@ -35,7 +35,7 @@ def test_which_actions_a_robot_has_follows_from_its_sensors():
 def test_the_chain_types_connect_reader_to_detector_to_avoider():
     assert A.LASER.outputs == A.DETECTOR.inputs == (A.RANGE_DATA,)
     assert A.DETECTOR.outputs == A.AVOIDER.inputs == (A.OBSTACLE_LIST,)
-    assert A.LASER.rate(A.RANGE_DATA) == pytest.approx(0.03168)      # an A1: 360 ranges x 2 bytes x 5.5 Hz
+    assert A.LASER.rate(A.RANGE_DATA) == pytest.approx(0.02896)      # 181 ranges x 2 bytes x 10 Hz
     assert {a.code for a in A.ALL} == set(A.BY_CODE) and len(A.BY_CODE) == len(A.ALL)
 
 

@@ -90,7 +90,7 @@ def test_the_cheapest_coalition_wins_a_local_chain_beats_a_remote_one():
 
 
 def test_a_link_too_narrow_for_the_laser_stream_refuses_that_chain():
-    """0.02 Mb/s cannot carry the laser's 0.032 Mb/s: only the chain that sends the obstacle list (0.008) fits."""
+    """0.02 Mb/s cannot carry the laser's 0.029 Mb/s: only the chain that sends the obstacle list (0.008) fits."""
     opts = ComutarOptions(link_capacity=0.02)
     agents, bus = fleet({1: (), 2: ("laser",)}, {1: (0, 0, 0), 2: (2, 0, 0)}, opts)
     hand_in(agents, [Task(tid(1, 1), "avoid_obstacles", AvoidObstacles(1))])

@@ -33,10 +33,13 @@ SURVEY, SENSOR, AVOID = "survey", "sensor", "avoid"        # ActionSpec.motion
 
 # the sensors a reader can read, and the data they make (Mb/s when streamed to another robot)
 SENSORS = {
-    "laser": Sensor(fov=2 * math.pi, range=12.0),          # an RPLIDAR A1/A2: all round, 12 m (docs/sensors.md)
+    # the paper's laser (181 beams, 180 deg ahead, 8 m: Stage's default), which the kinematic reproduction simulates;
+    # an RPLIDAR (all round, 12 m; a sensors: entry of type rplidar, kind "laser") is claimed as that subset of it
+    "laser": Sensor(fov=math.pi, range=8.0),
     "sonar": Sensor(fov=2 * math.pi, range=5.0),           # a Pioneer ring: all round, 5 m
 }
-LASER_RATE = 360 * 2 * 5.5 * 8 / 1e6                       # an A1's 360 ranges x 2 bytes x 5.5 Hz: 0.032 Mb/s
+LASER_RATE = 181 * 2 * 10 * 8 / 1e6                        # 181 ranges x 2 bytes x 10 Hz: 0.029 Mb/s (an A1's
+#                                                            360 x 2 x 5.5 Hz is 0.032: under the same link budgets)
 SONAR_RATE = 16 * 2 * 10 * 8 / 1e6                         # 16 ranges x 2 bytes x 10 Hz: 0.0026 Mb/s
 OBSTACLES_RATE = 16 * 12 * 5 * 8 / 1e6                     # 16 discs x 12 bytes x 5 Hz: 0.0077 Mb/s
 

@@ -451,11 +451,8 @@ class ComutarAgent:
                 if info == A.OBSTACLE_LIST:
                     discs = np.vstack([discs, [[self.pose[0], self.pose[1], self.estimator.profile.radius]]])
                 ox, oy = self.position
-                near = (ox, oy)
                 region = self.region(tid) if len(discs) > MAX_DISCS else None
-                if region is not None:         # a laser hears more than a stream carries: those nearest the consumer
-                    near = region[1:3]
-                order = np.argsort(np.hypot(discs[:, 0] - near[0], discs[:, 1] - near[1]))
+                order = stream_order(discs, (ox, oy), None if region is None else region[1:3])
                 packed = [v for v in (pack_disc(*discs[i], ox, oy) for i in order) if v is not None]
                 out.append(CmStream(self.robot_id, consumer, tid, A.INFO[info], float(now), ox, oy,
                                     tuple(packed[:MAX_DISCS])))
@@ -566,6 +563,14 @@ def make_agent(ctx: AgentContext, sensors: Sequence[str] | None = None) -> Comut
     if sensors is None and ctx.base is not None:
         sensors = A.sensors_of(ctx.base)
     return ComutarAgent(ctx, sensors)
+
+
+def stream_order(discs: np.ndarray, own, region=None) -> np.ndarray:
+    """The indices of ``discs`` in the order a stream packs them (it carries the first :data:`MAX_DISCS`): nearest
+    ``own`` (the provider's x, y) first, or, when they are more than a stream carries (a laser's revolution) and the
+    consumer's ``region`` (x, y) is known, nearest that: what the consumer may run into."""
+    near = region if region is not None and len(discs) > MAX_DISCS else own
+    return np.argsort(np.hypot(discs[:, 0] - near[0], discs[:, 1] - near[1]))
 
 
 def shadowed(discs: np.ndarray, origin, depth: float, step: float = 0.15) -> np.ndarray:

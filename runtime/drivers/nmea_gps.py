@@ -325,8 +325,8 @@ class NmeaGps:
 
     @property
     def usable(self) -> bool:
-        """A valid fix has come (the port opens in the constructor)."""
-        return self.last_fix is not None and bool(self.last_fix.valid)
+        """A valid fix has come and no outage is open (no fix for ``silence`` s); the port opens when built."""
+        return self.last_fix is not None and bool(self.last_fix.valid) and self._out_since is None
 
     def open(self, now: float = 0.0) -> None:
         """Nothing: the port opened when the driver was built (an InputError naming it if it did not)."""

@@ -10,14 +10,13 @@ process.
 """
 from __future__ import annotations
 
-import json
-import os
 import signal
 import time
 from dataclasses import dataclass
 
 from runtime import config as C
 from runtime.clock import Clock, ClockStalled, SharedClock
+from runtime.jsonfile import write_json
 from runtime.log import get_logger
 from runtime.robot.core import GCS, PEERS, Inbox, RobotCore, Sensed
 from runtime.robot.ports import BaseFacts
@@ -58,12 +57,8 @@ class Daemon:
                 raise InputError(f"{cfg.source or '<config>'}: {exc}") from None
         self.link = link
         self.guard = None                 # the base's stop guard (start_guard), in a daemon of its own process
-        fp = base.footprint
-        lasers = [s for s in self.sensor_parts if s.reports == "ranges"]
-        kinds = tuple(sorted(set(getattr(base, "sensor_kinds", ())) | {s.kind for s in self.sensor_parts}))
-        facts = BaseFacts(float(fp.radius), float(getattr(fp, "max_speed", 0.5)), bool(base.ranging or lasers),
-                          bool(base.latches_faults), kinds)
-        self.core = RobotCore(cfg, facts, mavlink=(link.mav, link.module, link.counters))
+        self.core = RobotCore(cfg, BaseFacts.of(base, self.sensor_parts),
+                              mavlink=(link.mav, link.module, link.counters))
         self.period = self.core.period
         self.feed = None                  # a recording's CoreFeed (runtime.recording.feed): told every cycle
         self._mode()
@@ -79,12 +74,6 @@ class Daemon:
                       ", ".join(f"{e.type} {e.port}" for e in self.cfg.sensor_list()) or "none",
                       self.cfg.comms.listen, self.cfg.comms.transport, self.core.method.name,
                       "" if self.core.node.armed else " (disarmed)")
-        nets = getattr(self.link, "unsigned_gcs", None)
-        if nets and self.link.signing:
-            self.log.warning("accepting unsigned ground-station frames from %s (comms.unsigned_gcs; peers must "
-                             "sign)", nets)
-        elif nets:
-            self.log.info("comms.unsigned_gcs (%s) changes nothing: signing is off, every frame is taken", nets)
 
     def start_guard(self) -> None:
         """Start the base's stop guard (:mod:`runtime.drivers.guard`): a process that stops the base when this
@@ -225,7 +214,7 @@ def run(daemon: Daemon, clock: Clock, duration: float | None = None, stats_path:
                 last_dump = now
                 daemon.stats.cpu_seconds = time.process_time() - cpu0
                 daemon.stats.wall_seconds = time.monotonic() - wall0
-                _dump(stats_path, daemon.snapshot())
+                write_json(stats_path, daemon.snapshot())
             try:
                 clock.sleep_until(next_t)
             except ClockStalled as exc:
@@ -243,16 +232,9 @@ def run(daemon: Daemon, clock: Clock, duration: float | None = None, stats_path:
         daemon.stats.cpu_seconds = time.process_time() - cpu0
         daemon.stats.wall_seconds = time.monotonic() - wall0
         if stats_path:
-            _dump(stats_path, daemon.snapshot())
+            write_json(stats_path, daemon.snapshot())
         daemon.log.info("stopped after %d cycles, %d missed deadlines", daemon.stats.cycles,
                         daemon.stats.missed_deadlines)
         for s, handler in before.items():      # ignored signals would be inherited by every later child process
             signal.signal(s, handler)
     return code
-
-
-def _dump(path: str, data: dict) -> None:
-    tmp = f"{path}.tmp{os.getpid()}"
-    with open(tmp, "w") as fh:
-        json.dump(data, fh, default=str)
-    os.replace(tmp, path)

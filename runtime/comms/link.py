@@ -368,6 +368,12 @@ class MavlinkLink:
         except ValueError as e:
             raise InputError(f"comms.unsigned_gcs: expected a network in CIDR form ({e})") from None
         self._unsigned_net = False        # the datagram being parsed comes from a network in unsigned_gcs
+        if self.unsigned_gcs and self.signing:
+            self.log.warning("accepting unsigned ground-station frames from %s (comms.unsigned_gcs; peers must "
+                             "sign)", self.unsigned_gcs)
+        elif self.unsigned_gcs:
+            self.log.info("comms.unsigned_gcs (%s) changes nothing: signing is off, every frame is taken",
+                          self.unsigned_gcs)
         self._fleet = frozenset(int(r) for r in fleet) | {self.robot_id}    # system ids that must always sign
         if self.signing:
             s = self.mav.signing

@@ -4,7 +4,7 @@ of [from, to).  Prints one line a run (least clearance of the borrower's body to
 and then the spread: runs that touched, the least clearances' minimum, 10th percentile and median, and how many
 met the goal (every waypoint visited, no touch, stopped and re-allocated after the kill).
 
-    PYTHONPATH=. python benchmarks/comutar_clearance.py --from 1 --to 41 [--jobs 2] [--option feed_memory=0.5 ...]
+    PYTHONPATH=. python benchmarks/comutar_clearance.py --from 1 --to 41 [--jobs 2 | --cluster local|tcp://HOST:PORT] [--option feed_memory=0.5 ...]
                                                         [--peer-loss 0.1]
 
 ``--option NAME=VALUE`` sets an ``allocation:`` option of the borrower's robot config (the consumer of the
@@ -17,13 +17,15 @@ from __future__ import annotations
 import argparse
 import sys
 import tempfile
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from runtime.errors import InputError  # noqa: E402
+from sitl.experiments import executor  # noqa: E402  (--jobs / --cluster: the sweep executor)
 
 
 def one(job: tuple[int, dict, float]) -> dict:
@@ -53,11 +55,15 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--from", dest="lo", type=int, default=1)
     ap.add_argument("--to", dest="hi", type=int, default=41)
-    ap.add_argument("--jobs", type=int, default=2)
+    executor.add_arguments(ap, jobs=2)
     ap.add_argument("--option", action="append", default=[], metavar="NAME=VALUE")
     ap.add_argument("--peer-loss", type=float, default=0.0, metavar="P",
                     help="every robot's link loses this share of its datagrams to each peer (default 0)")
     args = ap.parse_args()
+    try:
+        executor.check_arguments(args)
+    except InputError as exc:
+        ap.error(str(exc))
     import yaml
 
     from dataclasses import fields
@@ -76,12 +82,11 @@ def main() -> int:
         ap.error(f"--peer-loss {args.peer_loss}: expected a share of datagrams 0..1")
     seeds = list(range(args.lo, args.hi))
     rows = []
-    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        for r in pool.map(one, [(seed, options, args.peer_loss) for seed in seeds]):
-            rows.append(r)
-            at = "-" if r["at"] is None else f"{r['at']:.1f} s"
-            print(f"seed {r['seed']:3d}: least clearance {r['least']:6.3f} m at {at:>8}, sim {r['sim_time']:5.1f} s: "
-                  f"{r['verdict']}", flush=True)
+    for _, r in executor.run_each(one, [((seed, options, args.peer_loss),) for seed in seeds], args.jobs, args.cluster):
+        rows.append(r)
+        at = "-" if r["at"] is None else f"{r['at']:.1f} s"
+        print(f"seed {r['seed']:3d}: least clearance {r['least']:6.3f} m at {at:>8}, sim {r['sim_time']:5.1f} s: "
+              f"{r['verdict']}", flush=True)
     least = np.array([r["least"] for r in rows])
     touched = int((least <= 0.0).sum())
     print(f"\n{len(rows)} runs: {touched} touched a pillar; least clearance min {least.min():.3f} m, "

@@ -6,7 +6,7 @@ tests/test_dr_fleet.py checks the kinematic fleet's (tests/dr_util.py ``Watch``)
 view nor holding two commitments, a leader's member list stale for at most member_timeout, no object with two
 leaders for longer than three LEADER_ALIVE periods.
 
-    PYTHONPATH=. python benchmarks/dr_sitl_loss.py --from 1 --to 11 [--loss 0.1] [--burst 0] [--carrier-leads] [--jobs 2]
+    PYTHONPATH=. python benchmarks/dr_sitl_loss.py --from 1 --to 11 [--loss 0.1] [--burst 0] [--carrier-leads] [--jobs 2 | --cluster local|tcp://HOST:PORT]
 
 One line a run (goal, the new leader's delay after the kill, the share of peer datagrams lost, the longest spell of
 two leaders and of a stale member, violations), then the spread.  tests/test_sitl_foraging.py runs seed 1.
@@ -17,13 +17,15 @@ import argparse
 import logging
 import sys
 import tempfile
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from runtime.errors import InputError  # noqa: E402
+from sitl.experiments import executor  # noqa: E402  (--jobs / --cluster: the sweep executor)
 
 
 def one(job: tuple[int, float, float, bool]) -> dict:
@@ -59,21 +61,24 @@ def main() -> int:
     ap.add_argument("--burst", type=float, default=0.0, help="comms.loss_burst: mean s of a loss spell (default 0)")
     ap.add_argument("--carrier-leads", action="store_true",
                     help="DR option carrier_leads: a robot with a load of a leaderless task may ask to lead it")
-    ap.add_argument("--jobs", type=int, default=2)
+    executor.add_arguments(ap, jobs=2)
     args = ap.parse_args()
+    try:
+        executor.check_arguments(args)
+    except InputError as exc:
+        ap.error(str(exc))
     if not 0.0 <= args.loss <= 1.0 or args.hi <= args.lo or not 0.0 <= args.burst <= 3600.0:
         ap.error(f"--loss {args.loss} / --burst {args.burst} / --from {args.lo} --to {args.hi}: expected a share 0..1, "
                  "a burst 0..3600 s and from < to")
     rows = []
-    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        for r in pool.map(one, [(seed, args.loss, args.burst, args.carrier_leads)
-                                   for seed in range(args.lo, args.hi)]):
-            rows.append(r)
-            after = "-" if r["after"] is None else f"{r['after']:.1f} s"
-            print(f"seed {r['seed']:3d}: {'goal met' if r['goal'] else 'NOT MET'} in {r['sim']:5.1f} s, new leader "
-                  f"{after} after the kill, {100 * r['lost']:.1f} % of peer datagrams lost, two leaders at most "
-                  f"{r['dual']:.2f} s, a stale member at most {r['stale']:.2f} s, {len(r['violations'])} violations"
-                  + (f": {r['violations'][:2]}" if r["violations"] else ""), flush=True)
+    tasks = [((seed, args.loss, args.burst, args.carrier_leads),) for seed in range(args.lo, args.hi)]
+    for _, r in executor.run_each(one, tasks, args.jobs, args.cluster):
+        rows.append(r)
+        after = "-" if r["after"] is None else f"{r['after']:.1f} s"
+        print(f"seed {r['seed']:3d}: {'goal met' if r['goal'] else 'NOT MET'} in {r['sim']:5.1f} s, new leader "
+              f"{after} after the kill, {100 * r['lost']:.1f} % of peer datagrams lost, two leaders at most "
+              f"{r['dual']:.2f} s, a stale member at most {r['stale']:.2f} s, {len(r['violations'])} violations"
+              + (f": {r['violations'][:2]}" if r["violations"] else ""), flush=True)
     afters = [r["after"] for r in rows if r["after"] is not None]
     burst = f" in spells of {args.burst:g} s" if args.burst else ""
     print(f"\n{len(rows)} runs at {100 * args.loss:g} % loss{burst}: goal met in {sum(r['goal'] for r in rows)}, "

@@ -4,7 +4,7 @@ mean ``--burst`` s (``comms.peer_loss``, ``comms.loss_burst``), beside the same 
 ``mrta sitl run configs/fleets/NAME.yaml --lockstep [--peer-loss P] [--loss-burst S] --seed N`` for each cell.
 
     PYTHONPATH=. python benchmarks/fleets_loss.py [--fleets create2_4,can_2,...] [--seeds 1-2] [--loss 0.1]
-                                                  [--burst 2] [--jobs 2]
+                                                  [--burst 2] [--jobs 2 | --cluster local|tcp://HOST:PORT]
 
 One line a run (verdict, simulated time, the pose filters' relocalisations, idle robots' cycles making way, and
 for a formation its global cost above the Hungarian optimum), then a table per fleet: goals met without loss, at
@@ -18,11 +18,13 @@ import logging
 import math
 import sys
 import tempfile
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from runtime.errors import InputError  # noqa: E402
+from sitl.experiments import executor  # noqa: E402  (--jobs / --cluster: the sweep executor)
 
 FLEETS = ("create2_4", "create2_4_boxes", "create2_10", "pioneer_4", "mixed_4", "coalition_6", "can_2",
           "foraging_4_member", "comutar_3")
@@ -62,8 +64,12 @@ def main() -> int:
     ap.add_argument("--seeds", default="1-2", help="a range lo-hi, inclusive (default 1-2)")
     ap.add_argument("--loss", type=float, default=0.1, help="comms.peer_loss of every robot (default 0.1)")
     ap.add_argument("--burst", type=float, default=2.0, help="mean s of a loss spell for the third column (default 2)")
-    ap.add_argument("--jobs", type=int, default=2)
+    executor.add_arguments(ap, jobs=2)
     args = ap.parse_args()
+    try:
+        executor.check_arguments(args)
+    except InputError as exc:
+        ap.error(str(exc))
     try:
         fleets = args.fleets.split(",")
         lo, hi = (int(x) for x in args.seeds.split("-"))
@@ -75,13 +81,12 @@ def main() -> int:
     modes = ((0.0, 0.0), (args.loss, 0.0), (args.loss, args.burst))
     jobs = [(f, s, loss, burst) for f in fleets for s in range(lo, hi + 1) for loss, burst in modes]
     rows = []
-    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        for r in pool.map(one, jobs):
-            rows.append(r)
-            print(f"{r['fleet']:18s} seed {r['seed']} loss {r['loss']:g} spells {r['burst']:g} s: "
-                  f"{'goal met' if r['goal'] else 'NOT MET'} at {r['sim']:.1f} s, relocalised {r['reloc']}, "
-                  f"making way {r['made_way']} cycles" + ("" if r["gap"] is None else f", gap {r['gap']:+.2f} %"),
-                  flush=True)
+    for _, r in executor.run_each(one, [(job,) for job in jobs], args.jobs, args.cluster):
+        rows.append(r)
+        print(f"{r['fleet']:18s} seed {r['seed']} loss {r['loss']:g} spells {r['burst']:g} s: "
+              f"{'goal met' if r['goal'] else 'NOT MET'} at {r['sim']:.1f} s, relocalised {r['reloc']}, "
+              f"making way {r['made_way']} cycles" + ("" if r["gap"] is None else f", gap {r['gap']:+.2f} %"),
+              flush=True)
     print(f"\n| fleet | no loss | {100 * args.loss:g} % | {100 * args.loss:g} % in {args.burst:g} s spells |")
     print("| --- | --- | --- | --- |")
     for f in fleets:

@@ -32,6 +32,7 @@ COMMANDS = {
     "init-robot": "runtime.deploy.init_robot",               # mrta init-robot DIR --base create2|pioneer|can
     "schema": "runtime.config.schema_cli",                   # mrta schema robot|fleet|world
     "log": "runtime.recording.summary",                      # mrta log summary FILE.mcap
+    "router": "runtime.comms.router_cli",                    # mrta router --listen tcp/HOST:PORT [--connect ...]
 }
 SIMULATOR = ("pybullet", "matplotlib")       # the [sitl] extra
 NEEDS_SIMULATOR = "the simulator is not installed: pip install 'mrta-runtime[sitl]'"

@@ -1,7 +1,8 @@
 """The robot daemon: the I/O shell around one robot core.  poll -> core -> send.
 
-One :class:`Daemon` per robot.  It opens the base (chosen by ``base.type``), the GPS and the MAVLink link, and
-each control cycle (:meth:`Daemon.step`, never blocking) polls them, hands what it read to the robot's
+One :class:`Daemon` per robot.  It opens the base (chosen by ``base.type``), the sensors the config lists (each
+chosen by its ``type``: a GPS, a laser scanner) and the MAVLink link, and each control cycle (:meth:`Daemon.step`,
+never blocking) polls them, hands what it read to the robot's
 :class:`~runtime.robot.core.RobotCore` (the robot's logic, sans-IO: allocation, execution, pose estimate, ground
 services), then gives the base the core's command and sends the core's frames on the link.  The same object runs
 in its own process against real devices (:func:`run`, wall or scaled clock) or lock-stepped inside the SITL
@@ -9,14 +10,13 @@ process.
 """
 from __future__ import annotations
 
-import json
-import os
 import signal
 import time
 from dataclasses import dataclass
 
 from runtime import config as C
 from runtime.clock import Clock, ClockStalled, SharedClock
+from runtime.jsonfile import write_json
 from runtime.log import get_logger
 from runtime.robot.core import GCS, PEERS, Inbox, RobotCore, Sensed
 from runtime.robot.ports import BaseFacts
@@ -32,7 +32,9 @@ class ShellStats:
 
 
 class Daemon:
-    def __init__(self, cfg: C.RobotConfig, *, base=None, gps=None, link=None):
+    def __init__(self, cfg: C.RobotConfig, *, base=None, gps=None, link=None, listen_socket=None):
+        """``listen_socket``: a UDP socket already bound to ``comms.listen`` for the link (the SITL launcher's,
+        held since it checked the port), else the link binds one."""
         self.cfg = cfg
         self.id = cfg.robot.id
         self.log = get_logger("daemon", self.id)
@@ -41,24 +43,22 @@ class Daemon:
             from runtime.drivers.registry import open_base
             base = open_base(cfg.base, self.id)
         self.base = base
-        if gps is None and cfg.gps.enabled:
-            from runtime.drivers.nmea_gps import NmeaGps
-            gps = NmeaGps(cfg.gps.port, baudrate=cfg.gps.baudrate, robot_id=self.id)
-        self.gps = gps
+        from runtime.drivers.registry import open_sensor
+        # the sensors: entries (and an older config's gps: section); ``gps`` given stands for the GPS entries
+        self.sensor_parts = [gps if gps is not None and e.type == "nmea_gps" else open_sensor(e, self.id)
+                             for e in cfg.sensor_list()]
+        self.gps = next((s for s in self.sensor_parts if s.reports == "fixes"), None)
         if link is None:
-            from runtime.comms.link import MavlinkLink, load_key
-            key = load_key(cfg.comms.signing_key) if cfg.comms.signing_key else None
-            link = MavlinkLink(self.id, cfg.comms.listen, [p.address for p in cfg.comms.peers],
-                               cfg.comms.gcs, signing_key=key,
-                               heartbeat_timeout=cfg.comms.heartbeat_timeout, peer_loss=cfg.comms.peer_loss,
-                               loss_burst=cfg.comms.loss_burst, loss_seed=cfg.comms.loss_seed,
-                               unsigned_gcs=cfg.comms.unsigned_gcs, fleet=[p.id for p in cfg.comms.peers])
+            from runtime.comms.link import open_link
+            from runtime.errors import InputError
+            try:
+                link = open_link(cfg.comms, self.id, sock=listen_socket)
+            except InputError as exc:            # a socket that will not bind, no Zenoh router answering
+                raise InputError(f"{cfg.source or '<config>'}: {exc}") from None
         self.link = link
         self.guard = None                 # the base's stop guard (start_guard), in a daemon of its own process
-        fp = base.footprint
-        facts = BaseFacts(float(fp.radius), float(getattr(fp, "max_speed", 0.5)), bool(base.ranging),
-                          bool(base.latches_faults))
-        self.core = RobotCore(cfg, facts, mavlink=(link.mav, link.module, link.counters))
+        self.core = RobotCore(cfg, BaseFacts.of(base, self.sensor_parts),
+                              mavlink=(link.mav, link.module, link.counters))
         self.period = self.core.period
         self.feed = None                  # a recording's CoreFeed (runtime.recording.feed): told every cycle
         self._mode()
@@ -67,17 +67,13 @@ class Daemon:
     def open(self, now: float) -> None:
         self.core.prepare()               # before the base runs: its watchdogs start with it
         self.base.open(now)
-        if self.gps is not None and hasattr(self.gps, "open"):
-            self.gps.open(now)
-        self.log.info("open: base %s, gps %s, listening %s, allocation %s%s", self.cfg.base.type,
-                      self.cfg.gps.port if self.gps else "off", self.cfg.comms.listen, self.core.method.name,
+        for part in self.sensor_parts:
+            if hasattr(part, "open"):
+                part.open(now)
+        self.log.info("open: base %s, sensors %s, listening %s, peers over %s, allocation %s%s", self.cfg.base.type,
+                      ", ".join(f"{e.type} {e.port}" for e in self.cfg.sensor_list()) or "none",
+                      self.cfg.comms.listen, self.cfg.comms.transport, self.core.method.name,
                       "" if self.core.node.armed else " (disarmed)")
-        nets = getattr(self.link, "unsigned_gcs", None)
-        if nets and self.link.signing:
-            self.log.warning("accepting unsigned ground-station frames from %s (comms.unsigned_gcs; peers must "
-                             "sign)", nets)
-        elif nets:
-            self.log.info("comms.unsigned_gcs (%s) changes nothing: signing is off, every frame is taken", nets)
 
     def start_guard(self) -> None:
         """Start the base's stop guard (:mod:`runtime.drivers.guard`): a process that stops the base when this
@@ -94,7 +90,7 @@ class Daemon:
             if self.guard is not None:
                 self.guard.close(goodbye=stopped)      # no goodbye: the guard stops the base itself
                 self.guard = None
-            for part in (self.gps, self.link):
+            for part in (*self.sensor_parts, self.link):
                 if part is not None and hasattr(part, "close"):
                     part.close()
 
@@ -103,11 +99,17 @@ class Daemon:
         self.stats.cycles += 1
         base, link = self.base, self.link
         odometry = (base.odometry.v, base.odometry.w) if base.poll(now) else None
-        fixes = self.gps.poll(now) if self.gps is not None else ()
+        fixes, ranges = [], []
+        for part in self.sensor_parts:
+            got = part.poll(now)
+            if part.reports == "fixes":
+                fixes += got
+            else:
+                ranges += part.ranges()          # empty while the sensor is unusable (stalled, failed, lost)
         peers = link.poll(now)
         lost = link.peers_lost(now)
         inbox = self._inbox(peers, lost)
-        out = self.core.step(now, Sensed(odometry, fixes, base.sensors), inbox)
+        out = self.core.step(now, Sensed(odometry, fixes, base.sensors, ranges=ranges), inbox)
         if out.reset_faults:
             base.reset_faults(now)
         base.set_velocity(*out.command, now)
@@ -162,6 +164,8 @@ class Daemon:
             "missed_deadlines": s.missed_deadlines, "worst_lateness": s.worst_lateness,
             "cpu_seconds": s.cpu_seconds, "wall_seconds": s.wall_seconds,
             "base": vars(self.base.stats) if hasattr(self.base, "stats") else {},
+            "sensors": [{"type": e.type, "usable": bool(getattr(p, "usable", False))}
+                        for e, p in zip(self.cfg.sensor_list(), self.sensor_parts)],
             "link": self.link.counters.as_dict() if hasattr(self.link, "counters") else {},
         })
         return snap
@@ -210,7 +214,7 @@ def run(daemon: Daemon, clock: Clock, duration: float | None = None, stats_path:
                 last_dump = now
                 daemon.stats.cpu_seconds = time.process_time() - cpu0
                 daemon.stats.wall_seconds = time.monotonic() - wall0
-                _dump(stats_path, daemon.snapshot())
+                write_json(stats_path, daemon.snapshot())
             try:
                 clock.sleep_until(next_t)
             except ClockStalled as exc:
@@ -228,16 +232,9 @@ def run(daemon: Daemon, clock: Clock, duration: float | None = None, stats_path:
         daemon.stats.cpu_seconds = time.process_time() - cpu0
         daemon.stats.wall_seconds = time.monotonic() - wall0
         if stats_path:
-            _dump(stats_path, daemon.snapshot())
+            write_json(stats_path, daemon.snapshot())
         daemon.log.info("stopped after %d cycles, %d missed deadlines", daemon.stats.cycles,
                         daemon.stats.missed_deadlines)
         for s, handler in before.items():      # ignored signals would be inherited by every later child process
             signal.signal(s, handler)
     return code
-
-
-def _dump(path: str, data: dict) -> None:
-    tmp = f"{path}.tmp{os.getpid()}"
-    with open(tmp, "w") as fh:
-        json.dump(data, fh, default=str)
-    os.replace(tmp, path)

@@ -24,6 +24,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--clock-file", default=None,
                    help="SITL only: when built, write FILE.ready.ID, wait for FILE, then take the "
                         "simulator's time from it")
+    p.add_argument("--listen-fd", type=int, default=None, metavar="FD",
+                   help="take comms.listen's UDP socket already bound, as inherited file descriptor FD (the SITL "
+                        "launcher holds each robot's port from its check on and hands it over so)")
     p.add_argument("--duration", type=float, default=None, help="stop after this many (clock) seconds")
     p.add_argument("--stats", default=None, help="write a JSON status snapshot here every second")
     from runtime.recording.options import add_live, add_live_relay, add_record
@@ -47,6 +50,19 @@ def _wait_for_clock(path: str, robot_id: int, timeout: float = 120.0) -> None:
         time.sleep(0.01)
 
 
+def _inherited(fd: int | None):
+    """The socket of inherited descriptor ``fd`` (None: none), or an InputError naming --listen-fd."""
+    if fd is None:
+        return None
+    import socket
+
+    from runtime.errors import InputError
+    try:
+        return socket.socket(fileno=fd)
+    except OSError as e:
+        raise InputError(f"--listen-fd: expected an open UDP socket's descriptor, got {fd} ({e.strerror})") from None
+
+
 def _check_args(args) -> None:
     """The options, before anything starts: numbers in range, output files in folders that exist."""
     from runtime import argcheck
@@ -54,6 +70,7 @@ def _check_args(args) -> None:
     argcheck.number(args.speedup, "--speedup", 0.0, lo_open=True)
     argcheck.number(args.epoch, "--epoch")
     argcheck.number(args.duration, "--duration", 0.0, lo_open=True)
+    argcheck.number(args.listen_fd, "--listen-fd", 3, 65535)
     argcheck.output_file(args.stats, "--stats")
     argcheck.output_file(args.clock_file, "--clock-file")
     from runtime.recording.options import check_record
@@ -69,7 +86,7 @@ def _main(args) -> int:
         codec.check(dialect.load())   # the MAVLink bindings: shipped, or generated into a cache it can write
         print(f"{args.config}: ok (robot {cfg.robot.id}, base {cfg.base.type}, allocation {cfg.allocation.method})")
         return 0
-    daemon = D.Daemon(cfg)
+    daemon = D.Daemon(cfg, listen_socket=_inherited(args.listen_fd))
     if args.clock_file:
         _wait_for_clock(args.clock_file, cfg.robot.id)
         clock: Clock = SharedClock(args.clock_file, args.speedup or 1.0)

@@ -298,7 +298,7 @@ class Fleet:
     def __init__(self, cores: Mapping[int, RobotCore], motion: Motion, *, period: float = 0.05,
                  delay: float = 0.01, jitter: float = 0.0, drop: float = 0.0, duplicate: float = 0.0, seed: int = 0,
                  heartbeat_timeout: float = 3.0, heartbeat_period: float = 1.0, bus: bool = True,
-                 profile: bool = False,
+                 profile: bool = False, links: Mapping | None = None,
                  on_output: Callable[[int, Output, float], None] | None = None,
                  after_cycle: Callable[[float], None] | None = None,
                  after_advance: Callable[[float], None] | None = None):
@@ -307,9 +307,15 @@ class Fleet:
         self.period = float(period)
         self.talk = bool(bus)
         self.bus = InMemoryBus(dict(self.robots), delay=delay, jitter=jitter, drop=drop, duplicate=duplicate, seed=seed)
+        self.heartbeat_period = float(heartbeat_period)
         self.beats = InMemoryBus({r: Beats(r, h.liveness) for r, h in self.robots.items()}, delay=delay, jitter=jitter,
                                  drop=drop, seed=seed + 0x5EED, down=self.bus.down)     # the links' heartbeats
-        self.heartbeat_period = float(heartbeat_period)
+        if links is not None:             # real links (and their transports) instead of the in-memory buses
+            self.bus = LinkBus(self.robots, links)
+            self.beats = LinkBus({}, {}, down=self.bus.down)      # the links heartbeat themselves
+            self.heartbeat_period = math.inf
+            for r, h in self.robots.items():
+                h.liveness = LinkLiveness(links[r])
         self._next_beat = dict.fromkeys(self.robots, 0.0)
         self.on_output, self.after_cycle, self.after_advance = on_output, after_cycle, after_advance
         self.steps = 0
@@ -338,7 +344,7 @@ class Fleet:
         for r in live:
             h = self.robots[r]
             pose, sensors = sensed[r]
-            if self.talk and now >= self._next_beat[r] - 1e-9:
+            if self.talk and now >= self._next_beat[r] - 1e-9 and self.heartbeat_period < math.inf:
                 self.beats.send([Heartbeat(r)], now)
                 nxt = self._next_beat[r] + self.heartbeat_period      # the link's schedule: on time, or from now
                 self._next_beat[r] = nxt if nxt > now else now + self.heartbeat_period
@@ -385,6 +391,8 @@ class Fleet:
         if robot in self.bus.down:
             return
         self.bus.down.add(robot)
+        if isinstance(self.bus, LinkBus):
+            self.bus.links[robot].close()      # its session dies with it
         self.motion.remove(robot)
 
     def live(self) -> list[int]:
@@ -430,6 +438,50 @@ class Fleet:
 
     def task(self, task_id: int) -> Task:
         return self.robots[min(self.live())].node.table.entries[task_id].task
+
+
+class LinkBus:
+    """The in-memory bus's interface over real links (:class:`runtime.comms.link.MavlinkLink`, any transport): a
+    robot's messages go out on its own link, each robot's link is polled at :meth:`deliver`.  Messages arrive when
+    the transport brings them (wall time), so a fleet on it is not deterministic; the links heartbeat as daemons'
+    do (:class:`LinkLiveness` reads their verdicts)."""
+
+    def __init__(self, robots: Mapping, links: Mapping, down: set | None = None):
+        self.robots, self.links = robots, links
+        self.down: set[int] = set() if down is None else down
+
+    def send(self, msgs, now: float) -> None:
+        by: dict[int, list] = {}
+        for m in msgs:
+            by.setdefault(m.sender, []).append(m)
+        for r, batch in by.items():
+            if r not in self.down:
+                self.links[r].send_agent(batch, now)
+
+    def deliver(self, now: float) -> None:
+        for r, link in self.links.items():
+            if r in self.down:
+                continue
+            for msg in link.poll(now):
+                out = self.robots[r].on_message(msg, now)
+                if out:
+                    self.send(out, now)
+
+
+class LinkLiveness:
+    """A hosted robot's liveness verdicts from its link (heartbeats, and the transport's membership)."""
+
+    def __init__(self, link):
+        self.link = link
+
+    def due(self, now: float) -> list[int]:
+        return self.link.peers_lost(now)
+
+    def alive(self, now: float) -> list[int]:
+        return self.link.peers_alive
+
+    def hear(self, sender: int, now: float) -> None:        # the link hears heartbeats itself
+        pass
 
 
 def _time_executive(core: RobotCore, timing: Timing, clock) -> None:

@@ -1,7 +1,8 @@
-"""Read a JSON input file for a CLI: any failure is one InputError line naming the file."""
+"""Read a JSON input file for a CLI (any failure is one InputError line naming the file); write one whole."""
 from __future__ import annotations
 
 import json
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -35,3 +36,11 @@ def read_json(path: str | Path, what: str = "JSON file") -> Any:
         raise InputError(f"{name}: expected JSON (nested too deeply)") from None
     except ValueError as exc:           # an integer of more digits than Python converts (4300)
         raise InputError(f"{name}: expected JSON numbers Python can read ({str(exc).split(':')[0]})") from None
+
+
+def write_json(path: str | Path, data: Any) -> None:
+    """``data`` as JSON at ``path``, replaced whole (a reader never sees half a file: a daemon's --stats)."""
+    tmp = f"{path}.tmp{os.getpid()}"
+    with open(tmp, "w") as fh:
+        json.dump(data, fh, default=str)
+    os.replace(tmp, path)

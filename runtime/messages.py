@@ -184,10 +184,12 @@ class RobotState(Message):
 
 @dataclass(frozen=True)
 class TableRequest(Message):
-    """A robot whose table digest differs from the sender's asks for its table."""
+    """A robot whose table digest differs from the sender's asks for its table; with ``task`` (a fleet task id, not
+    0) it asks the task's origin for that task's record alone (to confirm a task it heard of from someone else)."""
     sender: int
     dest: int
     digest: int
+    task: int = 0
 
 
 FLEET_MESSAGES = (TaskRecord, RobotState, TableRequest)

@@ -54,6 +54,7 @@ class SimRobot:
     config_path: Path
     base_type: str
     radius: float                       # m, the body's footprint (for the run's picture)
+    sensor_devs: list = field(default_factory=list)     # (type, emulator) of its sensors: entries but the GPS
     proc: subprocess.Popen | None = None
     daemon: object = None
     exit_reported: bool = False
@@ -76,7 +77,20 @@ class Fleet:
     events: list[str] = field(default_factory=list)
     device_hook: object = None          # called with the sim time after every device service
     withdrawn: set[int] = field(default_factory=set)     # robots taken out of the arena
+    segments: object = None             # the Zenoh routers (comms.transport zenoh): a sitl.segments.Segments
     stopped: set[int] = field(default_factory=set)       # robots whose lock-step daemon no longer runs (killed)
+    held: dict = field(default_factory=dict)             # robot id -> its MAVLink port's socket, bound since the check
+
+    # -------------------------------------------------------------- ports
+    def take_socket(self, rid: int):
+        """Robot ``rid``'s MAVLink socket, bound since the port check, for its daemon (None once taken)."""
+        return self.held.pop(rid, None)
+
+    def release_ports(self) -> None:
+        """Unbind the ports still held (devices only: the user's own daemons bind them)."""
+        for sock in self.held.values():
+            sock.close()
+        self.held.clear()
 
     # -------------------------------------------------------------- devices
     def service_devices(self) -> None:
@@ -84,6 +98,8 @@ class Fleet:
         for r in self.robots.values():
             r.base_dev.service(t)
             r.gps_dev.service(t)
+            for _, dev in r.sensor_devs:
+                dev.service(t)
 
     def advance_to(self, t_target: float) -> None:
         """Step physics (and service the devices every ``device_period``) up to ``t_target``."""
@@ -105,6 +121,7 @@ class Fleet:
         self.withdrawn.add(rid)
 
     def close(self, keep_key: bool = False) -> None:
+        self.release_ports()
         for r in self.robots.values():
             if r.daemon is not None:
                 r.daemon.close()
@@ -117,17 +134,21 @@ class Fleet:
                 except subprocess.TimeoutExpired:
                     r.proc.kill()
         for r in self.robots.values():
-            for dev in (r.base_dev, r.gps_dev):
+            for dev in (r.base_dev, r.gps_dev, *(d for _, d in r.sensor_devs)):
                 if hasattr(dev, "close"):
                     dev.close()
         self.world.close()
+        if self.segments is not None:
+            self.segments.close()
         if self.fresh_key is not None and not keep_key:
             self.fresh_key.unlink(missing_ok=True)
 
 
-def claim_ports(fleet: FC.FleetConfig, instance: int = 0) -> FC.FleetConfig:
-    """The fleet moved to instance ``instance`` (its ground-station and robot ports + INSTANCE_STRIDE x N), once
-    every robot's MAVLink port is checked free: a busy one is an InputError naming it (another fleet runs)."""
+def claim_ports(fleet: FC.FleetConfig, instance: int = 0) -> tuple[FC.FleetConfig, dict]:
+    """The fleet moved to instance ``instance`` (its ground-station and robot ports + INSTANCE_STRIDE x N), and
+    every robot's MAVLink port bound: ``(fleet, {robot id: its bound UDP socket})``.  The sockets are held from
+    this check on and handed to the daemons (:meth:`Fleet.take_socket`), so no program that starts meanwhile can
+    take a robot's port; a port busy now is an InputError naming it (another fleet runs)."""
     import dataclasses
     import socket
 
@@ -135,33 +156,49 @@ def claim_ports(fleet: FC.FleetConfig, instance: int = 0) -> FC.FleetConfig:
     host, gcs_port = C.parse_hostport(fleet.gcs, fleet.source, "gcs")
     shift = INSTANCE_STRIDE * instance
     fleet = dataclasses.replace(fleet, base_port=fleet.base_port + shift, gcs=f"{host}:{gcs_port + shift}")
+    held: dict[int, socket.socket] = {}
     for r in fleet.robots:
         port = fleet.base_port + r.id
         s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             s.bind(("127.0.0.1", port))
         except OSError as e:
+            s.close()
+            for other in held.values():
+                other.close()
             raise C.ConfigError(fleet.source, "base_port",
                                 f"free UDP ports: 127.0.0.1:{port} (robot {r.id}'s MAVLink port) is in use "
                                 f"({e.strerror}); another fleet? run this one with --instance N") from None
-        finally:
-            s.close()
-    return fleet
+        held[r.id] = s
+    return fleet, held
 
 
 def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: str | Path | None = None,
           seed: int | None = None, signing: bool = True, method: str | None = None,
           speedup: float | None = None, instance: int = 0, peer_loss: float | None = None,
           loss_burst: float | None = None, key: str | Path | None = None,
-          unsigned_gcs: list[str] | None = None) -> Fleet:
-    """Load the fleet, build the world and devices, write robot configs and the manifest.  ``peer_loss`` and
-    ``loss_burst`` (else the fleet's, else each template's) become every robot's ``comms.peer_loss`` and
-    ``comms.loss_burst``.  The fleet signs with the key file ``key`` (``--key``), else the fleet's ``signing_key``,
-    else (``signing``) a fresh key in the run directory, removed by :meth:`Fleet.close` unless kept.  ``unsigned_gcs``
-    (``--unsigned-gcs``; networks in CIDR form) becomes every robot's ``comms.unsigned_gcs``."""
+          unsigned_gcs: list[str] | None = None, transport: str = "udp", segments: int = 1) -> Fleet:
+    """Load the fleet, hold its robots' ports, build the world and devices, write robot configs and the manifest.
+    ``peer_loss`` and ``loss_burst`` (else the fleet's, else each template's) become every robot's
+    ``comms.peer_loss`` and ``comms.loss_burst``.  The fleet signs with the key file ``key`` (``--key``), else the
+    fleet's ``signing_key``, else (``signing``) a fresh key in the run directory, removed by :meth:`Fleet.close`
+    unless kept.  ``unsigned_gcs`` (``--unsigned-gcs``; networks in CIDR form) becomes every robot's
+    ``comms.unsigned_gcs``.  ``transport`` ``zenoh`` starts ``segments`` linked Zenoh routers on loopback and points
+    each robot at its segment's (robot configs then name their peers by id only: no addresses)."""
+    fleet, held = claim_ports(FC.load_fleet(fleet_path), instance)
+    try:
+        return _build(fleet, held, run_dir, manifest, seed, signing, method, speedup, peer_loss, loss_burst, key,
+                      unsigned_gcs, transport, segments, instance)
+    except BaseException:
+        for sock in held.values():
+            sock.close()
+        raise
+
+
+def _build(fleet, held, run_dir, manifest, seed, signing, method, speedup, peer_loss, loss_burst, key,
+           unsigned_gcs, transport, segments, instance) -> Fleet:
     from sitl import scenarios
 
-    fleet = claim_ports(FC.load_fleet(fleet_path), instance)
     world_cfg = C.load_world(fleet.world)
     templates = {}
     for r in fleet.robots:
@@ -178,7 +215,7 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
     dialect.load()      # the MAVLink bindings (and their bytecode, in a fresh tree) before any device serves: a first
     #                     compile of them in this process later would hold the emulators' threads for seconds
     from sitl.devices.nmea_gps import NmeaGpsDevice      # pybullet only once the configs are good
-    from sitl.devices.registry import body_kind, make_device
+    from sitl.devices.registry import body_kind, make_device, make_sensor_device
     from sitl.world import World
     seed = fleet.seed if seed is None else seed
     run_dir = Path(run_dir or tempfile.mkdtemp(prefix="mrta-sitl-"))
@@ -189,20 +226,30 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
         from runtime.comms.link import load_key
         key = load_key(key_path)
 
+    zenoh = None
+    if transport == "zenoh":
+        from sitl.segments import Segments
+        zenoh = Segments(segments, [r.id for r in fleet.robots], fleet=f"sitl{instance}")
     world = World(world_cfg, seed=seed)
     robots: dict[int, SimRobot] = {}
     ports = {r.id: fleet.base_port + r.id for r in fleet.robots}
     for r in fleet.robots:
-        template = templates[fleet.template(r.id)]
-        base_cfg = C.load_robot(fleet.template(r.id)).base
+        template = dict(templates[fleet.template(r.id)])
+        robot_cfg = C.load_robot(fleet.template(r.id))
+        base_cfg = robot_cfg.base
         body = world.add_body(r.id, r.start, body_kind(base_cfg))
         base_dev = make_device(base_cfg, body, r.id)
+        # every robot has the world's GPS (whatever its template says); its other sensors: entries their twins
         gps_dev = NmeaGpsDevice(body, world_cfg.datum, noise_sigma=fleet.gps_noise, seed=seed * 1000 + r.id,
                                 robot_id=r.id)
+        entries = [e for e in robot_cfg.sensors if e.type != "nmea_gps"]
+        sensor_devs = [(e.type, make_sensor_device(e, body, r.id)) for e in entries]
+        template.pop("gps", None)
+        template["sensors"] = [{**C.to_dict(e), **dev.endpoint()} for e, (_, dev) in zip(entries, sensor_devs)] + \
+            [{"type": "nmea_gps", **gps_dev.endpoint()}]
         overrides = {
             "robot": {"id": r.id, "name": f"{template.get('robot', {}).get('name', 'robot')}-{r.id}"},
             "base": base_dev.endpoint(),
-            "gps": {"port": gps_dev.path, "enabled": True},
             "localization": {"initial_pose": list(r.start)},
             "comms": {"listen": f"127.0.0.1:{ports[r.id]}", "gcs": fleet.gcs,
                       "peers": [{"id": o, "address": f"127.0.0.1:{p}"} for o, p in ports.items() if o != r.id],
@@ -217,6 +264,8 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
                 overrides["comms"][name] = value
         if unsigned_gcs:
             overrides["comms"]["unsigned_gcs"] = list(unsigned_gcs)
+        if zenoh is not None:
+            overrides["comms"].update(zenoh.comms(r.id))
         if method:
             overrides["allocation"] = {"method": method}
         data = C.deep_merge(template, overrides)
@@ -227,11 +276,11 @@ def build(fleet_path: str | Path, run_dir: str | Path | None = None, manifest: s
         cfg_path.write_text(yaml.safe_dump(data, sort_keys=False))
         C.load_robot(cfg_path)   # what we wrote must load
         robots[r.id] = SimRobot(r.id, body, base_dev, gps_dev, ports[r.id], cfg_path, base_cfg.type,
-                                float(body.radius))
+                                float(body.radius), sensor_devs)
 
     manifest_path = Path(manifest) if manifest else run_dir / "manifest.json"
     out = Fleet(fleet, world_cfg, robots, world, run_dir, manifest_path, key=key,
-                fresh_key=key_path if fresh_key else None, key_path=key_path)
+                fresh_key=key_path if fresh_key else None, key_path=key_path, held=held, segments=zenoh)
     out.scenario = scenarios.module(fleet.scenario.type).Scenario(fleet, world_cfg)
     if hasattr(out.scenario, "build"):
         out.scenario.build(world)                 # the scenario's own bodies (unmapped obstacles)
@@ -283,6 +332,7 @@ def write_manifest(f: Fleet, speedup: float, seed: int, key_path: Path | None) -
                 "id": r.id, "system_id": r.id, "component_id": 1,
                 "base": {"type": r.base_type, **r.base_dev.endpoint()},
                 "gps": {"protocol": "nmea0183", "device": r.gps_dev.path, "baudrate": 9600},
+                "sensors": [{"type": kind, **d.endpoint()} for kind, d in r.sensor_devs],
                 "mavlink_udp": f"127.0.0.1:{r.udp_port}",
                 "config": str(r.config_path),
                 "start": list(next(x.start for x in f.fleet.robots if x.id == r.id)),
@@ -308,17 +358,7 @@ def finish(f: Fleet, op, ended: str) -> dict:
     res = f.scenario.summary(view)
     res["sim_time"] = f.world.t
     res["lost"] = sorted(op.dead)
-    short = f.scenario.shortfall(view)
-    res["goal_met"] = short is None
-    if short is None:
-        res["verdict"] = "goal met"
-    else:
-        why = {"timeout": f"timeout after {f.world.t:.0f} s", "stopped": "stopped by the operator",
-               "refused": "; ".join(op.refused()), "unreachable": f.scenario.unreachable(view) or "unreachable"}
-        parts = [why.get(ended, ended), short]
-        if op.dead:
-            parts.append("robot(s) " + ", ".join(map(str, sorted(op.dead))) + " died")
-        res["verdict"] = "goal not met: " + "; ".join(parts)
+    res["goal_met"], res["verdict"] = verdict(f.scenario, view, ended, f.world.t, op.dead, op.refused())
     res["events"] = list(f.events)
     try:
         op.trace.write(f.run_dir / "trace.json")
@@ -327,6 +367,25 @@ def finish(f: Fleet, op, ended: str) -> dict:
         log.warning("run picture not drawn: %s", exc)
         res["picture"] = None
     return res
+
+
+def verdict(scenario, view, ended: str, t: float, dead, refused: list[str]) -> tuple[bool, str]:
+    """(goal met, the verdict line) of a run that ``ended`` ("goal", "timeout", "stopped", "refused",
+    "unreachable") at sim time ``t``: "goal met" only over work done; a run with no work to judge it by (nothing
+    handed in, or all of it withdrawn by a clear: the scenario's ``idle(view)`` line) says so and is not met."""
+    short = scenario.shortfall(view)
+    if short is None:
+        return True, "goal met"
+    idle = getattr(scenario, "idle", None)
+    if idle is not None and ended in ("stopped", "timeout") and short == idle(view):
+        head, parts = "", [short]                  # no work: the run is judged by nothing, and says so
+    else:
+        why = {"timeout": f"timeout after {t:.0f} s", "stopped": "stopped by the operator",
+               "refused": "; ".join(refused), "unreachable": scenario.unreachable(view) or "unreachable"}
+        head, parts = "goal not met: ", [why.get(ended, ended), short]
+    if dead:
+        parts.append("robot(s) " + ", ".join(map(str, sorted(dead))) + " died")
+    return False, head + "; ".join(parts)
 
 
 def print_summary(f: Fleet, res: dict, out=sys.stdout) -> None:
@@ -391,7 +450,7 @@ class Lockstep:
         self.clock = SimClock(f.world.t)
         self.daemons = {}
         for r in f.robots.values():
-            r.daemon = self.daemons[r.id] = Daemon(C.load_robot(r.config_path))
+            r.daemon = self.daemons[r.id] = Daemon(C.load_robot(r.config_path), listen_socket=f.take_socket(r.id))
             r.daemon.open(self.clock.now())
         self.recording = open_recording(f, record, live)
         if self.recording is not None:
@@ -535,8 +594,16 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
             cmd += ["--record", str(f.run_dir / f"robot_{r.id}.mcap"), "--record-mavlink"]
         if relay is not None:            # one live view for the whole fleet: each daemon streams its channels here
             cmd += ["--live-relay", f"{relay[0]}:{relay[1]}"]
-        with open(f.run_dir / f"robot_{r.id}.log", "w") as log_fh:
-            r.proc = subprocess.Popen(cmd, stdout=log_fh, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent)
+        sock = f.take_socket(r.id)              # the port held since the check: the daemon inherits it, bound
+        if sock is not None:
+            cmd += ["--listen-fd", str(sock.fileno())]
+        try:
+            with open(f.run_dir / f"robot_{r.id}.log", "w") as log_fh:
+                r.proc = subprocess.Popen(cmd, stdout=log_fh, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent,
+                                          pass_fds=() if sock is None else (sock.fileno(),))
+        finally:
+            if sock is not None:
+                sock.close()                    # the daemon has its own descriptor of it now
     op = Operator(f)
     # start barrier: the sim clock starts once every daemon is built (imports take seconds)
     deadline = time.monotonic() + 120
@@ -557,6 +624,7 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
     wait = getattr(f.fleet.scenario, "wait", False) if wait is None else wait
     since, next_progress, next_record = None, 0.0, 0.0
     max_lag, slips, idle_from, ended = 0.0, 0, None, None
+    t_start, wall_start = f.world.t, time.monotonic()
     try:
         while True:
             if stop_flag and stop_flag():
@@ -619,13 +687,23 @@ def run_processes(f: Fleet, speedup: float, timeout: float | None = None, progre
     res["world_max_lag"] = max_lag
     res["clock_slips"] = slips
     if slips:
-        res["events"].append(f"the world fell more than {MAX_LAG} s behind the {speedup:g}x clock {slips} times "
-                             f"(the machine cannot hold this speedup)")
+        res["events"].append(slip_warning(speedup, slips, f.world.t - t_start, time.monotonic() - wall_start))
     if idle_from is not None:
         wall = time.monotonic() - idle_from[0]
         res["idle_cpu_share"] = {rid: (_cpu_seconds(f.robots[rid].proc.pid) - c0) / wall
                                  for rid, c0 in idle_from[1].items()}
     return res
+
+
+def slip_warning(speedup: float, slips: int, sim: float, wall: float) -> str:
+    """The run's event when the world fell behind its clock: what it means for the run and what to do."""
+    achieved = sim / wall if wall > 0 else speedup
+    suggest = max(0.5, math.floor(min(achieved, speedup) * 0.8 * 2) / 2)
+    return (f"this machine could not hold the {speedup:g}x clock: the world fell more than {MAX_LAG} s behind it "
+            f"{slips} times and ran at {achieved:.2g}x on average. The daemons, short of CPU too, then step less often "
+            f"than their control rate in sim time, so robots react later than on real hardware (closer calls, "
+            f"longer stops) and the run is less faithful; run it again with --speedup {suggest:g} "
+            f"or lower, or with --lockstep")
 
 
 def _verbosity() -> list[str]:
@@ -660,11 +738,25 @@ def _cpu_seconds(pid: int) -> float:
 
 
 def _progress(f: Fleet, op) -> None:
+    """One line every 5 s of sim time: who reports, who holds a task, the fleet's tasks, then the scenario's own
+    progress where it has one (formation: positions held and reached, as its tasks are never done), else how many
+    tasks are done (done-then-cleared ones too) and withdrawn."""
+    from runtime.messages import CLEARED, DONE, WITHDRAWN
+    from sitl.operator import RunView
+
     live = op.live_robots()
     busy = sum(1 for rid in live if op.gcs.robots[rid].tasks)
-    done = sum(1 for r in op.gcs.table.values() if r.state == 1)
-    print(f"[t={f.world.t:6.1f} s] robots reporting {len(live)}/{len(f.robots)}, holding a task {busy}, "
-          f"fleet tasks {len(op.gcs.table)} ({done} done)", flush=True)
+    states = [r.state for r in op.gcs.table.values()]
+    done = sum(s in (DONE, CLEARED) for s in states)
+    withdrawn = sum(s == WITHDRAWN for s in states)
+    own = getattr(f.scenario, "progress", None)
+    line = (f"[t={f.world.t:6.1f} s] robots reporting {len(live)}/{len(f.robots)}, holding a task {busy}, "
+            f"fleet tasks {len(states)}")
+    if own is not None:                 # its tasks may never be done (formation positions): its own words
+        line += f", {own(RunView(op))}"
+    else:
+        line += f" ({done} done{f', {withdrawn} withdrawn' if withdrawn else ''})"
+    print(line, flush=True)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -706,6 +798,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --peer-loss: the losses come in spells of this mean length in seconds, as fading "
                         "brings them (%g..%g; default: the fleet's loss_burst, else 0: each on its own)"
                         % fleet_range("loss_burst"))
+    r.add_argument("--transport", choices=("udp", "zenoh"), default="udp",
+                   help="what carries the robots' peer frames: udp (default) or zenoh through routers on loopback "
+                        "(needs the [zenoh] extra)")
+    r.add_argument("--segments", type=int, default=1, metavar="K",
+                   help="with --transport zenoh: K linked routers, the robots split among them (default 1)")
     r.add_argument("--json", default=None, help="write the result here as JSON")
     r.add_argument("--no-record", dest="record", action="store_false",
                    help="write no recording (default: RUN_DIR/run.mcap, and each daemon process its "
@@ -724,7 +821,8 @@ def _main(args) -> int:
     run_args.check(args)          # every option, before the world is built
     live = live_address(args.live)
     f = build(args.fleet, args.run_dir, args.manifest, args.seed, args.signing, args.method, args.speedup,
-              args.instance, args.peer_loss, args.loss_burst, args.key, args.unsigned_gcs)
+              args.instance, args.peer_loss, args.loss_burst, args.key, args.unsigned_gcs,
+              transport=args.transport, segments=args.segments)
     speedup = args.speedup or f.fleet.speedup
     stop = {"flag": False}
 
@@ -736,6 +834,7 @@ def _main(args) -> int:
     print(f"SITL: {len(f.robots)} robots, manifest {f.manifest_path}, run dir {f.run_dir}", flush=True)
     try:
         if args.devices_only:
+            f.release_ports()                   # your own daemons bind the robots' ports
             print("devices only: Ctrl-C to stop", flush=True)
             clock = ScaledClock(speedup)
             while not stop["flag"]:

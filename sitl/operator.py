@@ -17,7 +17,7 @@ import math
 
 from runtime.comms.gcs import GroundStation
 from runtime.comms.mission import ACCEPTED, result_name
-from runtime.messages import ALLOCATING, DONE
+from runtime.messages import ALLOCATING, CLEARED, DONE
 from runtime.log import get_logger
 from sitl.run_trace import RobotTrack, RunTrace, TaskMark
 from sitl.scenarios.base import match_tasks
@@ -145,7 +145,7 @@ class Operator:
         for tid, r in gcs.table.items():
             if tid not in self.trace.tasks:
                 self._mark(tid, r, now)
-            if r.state == DONE and tid not in self.done_at:
+            if r.state in (DONE, CLEARED) and tid not in self.done_at:      # cleared: done, then cleared
                 self.done_at[tid] = now
                 by = tuple(r.holders) or self._holders.get(tid, ())
                 self.done_by[tid] = by

@@ -48,3 +48,10 @@ def check(args) -> None:
             raise InputError(f"--unsigned-gcs: expected {EXPECTED}, got {net!r} ({exc})") from None
     if args.instance:
         check_instance(FC.load_fleet(args.fleet), args.instance)
+    segments = getattr(args, "segments", 1)
+    if segments != 1 and getattr(args, "transport", "udp") != "zenoh":
+        raise InputError(f"--segments: expected with --transport zenoh (UDP has no routers), got {segments}")
+    argcheck.number(segments, "--segments", 1, len(FC.load_fleet(args.fleet).robots))
+    if getattr(args, "transport", "udp") == "zenoh":
+        from runtime.comms.zenoh_transport import load_zenoh
+        load_zenoh()                  # one line naming the extra when it is missing

@@ -114,6 +114,22 @@ def test_higher_price_displaces_and_the_robot_bids_again():
     assert a.held == 2 and out and out[0].task == 2      # -3 - 0 beats -1 - 100
 
 
+def test_a_task_priced_at_the_protocol_maximum_is_out_of_reach_and_no_bid_passes_it():
+    """Issue 31 point 5: a forged Price at the protocol's largest price (unsigned fleet) must not make a genuine bid
+    one that peers refuse: the displaced robot bids for the next best task, and with every task out of reach it
+    bids for none."""
+    from runtime.allocation.formation.messages import MAX_VALUE
+    a = informed(agent())
+    assert a.held == 1
+    out = a.on_message(Price(2, 0, 1, 2, MAX_VALUE, 0), 0.1)           # my best task, forged at the maximum
+    assert a.held == 2 and out and out[0].task == 2 and out[0].price <= MAX_VALUE
+    out += a.on_message(Price(3, 0, 2, 3, MAX_VALUE - 0.5, 0), 0.2)    # the next best too
+    out += a.on_message(Price(2, 0, 0, 2, MAX_VALUE - 0.5, 0), 0.3)    # and the last
+    out += a.on_tick(0.4)
+    assert all(m.price <= MAX_VALUE for m in out if isinstance(m, Price))
+    assert a.held is None
+
+
 def test_equal_price_goes_to_the_lowest_id_and_stale_prices_lose():
     a = informed(agent(rid=5, peers=(2, 7)))
     assert a.held == 1

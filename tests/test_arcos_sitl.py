@@ -121,9 +121,11 @@ def test_driving_into_a_wall_sets_the_bumper_and_stall_bits():
 
 
 # ----------------------------------------------------------------------------- daemons
-def _one_pioneer(tmp_path: Path, sonar: bool) -> Path:
+def _one_pioneer(tmp_path: Path, sonar: bool, laser: bool = False) -> Path:
     tpl = yaml.safe_load((CONFIGS / "robots" / "pioneer3dx.yaml").read_text())
     tpl["base"]["sonar"] = sonar
+    if laser:                           # an RPLIDAR A1 on top, 5 cm ahead of the centre (the launcher serves it)
+        tpl["sensors"] = [{"type": "rplidar", "port": "/dev/ttyUSB2", "mount": [0.05, 0.0, 0.0]}]
     tmp_path.mkdir(parents=True, exist_ok=True)
     (tmp_path / "robot.yaml").write_text(yaml.safe_dump(tpl))
     robots = [{"id": 1, "start": [-3.0, 0.0, 0.0], "robot": str(tmp_path / "robot.yaml")}]
@@ -131,9 +133,9 @@ def _one_pioneer(tmp_path: Path, sonar: bool) -> Path:
     return shipped_fleet(tmp_path, "pioneer_4.yaml", robots=robots, scenario=scenario)
 
 
-def _drive_at_unmapped_box(tmp_path: Path, sonar: bool) -> dict:
+def _drive_at_unmapped_box(tmp_path: Path, sonar: bool, laser: bool = False) -> dict:
     """One Pioneer sent 6 m straight through a 0.6 m box that is in the world but not in its map."""
-    f = launcher.build(_one_pioneer(tmp_path, sonar), tmp_path / "run", signing=False)
+    f = launcher.build(_one_pioneer(tmp_path, sonar, laser), tmp_path / "run", signing=False)
     box = f.world.add_box((0.0, 0.0), (0.6, 0.6))
     body = f.robots[1].body
     seen = {"contacts": 0, "closest_echo": math.inf, "x": -math.inf}
@@ -141,7 +143,7 @@ def _drive_at_unmapped_box(tmp_path: Path, sonar: bool) -> dict:
     def watch(fleet):
         if p.getContactPoints(bodyA=body.body_id, bodyB=box, physicsClientId=fleet.world.client_id):
             seen["contacts"] += 1
-        ranges = fleet.robots[1].daemon.base.sensors.ranges
+        ranges = fleet.robots[1].daemon.core.sensors.ranges        # the base's and the laser's, as the arbiter's
         if ranges:
             seen["closest_echo"] = min(seen["closest_echo"], min(r for _, r in ranges))
         seen["x"] = max(seen["x"], body.pose()[0])
@@ -160,6 +162,14 @@ def test_the_sonar_keeps_a_pioneer_off_an_unmapped_box(tmp_path):
     assert with_sonar["contacts"] == 0 and with_sonar["closest_echo"] < 1.0 and with_sonar["x"] > -1.5
     blind = _drive_at_unmapped_box(tmp_path / "off", sonar=False)
     assert blind["contacts"] > 0 and blind["closest_echo"] == math.inf
+
+
+@pytest.mark.slow
+def test_a_laser_keeps_a_pioneer_with_its_sonar_off_off_an_unmapped_box(tmp_path):
+    """Issue 32 point 5: the sonar off (the control above drives into the box), an RPLIDAR listed in sensors:
+    instead: its ranges reach the arbiter's avoidance and the robot never touches the box."""
+    laser = _drive_at_unmapped_box(tmp_path, sonar=False, laser=True)
+    assert laser["contacts"] == 0 and laser["closest_echo"] < 1.0 and laser["x"] > -1.5, laser
 
 
 @pytest.mark.slow

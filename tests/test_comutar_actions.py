@@ -14,6 +14,7 @@ from runtime.tasks.surveillance import Board, Surveillance
 from runtime.config.build import ConfigError, from_dict
 from runtime.drivers.arcos import ArcosConfig
 from runtime.drivers.create_oi import CreateOIConfig
+from runtime.drivers.rplidar import RplidarConfig
 from runtime.tasks import Profile
 
 
@@ -25,7 +26,7 @@ def test_which_actions_a_robot_has_follows_from_its_sensors():
     assert [a.name for a in pioneer.producing(A.RANGE_DATA)] == ["sonar_reader"]
     quiet = A.catalogue(A.sensors_of(ArcosConfig(sonar=False)))
     assert not quiet.producing(A.RANGE_DATA)
-    laser = A.catalogue(A.sensors_of(CreateOIConfig(), ComutarOptions(sensors=("laser",))))
+    laser = A.catalogue(A.sensors_of(CreateOIConfig(), [RplidarConfig()]))     # a sensors: entry of an rplidar
     assert [a.name for a in laser.producing(A.RANGE_DATA)] == ["laser_reader"]
     assert [a.name for a in laser.accomplishing("avoid_obstacles")] == ["obstacle_avoider"]
     assert A.catalogue(["radar"]).sensors == ()
@@ -39,10 +40,10 @@ def test_the_chain_types_connect_reader_to_detector_to_avoider():
 
 
 def test_the_options_are_a_config_section_with_one_line_errors():
-    opts = from_dict(ComutarOptions, {"method": "comutar", "sensors": ["laser"], "link_capacity": 0.5})
-    assert opts.sensors == ("laser",) and opts.link_capacity == 0.5
-    with pytest.raises(ConfigError, match="sensors"):
-        from_dict(ComutarOptions, {"sensors": ["radar"]})
+    opts = from_dict(ComutarOptions, {"method": "comutar", "link_capacity": 0.5})
+    assert opts.link_capacity == 0.5
+    with pytest.raises(ConfigError, match="sensors: expected no such key"):      # a laser is a sensors: entry
+        from_dict(ComutarOptions, {"sensors": ["laser"]})
     with pytest.raises(ConfigError, match="auction_timeout"):
         from_dict(ComutarOptions, {"auction_timeout": -1})
 

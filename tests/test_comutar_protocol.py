@@ -440,7 +440,7 @@ def test_a_disarmed_robot_resigns_and_its_task_is_served_again():
 
 def test_the_method_entry_describes_the_agent_for_phase_2():
     assert COMUTAR.name == "comutar" and set(COMUTAR.task_kinds) == {"surveillance", "avoid_obstacles"}
-    agent = COMUTAR.make(AgentContext(3, (1, 2), Est(), ComutarOptions(sensors=("laser",))))
+    agent = COMUTAR.make(AgentContext(3, (1, 2), Est(), ComutarOptions(), sensors=("laser",)))
     assert "laser_reader" in agent.catalogue.names
     assert agent.converged and agent.commitments == ()
 
@@ -478,3 +478,16 @@ def test_valid_but_unexpected_messages_are_ignored_and_counted():
     a.on_message(M.CmAnnounce(3, 0, 3 << 16 | 1, 1 << 16 | 1, 1.0, 1), 0.0)          # robot 3 is not a peer
     assert a.auction.stats.late == 1 and a.bidder.stats.ignored == 1 and a.dropped["not a robot of the fleet"] == 1
     assert not a.ledger.holds and not a.commitments
+
+
+def test_a_stream_carries_a_lasers_discs_nearest_the_consumer_and_a_sonars_nearest_the_provider():
+    from runtime.allocation.comutar.messages import MAX_DISCS
+    from runtime.allocation.comutar.protocol import stream_order
+
+    ring = np.array([[math.cos(a), math.sin(a), 0.1] for a in np.linspace(0, 2 * math.pi, 16, endpoint=False)])
+    ring[:, 0] += np.arange(16) * 0.01               # distinct distances from the provider at (0, 0)
+    order = stream_order(ring, (0.0, 0.0), (5.0, 0.0))
+    assert list(order) == list(np.argsort(np.hypot(ring[:, 0], ring[:, 1])))      # a sonar's: all go, as before
+    scan = np.array([[3 * math.cos(a), 3 * math.sin(a), 0.05] for a in np.radians(np.arange(360))])
+    first = stream_order(scan, (0.0, 0.0), (3.0, 0.0))[:MAX_DISCS]
+    assert len(scan) > MAX_DISCS and set(first) == set(range(16)) | set(range(344, 360))   # within 16 deg of it

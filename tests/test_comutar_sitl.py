@@ -1,6 +1,7 @@
-"""Paper 003 in SITL (issue 17's acceptance): a Create 2 with no range sensor surveys a region among unmapped
-pillars while avoiding them with a Pioneer's sonar, both tasks at once; the Pioneer's daemon is killed; the
-Create stands still, and its avoidance goes to the third robot."""
+"""Paper 003 in SITL (issues 17 and 32's acceptance): a Create 2 with no range sensor surveys a region among unmapped
+pillars while avoiding them with robot 2's RPLIDAR laser scanner (as the paper's robot 2 reads a laser), both tasks
+at once; robot 2's daemon is killed; the Create stands still, and its avoidance goes to the third robot's sonar.
+So one run streams a laser (byte-exact emulator, driver, ``sensors:`` entry) and then a sonar ring to the Create."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -14,6 +15,7 @@ from sitl import fleet_config as FC
 
 ROOT = Path(__file__).resolve().parents[1]
 FLEET = ROOT / "configs" / "fleets" / "comutar_3.yaml"
+LASER_FLEET = ROOT / "configs" / "fleets" / "comutar_3_laser.yaml"
 
 
 def _load(tmp_path, **changes):
@@ -41,12 +43,13 @@ def test_the_shipped_robot_configs_build_comutar_agents_with_the_bases_sensors()
     from runtime.allocation.agent import AgentContext
     from runtime.allocation.comutar.actions import sensors_of
 
-    for name, sensors in (("create2_comutar.yaml", ()), ("pioneer3dx_comutar.yaml", ("sonar",))):
+    for name, kinds, readers in (("create2_comutar.yaml", (), ()), ("pioneer3dx_comutar.yaml", ("sonar",), ("sonar",)),
+                                 ("pioneer3dx_comutar_laser.yaml", ("gps", "laser"), ("laser",))):
         cfg = C.load_robot(ROOT / "configs" / "robots" / name)
         assert cfg.allocation.method == "comutar"
-        assert sensors_of(cfg.base, cfg.allocation) == sensors
-        agent = registry.method("comutar").make(AgentContext(1, (2,), None, cfg.allocation, cfg.base))
-        assert agent.catalogue.sensors == sensors
+        assert sensors_of(cfg.base, cfg.sensors) == kinds
+        agent = registry.method("comutar").make(AgentContext(1, (2,), None, cfg.allocation, cfg.base, kinds))
+        assert agent.catalogue.sensors == readers
 
 
 @pytest.mark.slow
@@ -56,12 +59,15 @@ def test_the_borrower_surveys_without_touching_stops_when_its_sensor_dies_and_ge
     from sitl import launcher
     from tests.sitl_util import shipped_fleet
 
-    f = launcher.build(shipped_fleet(tmp_path, FLEET.name), tmp_path / "run")
+    f = launcher.build(shipped_fleet(tmp_path, LASER_FLEET.name), tmp_path / "run")
+    assert [k for k, _ in f.robots[2].sensor_devs] == ["rplidar"]
     try:
         res = launcher.run_lockstep(f, timeout=400)
+        laser = f.robots[2].daemon.sensor_parts[0]
     finally:
         f.close()
-    print({k: res[k] for k in ("verdict", "least_clearance", "kill", "sim_time")})
+    print({k: res[k] for k in ("verdict", "least_clearance", "kill", "sim_time")}, laser.stats)
+    assert laser.kind == "laser" and laser.stats.scans > 100        # 5.5 revolutions a second until the kill
     assert res["goal_met"], res["verdict"]
     assert res["least_clearance"] > 0.0
     k = res["kill"]

@@ -125,6 +125,7 @@ def test_a_gps_that_babbles_or_goes_silent_is_one_outage_and_its_fixes_return(mo
     dev = NmeaGpsDevice(_StillBody(), Datum(), link=link)
     gps = NmeaGps(dev.path)
     during = first_after = None
+    usable = {}
     try:
         with caplog.at_level(logging.INFO):
             for k in range(1, 22 * 20 + 1):            # 22 s: 2 clean, 10 babbling or silent, 10 clean
@@ -132,6 +133,7 @@ def test_a_gps_that_babbles_or_goes_silent_is_one_outage_and_its_fixes_return(mo
                 link.mode = mode if 2.0 <= t < 12.0 else "clean"
                 dev.service(t)
                 fixes = gps.poll(t)
+                usable[round(t, 2)] = gps.usable
                 if 2.3 <= t < 12.0 and fixes:
                     during = t
                 if t >= 12.0 and fixes and first_after is None:
@@ -142,6 +144,7 @@ def test_a_gps_that_babbles_or_goes_silent_is_one_outage_and_its_fixes_return(mo
     print(f"gps {mode}: first fix {first_after} s after clean bytes")
     assert during is None and first_after is not None and first_after <= 0.25
     assert gps.stats.outages == 1
+    assert usable[1.9] and not usable[11.9] and usable[21.9]        # a sensors: entry unusable during the outage
     if mode == "garbage":
         assert gps.stats.dropped_bytes > 10_000
     text = caplog.text

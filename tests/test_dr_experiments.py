@@ -145,9 +145,9 @@ def test_dr_table5_quick_writes_its_files(tmp_path, model_file):
 def test_late_fastest_reaches_every_run_and_the_report(tmp_path, model_file, monkeypatch):
     seen, real = [], C.run_all
 
-    def spy(jobs, model, workers):
+    def spy(jobs, *rest):
         seen.extend(cell.late for cell, _, _ in jobs)
-        return real(jobs, model, workers)
+        return real(jobs, *rest)
 
     monkeypatch.setattr(C, "run_all", spy)
     out = tmp_path / "t5"
@@ -162,9 +162,9 @@ def test_late_fastest_reaches_every_run_and_the_report(tmp_path, model_file, mon
 def test_online_reaches_the_model_cells_only_and_the_report(tmp_path, model_file, monkeypatch):
     seen, real = [], C.run_all
 
-    def spy(jobs, model, workers):
+    def spy(jobs, *rest):
         seen.extend((cell.label, cell.online) for cell, _, _ in jobs)
-        return real(jobs, model, workers)
+        return real(jobs, *rest)
 
     monkeypatch.setattr(C, "run_all", spy)
     out = tmp_path / "t3"

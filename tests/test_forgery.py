@@ -307,3 +307,210 @@ def test_a_frame_captured_on_the_ground_station_side_and_replayed_to_a_peer_is_d
     finally:
         for s in (a, b, gcs):
             s.close()
+
+
+# ------------------------------------------------------------ every private message type of every family, unsigned
+
+def _forgeries(msg, rng, fleet_ids) -> list:
+    """Three forgeries of a genuine message, each within the protocol: the same message in another fleet robot's name;
+    in its sender's name with every amount scaled (x0.3-3) and every flag flipped; and with every amount at the
+    protocol's largest value (1e6: a Price there was the issue's attack)."""
+    import dataclasses
+    ids = ("sender", "dest", "task", "round", "auction", "holder", "winner", "robot", "phase", "n_tasks", "command",
+           "frame", "state", "seq", "reason")
+    out = []
+    others = [r for r in fleet_ids if r not in (msg.sender, msg.dest)]
+    if others:
+        out.append(dataclasses.replace(msg, sender=rng.choice(others)))
+    scaled, top = {}, {}
+    for f in dataclasses.fields(msg):
+        v = getattr(msg, f.name)
+        if isinstance(v, bool):
+            scaled[f.name] = not v
+        elif isinstance(v, float) and f.name not in ids and math.isfinite(v):
+            scaled[f.name] = v * rng.uniform(0.3, 3.0) + rng.uniform(-1.0, 1.0)
+            if f.name not in ("x", "y"):
+                top[f.name] = 1e6
+    out += [dataclasses.replace(msg, **c) for c in (scaled, top) if c]
+    return out
+
+
+def _made_up(cls, seen: dict, rng, fleet_ids):
+    """A message of a type the run never sent: its ids taken from the family's messages that were sent, robots from
+    the fleet, amounts plausible (1-20)."""
+    import dataclasses
+    import typing
+    values = {}
+    for m in seen.values():
+        values.update({k: v for k, v in vars(m).items() if k not in ("sender", "dest")})
+    hints = typing.get_type_hints(cls)
+    kw = {"sender": rng.choice(fleet_ids), "dest": 0}
+    for f in dataclasses.fields(cls):
+        if f.name in kw:
+            continue
+        base = typing.get_origin(hints[f.name]) is typing.Annotated and typing.get_args(hints[f.name])[0] \
+            or hints[f.name]
+        if f.name in values and isinstance(values[f.name], base if isinstance(base, type) else object):
+            kw[f.name] = values[f.name]
+        elif base is bool:
+            kw[f.name] = True
+        elif base is float:
+            kw[f.name] = rng.uniform(1.0, 20.0)
+        elif base is int:
+            kw[f.name] = 1
+        else:
+            kw[f.name] = tuple(fleet_ids)
+    return cls(**kw)
+
+
+class EveryType:
+    """Forges every message type of a fleet on the bus as it goes: the first genuine one of each type in each of
+    ``phases`` (s) is forged three ways (:func:`_forgeries`) 0.2 s later; at ``late`` s every type of ``types`` that
+    was never sent is made up (:func:`_made_up`) and put on the bus.  Genuine messages go through the codec too, as
+    on the wire (a value the protocol refuses is lost)."""
+
+    def __init__(self, f: Fleet, types, phases=(0.0, 4.0, 10.0), late=12.0, seed=0):
+        import random
+        self.f, self.types, self.phases, self.late = f, tuple(types), phases, late
+        self.rng = random.Random(seed)
+        self.ids = sorted(f.robots)
+        self.seen: dict = {}
+        self.forged: Counter = Counter()
+        self.refused: Counter = Counter()
+        self.genuine_refused: Counter = Counter()
+        self._done: set = set()
+        self._due: list = []
+        self._made = False
+        send = f.bus.send
+
+        def wired(msgs, now):
+            out = []
+            for m in msgs:
+                got = decoded(m)
+                if got is None:
+                    self.genuine_refused[type(m).__name__] += 1
+                    continue
+                out.append(got)
+                self._note(got, now)
+            if now >= self.late and not self._made:
+                self._made = True
+                self._due += [(now, _made_up(c, self.seen, self.rng, self.ids)) for c in self.types
+                              if c.__name__ not in self.seen]
+            for t, m in [d for d in self._due if d[0] <= now]:
+                self._due.remove((t, m))
+                got = decoded(m)
+                (self.refused if got is None else self.forged)[type(m).__name__] += 1
+                if got is not None:
+                    out.append(got)
+            send(out, now)
+
+        f.bus.send = wired
+
+    def _note(self, m, now: float) -> None:
+        name = type(m).__name__
+        self.seen.setdefault(name, m)
+        phase = max((k for k, p in enumerate(self.phases) if now >= p), default=None)
+        if phase is not None and (name, phase) not in self._done:
+            self._done.add((name, phase))
+            self._due += [(now + 0.2, g) for g in _forgeries(m, self.rng, self.ids)]
+
+    def tried(self) -> set[str]:
+        return set(self.forged) | set(self.refused)
+
+
+CONFLICT_BOUND = 15.0      # s two robots may hold one formation task before the protocol resolves it
+
+
+def _family_run(method: str, starts, specs, until: float, options=None, single: bool = True):
+    from runtime.allocation import registry
+    from runtime.messages import FLEET_MESSAGES
+    f = kinematic(starts, method, options=options)
+    types = tuple(registry.method(method).messages) + FLEET_MESSAGES
+    forger = EveryType(f, types)
+    f.run(0.5)
+    ids = f.hand_in(min(starts), specs)
+    twice: dict[int, float] = {}
+    worst = [0.0]
+
+    def watch(fl):
+        held_now = {t for t, h in fl.holders().items() if len(h) > 1} if single else set()
+        for t in held_now:
+            worst[0] = max(worst[0], fl.now - twice.setdefault(t, fl.now))
+        for t in set(twice) - held_now:
+            del twice[t]
+
+    def finished(fl):
+        return fl.now > forger.late + 1.0 and all(r.node.table.state(t) == DONE for r in fl.robots.values()
+                                                  for t in ids)
+    f.run(until, stop=finished, observe=watch)
+    f.run(f.now + 4.0, observe=watch)            # the tables' bound: every robot agrees
+    return f, ids, forger, worst[0], types
+
+
+@pytest.mark.parametrize("method", ["auction", "bs", "coalition", pytest.param("dr", marks=pytest.mark.slow),
+                                    pytest.param("comutar", marks=pytest.mark.slow)])
+def test_one_forgery_of_every_private_message_type_leaves_an_unsigned_fleet_valid(method):
+    """Issue 31 point 5: every private message type of the family and of the fleet task table forged with plausible
+    values (three ways each, at three moments, and a made-up one of each type the run never sent) on an unsigned
+    fleet: every task is done (nothing stuck), no formation task is held by two robots for more than
+    CONFLICT_BOUND s, nothing is held at the end, every robot's table is the same, and no genuine message is refused
+    on the wire afterwards (no forged value pushed the fleet's own past the protocol's range)."""
+    from runtime.allocation.dr.options import DrOptions
+    from runtime.tasks.rendezvous import Rendezvous
+    from runtime.tasks.surveillance import Surveillance
+    from runtime.tasks.transport import Transport
+    runs = {
+        "auction": (STARTS, [Goto(x, y, hold=2.0) for x, y in POSITIONS], 150.0, None, True),
+        "bs": (STARTS, [Goto(x, y, hold=2.0) for x, y in POSITIONS], 150.0, None, True),
+        "coalition": (STARTS, [Rendezvous(0.0, 0.0, 2, 100.0), Rendezvous(1.0, 1.0, 2, 100.0)], 200.0, None, False),
+        "dr": ({1: (-2, -1), 2: (-2, 0), 3: (-2, 1), 4: (2, -1), 5: (2, 0)},
+               [Transport(1.5, 1.5, 20, 60, 100), Transport(-1.5, 1.0, 20, 60, 100)], 300.0,
+               DrOptions(strategy="NM_NI"), False),
+        "comutar": ({1: (-3.0, -3.0, 0.0), 2: (3.0, 3.0, math.pi), 3: (3.0, -3.0, math.pi / 2)},
+                    [Surveillance(0.0, 0.0, 4.0, 4.0, 2.0)], 300.0, None, False),
+    }
+    starts, specs, until, options, single = runs[method]
+    f, ids, forger, worst, types = _family_run(method, starts, specs, until, options, single)
+    assert forger.tried() == {c.__name__ for c in types}, {c.__name__ for c in types} - forger.tried()
+    assert sum(forger.forged.values()) >= len(types), forger.forged      # most get through the codec
+    assert all(r.node.table.state(t) == DONE for r in f.robots.values() for t in ids), \
+        {rid: [r.node.table.state(t) for t in ids] for rid, r in f.robots.items()}
+    assert worst <= CONFLICT_BOUND, worst
+    assert all(not r.agent.commitments for r in f.robots.values())
+    tables = {rid: {t: (e.state, e.done_by) for t, e in r.node.table.entries.items()} for rid, r in f.robots.items()}
+    assert all(tab == tables[min(tables)] for tab in tables.values()), tables
+    assert not any(s == OPEN for tab in tables.values() for s, _ in tab.values())
+    assert not forger.genuine_refused, forger.genuine_refused
+
+
+def test_a_decoy_task_record_is_disowned_by_its_origin_or_held_and_never_driven_to():
+    """Issue 31 point 5: a forged task record of a new task at an attacker's point, unsigned.  Sent in its origin's
+    name to everyone, or relayed in another robot's name to one robot only: the origin (past its start-up grace)
+    disowns it when it hears of it (the record, or a robot asking it to confirm), so it ends withdrawn in every
+    table.  Relayed when its origin is lost: held, never entered, dropped after UNCONFIRMED s.  Nobody drives there."""
+    from runtime.fleet.node import OWN_GRACE, UNCONFIRMED
+    f, ids = formation("auction", POSITIONS[:3])
+    f.run(OWN_GRACE + 1.0)
+    x, y = ATTACKER_POINT
+    record = dict(command=NAV_WAYPOINT, frame=LOCAL_ENU, state=OPEN, param1=0.0, param2=0.0, param3=0.0,
+                  param4=math.nan, x=x, y=y)
+    named, relayed, orphan = 2 << 16 | 40, 2 << 16 | 41, 4 << 16 | 42
+    seen = []
+
+    def watch(fl):
+        seen.extend(c.task.position for r in fl.robots.values() for c in r.agent.commitments)
+    forger = Forger(f)
+    forger.send([TaskRecord(2, 0, named, **record), TaskRecord(3, 1, relayed, **record)])
+    f.run(f.now + 6.0, observe=watch)                                   # within the table's bound
+    for t in (named, relayed):
+        assert all(r.node.table.state(t) is not None and r.node.table.state(t) & 2 for r in f.robots.values()), t
+    assert f.robots[2].node.dropped["a task of my own origin I never minted"] >= 2
+    f.kill(4)
+    f.run(f.now + 5.0, observe=watch)                                   # robot 4 is lost to the others
+    forger.send([TaskRecord(3, 1, orphan, **record)])
+    f.run(f.now + 1.0, observe=watch)
+    assert orphan in f.robots[1].node._pending and orphan not in f.robots[1].node.table.entries
+    f.run(f.now + UNCONFIRMED + 2.0, observe=watch)
+    assert orphan not in f.robots[1].node._pending and orphan not in f.robots[1].node.table.entries
+    assert f.robots[1].node.dropped["a task its origin never confirmed"] == 1
+    assert seen and ATTACKER_POINT not in seen

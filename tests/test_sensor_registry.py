@@ -26,6 +26,8 @@ def test_driver_config_is_tagged_by_its_key_and_the_device_twin_exists(name):
     assert typing.get_args(hints["type"]) == (name,) and cfg_cls().type == name
     for attr in ("from_config", "open", "poll", "close"):
         assert callable(getattr(cls, attr, None)), attr
+    assert isinstance(cls.kind, str) and cls.kind and cls.reports in ("fixes", "ranges")
+    assert cls.reports == "fixes" or callable(getattr(cls, "ranges", None))
     assert set(devices.SENSOR_DEVICES) == set(drivers.SENSORS)
 
 
@@ -57,5 +59,5 @@ def test_an_unknown_sensor_type_has_no_device():
     class Nope:
         type: str = "sonar_x"
 
-    with pytest.raises(InputError, match="sensors type 'sonar_x': expected one with a SITL device, one of rplidar"):
+    with pytest.raises(InputError, match="sensors type 'sonar_x': expected one with a SITL device, one of nmea_gps, rplidar"):
         devices.make_sensor_device(Nope(), None, 1)

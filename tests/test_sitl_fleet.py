@@ -97,7 +97,8 @@ def test_a_robot_that_never_comes_up_is_treated_as_lost_and_the_rest_converge(tm
     daemons = {}
     op = Operator(f)              # hands the formation to robot 1 over MAVLink
     try:
-        daemons = {rid: Daemon(C.load_robot(r.config_path)) for rid, r in f.robots.items() if rid != 4}
+        daemons = {rid: Daemon(C.load_robot(r.config_path), listen_socket=f.take_socket(rid))
+                   for rid, r in f.robots.items() if rid != 4}
         grace = daemons[1].cfg.comms.startup_grace
         for d in daemons.values():
             d.open(f.world.t)

@@ -48,7 +48,7 @@ def test_fused_pose_beats_gps_and_odometry(tmp_path):
         clock = SimClock(0.0)
         daemons = {}
         for r in f.robots.values():
-            d = Daemon(C.load_robot(r.config_path))
+            d = Daemon(C.load_robot(r.config_path), listen_socket=f.take_socket(r.id))
             d.open(0.0)
             daemons[r.id] = d
             poll = d.gps.poll

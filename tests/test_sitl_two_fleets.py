@@ -79,3 +79,51 @@ def test_a_second_fleet_is_refused_then_runs_beside_the_first_with_instance_1(tm
         assert "verdict: goal met" in out and "assignment valid: True" in out
     manifest = yaml.safe_load((tmp_path / "c" / "manifest.json").read_text())
     assert {r["mavlink_udp"] for r in manifest["robots"]} == {f"127.0.0.1:{base + 100 + i}" for i in (1, 2, 3, 4)}
+
+
+def test_a_port_taken_after_the_check_cannot_lose_a_robot(tmp_path):
+    """Issue 31 point 10: the launcher holds each robot's MAVLink port from its check on and hands the bound socket
+    to the daemon, so a program that tries to take a port between the check and the daemons' start is refused,
+    and every daemon still listens on its port (lock-step here; process mode passes the same socket as an
+    inherited descriptor, `mrta daemon --listen-fd`)."""
+    from sitl import launcher
+    f = launcher.build(shipped_fleet(tmp_path, "operator_4.yaml"), tmp_path / "run")
+    run = None
+    try:
+        ports = {rid: r.udp_port for rid, r in f.robots.items()}
+        assert all(_bound(p) for p in ports.values())          # the intruder finds every port taken
+        run = launcher.Lockstep(f)
+        assert not f.held                                       # every socket handed over
+        for rid, d in run.daemons.items():
+            assert d.link.sock.getsockname() == ("127.0.0.1", ports[rid])
+        for _ in range(40):
+            run.step()
+        assert sorted(run.op.live_robots()) == sorted(ports)    # each daemon heard on its port
+    finally:
+        if run is not None:
+            run.close()
+        f.close()
+    assert not any(_bound(p) for p in ports.values())           # and released at the end
+
+
+def test_a_handed_in_socket_must_be_udp_on_the_listen_address():
+    from runtime.comms.link import MavlinkLink
+    from runtime.daemon_cli import _inherited
+    from runtime.errors import InputError
+    other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    other.bind(("127.0.0.1", 0))
+    tcp = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    try:
+        port = other.getsockname()[1]
+        with pytest.raises(InputError, match="comms.listen: expected the socket handed in to be UDP bound to"):
+            MavlinkLink(1, f"127.0.0.1:{port + 1 if port < 65535 else port - 1}", [], sock=other)
+        tcp.bind(("127.0.0.1", 0))
+        with pytest.raises(InputError, match="comms.listen"):
+            MavlinkLink(1, f"127.0.0.1:{tcp.getsockname()[1]}", [], sock=tcp)
+        link = MavlinkLink(1, f"127.0.0.1:{port}", [], sock=other)
+        assert link.sock is other
+        with pytest.raises(InputError, match="--listen-fd: expected an open UDP socket's descriptor, got 9999"):
+            _inherited(9999)
+    finally:
+        other.close()
+        tcp.close()

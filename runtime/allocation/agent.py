@@ -43,6 +43,7 @@ class AgentContext:
     estimator: Estimator
     options: Any                       # the method's options dataclass (the config's allocation section)
     base: Any = None                   # the robot config's base section (what the robot is and senses), if known
+    sensors: tuple[str, ...] | None = None   # the sensor kinds the robot carries ("sonar", "laser", "gps"), if known
 
 
 class Agent(Protocol):

@@ -1,7 +1,10 @@
-"""MAVLink over UDP unicast between robots, and to the ground station.
+"""MAVLink between robots (over a transport: UDP unicast by default) and to the ground station (UDP).
 
-One non-blocking UDP socket per robot, bound to ``listen``.  Agent messages are encoded once and sent
-to every peer address; receivers keep those whose ``target_system`` is 0 or their own id.  Frames are
+One non-blocking UDP socket per robot, bound to ``listen``, for ground stations, and for the peers too under the
+default ``udp`` transport.  The link keeps framing, signing, replay windows, counters and the loss model; a
+transport (:mod:`runtime.comms.transport`: ``udp``, or ``zenoh`` publishing each frame once through a router) only
+moves bytes.  Agent messages are encoded once and sent to every peer address (UDP) or published once (Zenoh);
+receivers keep those whose ``target_system`` is 0 or their own id.  Frames are
 parsed with the generated pymavlink parser (robust mode), one datagram at a time: garbage, bad CRCs,
 truncated frames and refused signatures are counted in :class:`LinkCounters`, never raised.
 
@@ -206,6 +209,7 @@ def _resolve(text: str, what: str, family: int | None = None, *, listen: bool = 
     return fam, sockaddr
 
 
+
 DROP_REASONS = ("parse_errors", "bad_crc", "unsigned_dropped", "bad_signature_dropped", "replayed_dropped",
                 "unknown", "invalid", "not_for_us", "ignored", "gcs_overflow", "setup_signing_refused")
 
@@ -227,6 +231,7 @@ class LinkCounters:
     gcs_overflow: int = 0           # a ground-station request dropped: the inbox was full
     setup_signing_refused: int = 0  # a SETUP_SIGNING: the key is never changed from the network
     kernel_dropped: int = 0         # datagrams the kernel dropped before we read them (receive buffer full)
+    queue_dropped: int = 0          # frames a publish/subscribe transport (zenoh) dropped unread (its queue full)
     # frames (a datagram may carry several)
     agent_received: int = 0         # agent messages returned by poll
     heartbeats: int = 0             # HEARTBEATs taken (peers and ground stations)
@@ -325,7 +330,11 @@ class MavlinkLink:
                  signing_key: bytes | None = None, heartbeat_timeout: float = 3.0, *,
                  heartbeat_period: float = 1.0, wallclock: Callable[[], float] = time.time,
                  peer_loss: float = 0.0, loss_burst: float = 0.0, loss_seed: int | None = None,
-                 unsigned_gcs: Iterable[str] = (), fleet: Iterable[int] = ()):
+                 unsigned_gcs: Iterable[str] = (), fleet: Iterable[int] = (), sock: socket.socket | None = None,
+                 transport=None):
+        """``sock``: a UDP socket already bound to ``listen`` (held for this robot since its port was checked, as
+        the SITL launcher does, or inherited: ``mrta daemon --listen-fd``) instead of binding one here.
+        ``transport``: what carries peer frames (:mod:`runtime.comms.transport`; None: UDP on ``sock``/``listen``)."""
         if not 1 <= int(robot_id) <= 250:
             raise InputError(f"robot id: expected 1..250, got {robot_id!r}")
         if signing_key is not None and len(signing_key) != 32:
@@ -359,6 +368,12 @@ class MavlinkLink:
         except ValueError as e:
             raise InputError(f"comms.unsigned_gcs: expected a network in CIDR form ({e})") from None
         self._unsigned_net = False        # the datagram being parsed comes from a network in unsigned_gcs
+        if self.unsigned_gcs and self.signing:
+            self.log.warning("accepting unsigned ground-station frames from %s (comms.unsigned_gcs; peers must "
+                             "sign)", self.unsigned_gcs)
+        elif self.unsigned_gcs:
+            self.log.info("comms.unsigned_gcs (%s) changes nothing: signing is off, every frame is taken",
+                          self.unsigned_gcs)
         self._fleet = frozenset(int(r) for r in fleet) | {self.robot_id}    # system ids that must always sign
         if self.signing:
             s = self.mav.signing
@@ -371,15 +386,12 @@ class MavlinkLink:
         family, self._listen_addr = _resolve(listen, "comms.listen", listen=True)
         self._peers = [_resolve(p, f"comms.peers[{i}]", family)[1] for i, p in enumerate(peers)]
         self._gcs = _resolve(gcs, "comms.gcs", family)[1] if gcs else None
-        self.sock = socket.socket(family, socket.SOCK_DGRAM)
-        try:
-            self.sock.bind(self._listen_addr)
-        except OSError as e:
-            self.sock.close()
-            raise InputError(f"comms.listen: cannot bind {listen!r} ({e.strerror})") from None
-        self.sock.setblocking(False)
-        self._overflows = udp.count_overflows(self.sock)
+        # ground stations are always on UDP at the robot; peers too unless another transport is given
+        self.udp = udp.UdpTransport(family, self._listen_addr, () if transport is not None else self._peers,
+                                    sock=sock, listen=listen)
+        self.transport = self.udp if transport is None else transport
         self._next_kernel_check = -math.inf
+        self._left: set[int] = set()          # peers the transport said left, not reported lost yet
 
         # what the peer HEARTBEAT says; GcsTelemetry keeps these current
         self.base_mode = self.module.MAV_MODE_FLAG_AUTO_ENABLED
@@ -399,7 +411,12 @@ class MavlinkLink:
     @property
     def address(self) -> tuple[str, int]:
         """The bound (host, port); the port is the real one when ``listen`` asked for port 0."""
-        return self.sock.getsockname()[:2]
+        return self.udp.address
+
+    @property
+    def sock(self) -> socket.socket:
+        """The UDP socket (ground stations; peers too over the ``udp`` transport)."""
+        return self.udp.sock
 
     @property
     def peers(self) -> list[tuple]:
@@ -418,11 +435,11 @@ class MavlinkLink:
         self.mav.seq = (self.mav.seq + 1) % 256
         return frame
 
-    def _sendto(self, frame: bytes, addr) -> bool:
+    def _sendto(self, frame: bytes, addr, transport=None) -> bool:
         if self.tap is not None:
             self.tap("tx", frame, addr, self._now)
         try:
-            self.sock.sendto(frame, addr)
+            (transport or self.udp).send(frame, addr)
         except OSError as e:
             self.counters.send_errors += 1
             self.log.debug("send to %s failed: %s", addr, e)
@@ -440,17 +457,26 @@ class MavlinkLink:
                 self.counters.encode_errors += 1
                 self.log.error("not sent: %s", e)
                 continue
-            self._to_peers(frame, now)
+            self._to_peers(frame, now, getattr(msg, "dest", 0))
 
-    def _to_peers(self, frame: bytes, now: float) -> None:
-        """Send ``frame`` to every peer; with ``peer_loss``, a copy is lost with that probability (or, with
-        ``loss_burst``, while that peer's channel is in a bad spell), as a lossy radio loses it for one receiver and
-        not another."""
-        for addr in self._peers:
-            if self.peer_loss and self._loses(addr, now):
+    def _to_peers(self, frame: bytes, now: float, dest: int = 0) -> None:
+        """Send ``frame`` to the peers (``dest``: the robot it is addressed to, 0 every robot) over the transport.
+        With ``peer_loss``, a copy is lost with that probability (or, with ``loss_burst``, while that peer's channel
+        is in a bad spell), as a lossy radio loses it for one receiver and not another: drawn here per copy when the
+        transport sends copies (UDP), on receipt per sender when it publishes once (:meth:`_lost_on_receipt`)."""
+        t = self.transport
+        for where in t.destinations(dest):
+            if self.peer_loss and t.copies and self._loses(where, now):
                 self.counters.loss_injected += 1
                 continue
-            self.counters.peer_sent += self._sendto(frame, addr)
+            self.counters.peer_sent += self._sendto(frame, where, t)
+
+    def _lost_on_receipt(self, origin, now: float) -> bool:
+        """A published frame from ``origin`` (the sender's key) lost here with the loss model; counted."""
+        if origin is None or not self.peer_loss or not self._loses(origin, now):
+            return False
+        self.counters.loss_injected += 1
+        return True
 
     def _loses(self, addr, now: float) -> bool:
         if not self.loss_burst or self.peer_loss >= 1.0:
@@ -524,18 +550,38 @@ class MavlinkLink:
         self._now = max(self._now, now)
         self._heartbeat_peers(now)
         out: list = []
-        for data, addr in udp.datagrams(self.sock, self._overflows, self.counters, MAX_DATAGRAMS_PER_POLL):
-            out += self.feed(data, now, addr)
+        for t in self._transports():
+            for data, addr, origin in t.receive(self.counters, MAX_DATAGRAMS_PER_POLL):
+                if not self._lost_on_receipt(origin, now):
+                    out += self.feed(data, now, addr)
+        for robot, joined in self.transport.membership():
+            self._member(robot, joined, now)
         if now >= self._next_kernel_check:
             self._next_kernel_check = now + KERNEL_DROPS_PERIOD
             self.check_kernel_drops()
         return out
 
+    def _transports(self) -> tuple:
+        return (self.udp,) if self.transport is self.udp else (self.udp, self.transport)
+
+    def _member(self, robot: int, joined: bool, now: float) -> None:
+        """The transport saw ``robot`` join (a session's liveliness token appeared: it counts as heard now) or
+        leave (its session died: reported lost at the next :meth:`peers_lost`, without waiting for the
+        heartbeats' timeout; the core still waits for its messages to be silent that long)."""
+        if robot == self.robot_id or not 1 <= robot <= MAX_ROBOT_ID:
+            return
+        if joined:
+            self._left.discard(robot)
+            self._beats.hear(robot, now)
+        elif robot not in self._beats.lost:
+            self._left.add(robot)
+
     def check_kernel_drops(self) -> int:
-        """Bring ``kernel_dropped`` up to the kernel's count now (datagrams carry it only once more arrive)."""
-        c = self.counters
-        c.kernel_dropped = max(c.kernel_dropped, udp.proc_drops(self.sock) or 0)
-        return c.kernel_dropped
+        """Bring ``kernel_dropped`` up to the kernel's count now (datagrams carry it only once more arrive), and
+        ``queue_dropped`` up to a publish/subscribe transport's."""
+        for t in self._transports():
+            t.check_drops(self.counters)
+        return self.counters.kernel_dropped
 
     def feed(self, data: bytes, now: float, addr: tuple | None = None) -> list:
         """Parse one datagram; return the agent messages addressed to us.  Never raises.  The datagram is
@@ -682,7 +728,13 @@ class MavlinkLink:
     def peers_lost(self, now: float) -> list[int]:
         """Peers silent for more than ``heartbeat_timeout`` at ``now`` and not reported before."""
         self._now = max(self._now, now)
-        return self._beats.due(now)
+        due = self._beats.due(now)
+        if self._left:
+            left = sorted(self._left - set(due))
+            self._left.clear()
+            self._beats.lost.update(left)
+            due = sorted(set(due) | set(left))
+        return due
 
     @property
     def peers_alive(self) -> list[int]:
@@ -690,7 +742,27 @@ class MavlinkLink:
         return self._beats.alive(self._now)
 
     def close(self) -> None:
-        self.sock.close()
+        for t in self._transports():
+            t.close()
+
+
+def open_link(comms, robot_id: int, **kw) -> MavlinkLink:
+    """The link a robot config's ``comms`` describes: its key loaded, its transport opened (peers' addresses only
+    over ``udp``)."""
+    from runtime.comms.transport import open_transport
+
+    key = load_key(comms.signing_key) if comms.signing_key else None
+    transport = open_transport(comms, robot_id)
+    try:
+        return MavlinkLink(robot_id, comms.listen, [p.address for p in comms.peers] if transport is None else [],
+                           comms.gcs, signing_key=key, heartbeat_timeout=comms.heartbeat_timeout,
+                           peer_loss=comms.peer_loss, loss_burst=comms.loss_burst, loss_seed=comms.loss_seed,
+                           unsigned_gcs=comms.unsigned_gcs, fleet=[p.id for p in comms.peers], transport=transport,
+                           **kw)
+    except BaseException:
+        if transport is not None:
+            transport.close()
+        raise
 
 
 def was_signed(frame) -> bool:

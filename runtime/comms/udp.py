@@ -77,3 +77,76 @@ def proc_drops(sock: socket.socket) -> int | None:
         except (OSError, ValueError):
             continue
     return None
+
+
+def bound(sock: socket.socket | None, family: int, addr: tuple, listen: str, what: str = "comms.listen") -> socket.socket:
+    """A UDP socket bound to ``addr``: ``sock`` if it is one (an InputError naming ``what`` if it is bound
+    elsewhere or is no UDP socket), else a new one bound here."""
+    from runtime.errors import InputError
+
+    if sock is not None:
+        try:
+            ok = sock.type == socket.SOCK_DGRAM and sock.getsockname()[:2] == addr[:2]
+            where = sock.getsockname()
+        except OSError as e:
+            raise InputError(f"{what}: the socket handed in is not usable ({e.strerror})") from None
+        if not ok:
+            raise InputError(f"{what}: expected the socket handed in to be UDP bound to {listen!r}, got "
+                             f"{where!r}")
+        return sock
+    sock = socket.socket(family, socket.SOCK_DGRAM)
+    try:
+        sock.bind(addr)
+    except OSError as e:
+        sock.close()
+        raise InputError(f"{what}: cannot bind {listen!r} ({e.strerror})") from None
+    return sock
+
+
+class UdpTransport:
+    """The default transport: one non-blocking UDP socket bound to ``listen``; a peer frame goes to every peer
+    address (one copy each, so the link draws its loss model per copy, as a radio loses a broadcast for one
+    receiver and not another).  Needs nothing beyond the standard library.
+
+    The transport interface (:mod:`runtime.comms.transport`): ``copies``, :meth:`destinations`, :meth:`send`,
+    :meth:`receive`, :meth:`membership`, :meth:`check_drops`, :meth:`close`.  The link keeps everything else."""
+
+    copies = True            # destinations() are receivers: the link's loss model draws once per copy when sending
+
+    def __init__(self, family: int, listen_addr, peers, what: str = "comms.listen", sock: socket.socket | None = None,
+                 listen: str | None = None):
+        """``sock``: a UDP socket already bound to ``listen_addr`` (held since the port was checked, or inherited)
+        instead of binding one here; ``listen``: the address as the config writes it, for errors."""
+        self.peers = list(peers)
+        self.sock = bound(sock, family, listen_addr, listen_addr if listen is None else listen, what)
+        self.sock.setblocking(False)
+        self._overflows = count_overflows(self.sock)
+
+    @property
+    def address(self) -> tuple:
+        return self.sock.getsockname()[:2]
+
+    def destinations(self, dest: int) -> list:
+        """Where a peer frame for robot ``dest`` (0: every robot) goes: every peer, as today (the receivers keep
+        what is addressed to them)."""
+        return self.peers
+
+    def send(self, frame: bytes, where) -> None:
+        """One datagram to ``where`` (an address); raises OSError."""
+        self.sock.sendto(frame, where)
+
+    def receive(self, counters, limit: int):
+        """``(data, source address, origin)`` for up to ``limit`` datagrams waiting; origin is None (loss was
+        drawn when sending)."""
+        for data, addr in datagrams(self.sock, self._overflows, counters, limit):
+            yield data, addr, None
+
+    def membership(self) -> list:
+        """Robots that joined (id, True) or left (id, False) since the last call: UDP cannot tell."""
+        return []
+
+    def check_drops(self, counters) -> None:
+        counters.kernel_dropped = max(counters.kernel_dropped, proc_drops(self.sock) or 0)
+
+    def close(self) -> None:
+        self.sock.close()

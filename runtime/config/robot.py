@@ -11,13 +11,18 @@ from pathlib import Path
 from typing import Any, Literal, Optional
 
 from runtime.comms.networks import EXPECTED as NETWORK, parse_network
-from runtime.config.build import _build, _read_yaml, deep_merge, rng, union_field
+from runtime.config.build import ConfigError, Tagged, _build, _read_yaml, deep_merge, rng, union_field
 from runtime.config.world import POSE_RANGES, Datum
 
 
 def _bases():
     from runtime.drivers.registry import config_classes
     return config_classes()
+
+
+def _sensors():
+    from runtime.drivers.registry import sensor_config_classes
+    return sensor_config_classes()
 
 
 def _methods():
@@ -34,6 +39,8 @@ class RobotIdentity:
 
 @dataclass(frozen=True)
 class GpsConfig:
+    """The older spelling of one ``sensors:`` entry of ``type: nmea_gps`` (read as that entry when no
+    ``nmea_gps`` is listed and ``enabled``)."""
     enabled: bool = True
     port: str = "loop://"
     baudrate: int = field(default=9600, metadata=rng(300, 921600))
@@ -61,8 +68,32 @@ class Peer:
     address: str = field(default="127.0.0.1:14601")
 
 
+def _endpoint(text: str) -> str:
+    from runtime.comms.zenoh_transport import parse_endpoint      # no zenoh import: only the pattern
+    return parse_endpoint(text)
+
+
+def _fleet(text: str) -> str:
+    from runtime.comms.zenoh_transport import parse_fleet
+    return parse_fleet(text)
+
+
+@dataclass(frozen=True)
+class ZenohConfig:
+    """``comms.zenoh``: used when ``comms.transport`` is ``zenoh`` (runtime/comms/zenoh_transport.py)."""
+    mode: Literal["client", "peer"] = "client"
+    # endpoints (tcp/HOST:PORT): client, the segment's router(s) (more than one: failover); peer, seed peers
+    connect: tuple[str, ...] = field(default=(), metadata={"check": (_endpoint, "a Zenoh endpoint PROTO/HOST:PORT")})
+    listen: tuple[str, ...] = field(default=(), metadata={"check": (_endpoint, "a Zenoh endpoint PROTO/HOST:PORT")})
+    fleet: str = field(default="fleet", metadata={"check": (_fleet, "a fleet name for the keys mrta/<fleet>/...")})
+    congestion: Literal["drop", "block"] = "drop"
+    config: Optional[str] = None     # a Zenoh JSON5 config file under these keys: TLS, access control (docs/transport.md)
+
+
 @dataclass(frozen=True)
 class CommsConfig:
+    transport: Literal["udp", "zenoh"] = "udp"     # what moves peer frames (runtime/comms/transport.py)
+    zenoh: ZenohConfig = ZenohConfig()
     listen: str = "127.0.0.1:14601"
     peers: tuple[Peer, ...] = ()
     gcs: Optional[str] = "127.0.0.1:14550"
@@ -99,6 +130,8 @@ class PlanningConfig:
 class RobotConfig:
     robot: RobotIdentity = RobotIdentity()
     base: Any = union_field("type", _bases, "create_oi")
+    # the robot's sensors beyond its base, each chosen by its type (runtime.drivers.registry.SENSORS)
+    sensors: tuple[Any, ...] = field(default=(), metadata={"tagged": Tagged("type", _sensors, None)})
     gps: GpsConfig = GpsConfig()
     localization: LocalizationConfig = LocalizationConfig()
     comms: CommsConfig = CommsConfig()
@@ -108,9 +141,33 @@ class RobotConfig:
     datum: Datum = Datum()
     source: str = ""
 
+    def sensor_list(self) -> tuple:
+        """Every sensor the daemon opens: ``sensors:``, and the ``gps:`` section as an ``nmea_gps`` entry when
+        none is listed and it is enabled (configs written before ``sensors:``)."""
+        if any(s.type == "nmea_gps" for s in self.sensors) or not self.gps.enabled:
+            return self.sensors
+        from runtime.drivers.nmea_gps import NmeaGpsConfig
+        return (NmeaGpsConfig(port=self.gps.port, baudrate=self.gps.baudrate),) + self.sensors
+
+    @property
+    def has_gps(self) -> bool:
+        return any(s.type == "nmea_gps" for s in self.sensor_list())
+
 
 def load_robot(path: str | Path, overrides: dict | None = None) -> RobotConfig:
     data = _read_yaml(path)
     if overrides:
         data = deep_merge(data, overrides)
+    check_one_gps(data, str(path))
     return _build(RobotConfig, data, str(path), "")
+
+
+def check_one_gps(data: Any, file: str) -> None:
+    """A config gives its GPS once: as a ``sensors:`` entry of ``type: nmea_gps`` or as the older ``gps:``
+    section, not both (which one would the daemon open?)."""
+    if not isinstance(data, dict) or "gps" not in data or not isinstance(data.get("sensors"), list):
+        return
+    for i, entry in enumerate(data["sensors"]):
+        if isinstance(entry, dict) and entry.get("type") == "nmea_gps":
+            raise ConfigError(file, "gps", f"no gps: section beside sensors[{i}] (type nmea_gps): give the GPS "
+                              "once, as that entry")

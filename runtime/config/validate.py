@@ -2,11 +2,13 @@
 start-up and `mrta daemon CONFIG --check` runs alone, without opening a device or a socket.
 
 * every address parses (``host:port``, port 1..65535; IPv6 as ``[::1]:port``) and resolves; a peer or ground
-  station is a unicast address;
+  station is a unicast address (peers' addresses only over ``udp``: over ``zenoh`` a peer is its id, and a client
+  names at least one router in ``comms.zenoh.connect``);
 * no peer is the robot itself, no peer id is listed twice;
 * the map file exists (relative to the config file) and loads, and ``localization.initial_pose`` lies inside it;
 * the signing key file loads;
-* the base driver accepts its options (e.g. a Create's baud rate): it is built, not opened.
+* the base driver accepts its options (e.g. a Create's baud rate): it is built, not opened;
+* every ``sensors:`` entry's port is a device file that exists or a pyserial URL (``socket://``, ``loop://``).
 
 The allocation method's options are the schema of ``allocation:`` and were checked when the config was built.
 """
@@ -34,7 +36,12 @@ def validate(cfg) -> None:
         if peer.id in seen:
             raise ConfigError(file, f"comms.peers[{i}].id", "a peer id listed once", peer.id)
         seen.add(peer.id)
-        resolve_address(peer.address, file, f"comms.peers[{i}].address")
+        if comms.transport == "udp":           # over zenoh a peer is an id: its frames come through the router
+            resolve_address(peer.address, file, f"comms.peers[{i}].address")
+    if comms.transport == "zenoh" and comms.zenoh.mode == "client" and not comms.zenoh.connect:
+        raise ConfigError(file, "comms.zenoh.connect", "the segment's router endpoint(s) (client mode)", [])
+    if comms.transport == "zenoh" and comms.zenoh.config is not None and not Path(comms.zenoh.config).is_file():
+        raise ConfigError(file, "comms.zenoh.config", "a Zenoh JSON5 config file", comms.zenoh.config)
     if comms.gcs is not None:
         resolve_address(comms.gcs, file, "comms.gcs")
     if cfg.planning.map is not None:
@@ -55,6 +62,11 @@ def validate(cfg) -> None:
         open_base(cfg.base, cfg.robot.id)          # built (its options checked), not opened
     except InputError as exc:
         raise InputError(f"{file}: base: {exc}") from None
+    for i, entry in enumerate(cfg.sensors):
+        port = getattr(entry, "port", None)
+        if isinstance(port, str) and "://" not in port and not Path(port).exists():
+            raise ConfigError(file, f"sensors[{i}].port", f"a serial device that exists or a pyserial URL "
+                              f"(type {entry.type})", port)
 
 
 def map_path(cfg) -> Path:

@@ -63,6 +63,10 @@ class ArcosBase(MobileBase):
     ranging = True             # the sonar ring
     input_period = 0.1         # s: one SIP per cycle (the P3-DX's default, as MobileSim's)
 
+    @property
+    def sensor_kinds(self) -> tuple[str, ...]:
+        return ("sonar",) if self.want_sonar else ()
+
     @classmethod
     def from_config(cls, cfg: ArcosConfig, robot_id=None) -> "ArcosBase":
         return cls(cfg.port, baudrate=cfg.baudrate, subclass=cfg.subclass, watchdog=cfg.watchdog,

@@ -149,6 +149,11 @@ class MobileBase(abc.ABC):
     latches_faults = False     # True: ``sensors.faults`` stay, and the base stands, until reset_faults() clears them
     ranging = False            # True: it has range sensors (``sensors.ranges`` empty then means nothing in range)
 
+    @property
+    def sensor_kinds(self) -> tuple[str, ...]:
+        """The sensors that are part of the base, as the allocation names them (the Pioneer's ring: "sonar")."""
+        return ()
+
     def __init__(self, footprint: Footprint, watchdog: float, log):
         if not (isinstance(watchdog, (int, float)) and math.isfinite(watchdog) and watchdog > 0):
             raise InputError(f"{type(self).__name__} watchdog {watchdog!r}: expected seconds > 0")

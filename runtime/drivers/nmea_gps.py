@@ -14,11 +14,12 @@ import datetime
 import math
 import re
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import Literal, Optional
 
 import pynmea2
 import serial
 
+from runtime.config.build import rng
 from runtime.errors import InputError
 from runtime.log import get_logger
 
@@ -280,6 +281,14 @@ class NmeaParser:
                        "course": math.nan if course is None else math.radians(course % 360.0)}, utc
 
 
+@dataclass(frozen=True)
+class NmeaGpsConfig:
+    """A ``sensors:`` entry of ``type: nmea_gps`` (what the top-level ``gps:`` section of older configs says)."""
+    type: Literal["nmea_gps"] = "nmea_gps"
+    port: str = "loop://"                          # any pyserial URL
+    baudrate: int = field(default=9600, metadata=rng(300, 921600))
+
+
 class NmeaGps:
     """Polled NMEA GPS on any pyserial URL (device, pty, ``socket://``, ``loop://``).
 
@@ -287,6 +296,14 @@ class NmeaGps:
     once fixes have come and then none for ``silence`` seconds, one warning opens the outage (``stats.outages``)
     and one closes it when fixes return.  The robot drives on: the pose filter dead-reckons on odometry meanwhile
     and gates the first fixes after."""
+
+    Config = NmeaGpsConfig
+    kind = "gps"               # what the robot can offer (an allocation's sensor view)
+    reports = "fixes"          # the daemon hands what poll() returns to the pose estimate
+
+    @classmethod
+    def from_config(cls, cfg: NmeaGpsConfig, robot_id=None) -> "NmeaGps":
+        return cls(cfg.port, baudrate=cfg.baudrate, robot_id=robot_id)
 
     def __init__(self, port: str, baudrate: int = 9600, robot_id=None, silence: float = 2.0):
         self.port = port
@@ -305,6 +322,14 @@ class NmeaGps:
     @property
     def stats(self) -> NmeaStats:
         return self.parser.stats
+
+    @property
+    def usable(self) -> bool:
+        """A valid fix has come and no outage is open (no fix for ``silence`` s); the port opens when built."""
+        return self.last_fix is not None and bool(self.last_fix.valid) and self._out_since is None
+
+    def open(self, now: float = 0.0) -> None:
+        """Nothing: the port opened when the driver was built (an InputError naming it if it did not)."""
 
     def poll(self, now: float) -> list[GpsFix]:
         """Read what has arrived (non-blocking) and return the fixes it completed; never raises."""

@@ -32,10 +32,13 @@ BASES: dict[str, str] = {
 }
 
 
-# Sensors by ``sensors[].type`` (issue 32): a driver class with ``Config`` (first field ``type: Literal[<key>]``),
-# ``from_config(cfg, robot_id)``, ``open(now)``, ``poll(now)``, ``close()`` and ``usable``.  The NMEA GPS and the
-# sonar ring (part of the ARCOS base) are not entries yet: the robot config still wires them by name.
+# Sensors by ``sensors[].type``: a driver class with ``Config`` (first field ``type: Literal[<key>]``),
+# ``from_config(cfg, robot_id)``, ``open(now)``, ``poll(now)``, ``close()``, ``usable``, ``kind`` (what the
+# allocation is told the robot carries: "gps", "laser") and ``reports``: "fixes" (poll() returns position fixes for
+# the pose estimate) or "ranges" (``ranges()``: BaseSensors.ranges pairs, merged with the base's).  The Pioneer's
+# sonar ring is part of its base (``MobileBase.sensor_kinds``), not an entry.
 SENSORS: dict[str, str] = {
+    "nmea_gps": "runtime.drivers.nmea_gps:NmeaGps",          # NMEA 0183 GPS receiver, serial
     "rplidar": "runtime.drivers.rplidar:Rplidar",            # Slamtec RPLIDAR A1/A2 laser scanner, serial
 }
 
@@ -43,6 +46,16 @@ SENSORS: dict[str, str] = {
 def sensor_class(type_name: str) -> type:
     """The driver class of ``sensors[].type`` ``type_name`` (a key of :data:`SENSORS`)."""
     return resolve(SENSORS[type_name])
+
+
+def sensor_config_classes() -> dict[str, type]:
+    """``{sensors[].type: its config dataclass}`` (the robot config's ``sensors:`` entries)."""
+    return {name: sensor_class(name).Config for name in SENSORS}
+
+
+def open_sensor(cfg, robot_id: int):
+    """The driver for ``sensors:`` entry ``cfg``, not yet opened (an NMEA GPS opens its port when built)."""
+    return sensor_class(cfg.type).from_config(cfg, robot_id)
 
 
 def driver_class(type_name: str) -> type:

@@ -41,6 +41,9 @@ RESTART_EVERY = 1.0        # s between STOP + SCAN while stalled
 MIN_SCAN_NODES = 5         # a "revolution" with fewer nodes (the one cut by a resynchronisation) is dropped
 
 
+MOUNT_RANGES = {"items": (rng(-2.0, 2.0), rng(-2.0, 2.0), rng(-7.0, 7.0))}   # a sensor's pose on its robot
+
+
 @dataclass(frozen=True)
 class RplidarConfig:
     """A ``sensors:`` entry of ``type: rplidar``."""
@@ -50,7 +53,8 @@ class RplidarConfig:
     model: Literal["a1", "a2"] = "a1"             # a1: motor by DTR; a2: motor by MOTOR_PWM
     motor_pwm: int = field(default=P.DEFAULT_PWM, metadata=rng(0, P.MAX_PWM))
     stall_timeout: float = field(default=0.5, metadata=rng(0.05, 10.0))  # s without a node while scanning
-    mount: tuple[float, float, float] = (0.0, 0.0, 0.0)                  # x, y (m), yaw (rad) on the robot
+    # x, y (m) on the robot (within 2 m of its centre), yaw (rad, a little over a turn either way)
+    mount: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0), metadata=MOUNT_RANGES)
     height: float = field(default=0.25, metadata=rng(0.0, 3.0))          # m above the floor (the SITL's beams)
 
 
@@ -88,6 +92,7 @@ class Rplidar:
 
     Config = RplidarConfig
     kind = "laser"             # what the robot can offer (an allocation's sensor view)
+    reports = "ranges"         # the daemon merges ranges() into BaseSensors.ranges
 
     @classmethod
     def from_config(cls, cfg: RplidarConfig, robot_id=None) -> "Rplidar":

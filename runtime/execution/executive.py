@@ -148,7 +148,8 @@ class Executive:
     # ------------------------------------------------------------------ one control cycle
     def step(self, pose, sensors, now: float, guidance: Mapping = NONE) -> tuple[tuple[float, float], list[Progress]]:
         """The command for this cycle and the progress to report.  ``pose`` None or no executor: stand still.
-        ``guidance``: as for :meth:`sync`."""
+        ``sensors``: a :class:`~runtime.drivers.base.BaseSensors` (the core's: the base's readings and its range
+        sensors').  ``guidance``: as for :meth:`sync`."""
         if pose is None or not self.executors:
             return self._make_way(sensors, now), []
         for tid, e in self.executors.items():
@@ -156,7 +157,7 @@ class Executive:
         for e in self.executors.values():
             e.begin(pose, now)
         self.avoid.on_bumpers(sensors.bump_left, sensors.bump_right, now)
-        ranges = getattr(sensors, "ranges", None)
+        ranges = sensors.ranges
         if ranges:
             self.avoid.on_ranges(ranges, now)
         lead = self._lead()
@@ -193,7 +194,7 @@ class Executive:
         then it creeps straight away from the nearest reading, if that side is clear.  A robot with nothing to do
         parked on a mark (the delivery point, a goal) moves off when another robot comes to it.  Readings are the
         base's ranges and, for a robot that has none, where the peers report they stand (``peers``)."""
-        ranges = tuple(getattr(sensors, "ranges", None) or ()) + tuple(self.peers)
+        ranges = tuple(sensors.ranges) + tuple(self.peers)
         if not self.make_way or not ranges:
             return 0.0, 0.0
         r = self.ctx.radius

@@ -13,8 +13,19 @@ the fleet, upper 16 bits); a task record that contradicts the table (same id, an
 parameters or position) is dropped: a task's content never changes once entered, only its state and who did it
 (both merged as :mod:`runtime.fleet.table` says).  Each drop is
 counted in :attr:`FleetNode.dropped`.  So a robot drives only to tasks in its table, which only operator uploads
-and the replication of its peers' tables fill.  A record forged in a peer's name with a new id, or with a later
-state or another doer for a known task, cannot be told from the peer's own without signing (the fleet's default).
+and the replication of its peers' tables fill.
+
+A task that a robot hears of from another robot than the one that minted it (its origin, the id's upper 16 bits)
+is held, not entered, until the origin confirms it: the robot asks the origin for that one record
+(``TableRequest`` with ``task``, again every ``resync`` s) and enters the task when the origin sends it; a record the
+origin never confirms is dropped after :data:`UNCONFIRMED` s, counted.  (A robot that missed the origin's broadcast
+learns the task so, one request later, through the anti-entropy of the table.)  The task of an origin that is lost
+(silent) is taken once two different peers have sent it, since the origin cannot answer any more.  The origin is
+the authority on its own ids: a record of my own origin that I never minted, heard after :data:`OWN_GRACE` s from
+my start (before that it is a restarted robot learning its own tasks back), is disowned: entered as withdrawn
+and that record broadcast, so a decoy forged in my name is withdrawn on every robot within the table's bound.
+What signing alone stops: a forged new task in the name of its origin reaches the robots it is sent to until the
+origin disowns it; a forged later state (done, withdrawn) or another doer for a known task.
 """
 from __future__ import annotations
 
@@ -24,10 +35,22 @@ from dataclasses import dataclass, replace
 
 from runtime.allocation.agent import AWARDED, DONE, TaskEvent
 from runtime.messages import (ALLOCATING, BROADCAST, DISARMED, DONE as T_DONE, EXECUTING, IDLE, LOCALIZING,
-                                    MAX_HELD, OPEN, RobotState, TableRequest, TaskRecord, task_origin)
+                                    MAX_HELD, OPEN, WITHDRAWN, RobotState, TableRequest, TaskRecord, task_origin)
 from runtime.fleet.table import TaskTable
 from runtime.log import get_logger
 from runtime.tasks import Progress
+
+UNCONFIRMED = 30.0          # s a task record its origin has not confirmed is held before it is dropped
+OWN_GRACE = 10.0            # s after start in which records of my own origin that I never minted are taken
+
+
+@dataclass
+class _Pending:
+    """A task record heard from someone other than its origin, or unasked: held until the origin confirms it."""
+    record: TaskRecord
+    since: float
+    asked: float = -math.inf             # when I last asked the origin for it
+    relays: frozenset = frozenset()      # peers that sent it
 
 
 @dataclass(frozen=True)
@@ -56,6 +79,9 @@ class FleetNode:
         self.positions: dict[int, tuple[float, float, float]] = {}   # peer -> (x, y, when) of its last RobotState
         self._last_state: tuple | None = None
         self._next_state = -math.inf
+        self._pending: dict[int, _Pending] = {}     # task id -> a record held until its origin confirms it
+        self._lost: set[int] = set()                 # peers declared lost and not heard since
+        self._started: float | None = None
         self.log = get_logger("fleet", self.robot_id)
         if not self.armed:
             agent.set_available(False, 0.0)
@@ -99,7 +125,14 @@ class FleetNode:
             self.dropped[why] += 1
             self.log.debug("dropped %s from robot %s: %s", type(msg).__name__, getattr(msg, "sender", None), why)
             return []
+        self._lost.discard(msg.sender)
         if isinstance(msg, TaskRecord):
+            held = self._pending.get(msg.task)
+            if held is not None and msg.sender == task_origin(msg.task) and msg.state & WITHDRAWN:
+                msg = replace(held.record, sender=msg.sender, state=msg.state, holders=())   # disowned by its origin
+            if msg.task not in self.table.entries and not self._confirmed(msg, now):
+                return self._hold(msg, now)
+            self._pending.pop(msg.task, None)
             task, state = self.table.merge(msg)
             out = []
             if task is not None and state == OPEN:
@@ -108,6 +141,11 @@ class FleetNode:
                 out += self.agent.withdraw_tasks([msg.task], now)
             return out
         if isinstance(msg, TableRequest):
+            if msg.task:
+                e = self.table.entries.get(msg.task)
+                if e is None and task_origin(msg.task) == self.robot_id and not self._confirmed(msg, now):
+                    return self._disown(msg.task, msg.sender)     # a peer holds a decoy in my name
+                return [] if e is None else [e.record(self.robot_id, msg.sender)]
             return [] if msg.digest == self.table.digest else self.table.records(msg.sender)
         if isinstance(msg, RobotState):
             self.holding[msg.sender] = tuple(msg.tasks)
@@ -128,7 +166,63 @@ class FleetNode:
             return "contradicts the task table"
         return None
 
+    def _confirmed(self, rec: TaskRecord, now: float) -> bool:
+        """A record of a task new to me may be entered (see the module docstring): from its origin; of my own origin
+        within OWN_GRACE of my start; of a lost origin, sent by two peers."""
+        origin = task_origin(rec.task)
+        if origin == self.robot_id:
+            return self._started is None or now - self._started <= OWN_GRACE
+        if rec.sender == origin:
+            return True
+        held = self._pending.get(rec.task)
+        return origin in self._lost and held is not None and bool(held.relays - {rec.sender})
+
+    def _hold(self, rec: TaskRecord, now: float) -> list:
+        """Hold a relayed record until its origin confirms it and ask the origin for it; disown one of my own
+        origin that I never minted."""
+        origin = task_origin(rec.task)
+        if origin == self.robot_id:
+            self.table.merge(replace(rec, state=rec.state | WITHDRAWN, holders=()))
+            return self._disown(rec.task, rec.sender)
+        held = self._pending.get(rec.task)
+        if held is None:
+            held = self._pending[rec.task] = _Pending(rec, now)
+        held.relays |= {rec.sender}
+        return self._ask(rec.task, held, now)
+
+    def _disown(self, task_id: int, sender: int) -> list:
+        """A task of my own origin that I never minted: withdrawn, that record broadcast (with what a peer sent, if
+        it sent the record; else it only asked me, and my withdrawn record of it says what it holds is no task)."""
+        self.dropped["a task of my own origin I never minted"] += 1
+        self.log.warning("task %s: robot %d knows a task of mine I never minted: withdrawn fleet-wide",
+                         _tid(task_id), sender)
+        e = self.table.entries.get(task_id)
+        if e is not None:
+            return [e.record(self.robot_id)]
+        return [TaskRecord(self.robot_id, sender, task_id, 0, 0, WITHDRAWN, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)]
+
+    def _ask(self, task_id: int, held: _Pending, now: float) -> list:
+        origin = task_origin(task_id)
+        if origin in self._lost or now - held.asked < self.table.resync:
+            return []
+        held.asked = now
+        return [TableRequest(self.robot_id, origin, self.table.digest, task_id)]
+
+    def _pending_tick(self, now: float) -> list:
+        """Ask again for held records; drop those unconfirmed for UNCONFIRMED s."""
+        out = []
+        for tid, held in list(self._pending.items()):
+            if now - held.since > UNCONFIRMED:
+                del self._pending[tid]
+                self.dropped["a task its origin never confirmed"] += 1
+                self.log.warning("task %s from robot %d dropped: its origin robot %d never confirmed it",
+                                 _tid(tid), held.record.sender, task_origin(tid))
+            else:
+                out += self._ask(tid, held, now)
+        return out
+
     def on_peer_lost(self, robot_id: int, now: float) -> list:
+        self._lost.add(robot_id)
         self.holding.pop(robot_id, None)
         self.positions.pop(robot_id, None)
         return self.agent.on_peer_lost(robot_id, now)
@@ -166,7 +260,9 @@ class FleetNode:
             setter(self.localized)
 
     def tick(self, now: float) -> list:
-        out = self.agent.on_tick(now)
+        if self._started is None:
+            self._started = now
+        out = self.agent.on_tick(now) + self._pending_tick(now)
         for ev in self.agent.pop_events():
             self.events.append(ev)
             who = "+".join(f"R{r}" for r in ev.robots)

@@ -19,9 +19,11 @@ One cycle, in order:
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
+import dataclasses
 from dataclasses import dataclass, field
 
 from runtime.comms.telemetry import MODES
+from runtime.drivers.base import BaseSensors
 from runtime.execution import peer_readings
 from runtime.execution.executive import NONE
 from runtime.fleet.node import Notice
@@ -42,6 +44,8 @@ class Sensed:
     odometry: tuple[float, float] | None = None    # (v m/s, w rad/s) when the base gave a new reading
     fixes: Sequence = ()                           # GPS fixes (``valid``, ``lat``, ``lon``, ``alt``)
     sensors: object = None                         # the base's BaseSensors: bumpers, ranges, battery, faults
+    ranges: Sequence = ()                          # (bearing, distance) pairs of the robot's range sensors beside
+    #                                                its base (a laser scanner's latest revolution), robot frame
     pose: tuple[float, float, float] | None = None  # a pose from outside the filter (a motion-capture system, a
                                                    # simulation's truth): the core takes it as its estimate
 
@@ -133,7 +137,7 @@ class RobotCore:
         self.method = registry.method(cfg.allocation.method) if method is None else method
         peers = tuple(p.id for p in cfg.comms.peers)
         self.agent = self.method.make(AgentContext(self.id, peers, self.estimator, cfg.allocation,
-                                                   cfg.base if base_config is ... else base_config))
+                                                   cfg.base if base_config is ... else base_config, base.kinds))
         self.node = FleetNode(self.id, self.agent, armed=cfg.robot.armed, peers=list(peers), state_period=state_period)
         self.liveness = PeerLiveness(peers, cfg.comms.heartbeat_timeout)    # lost: no heartbeat and no message
         self.executive = Executive(ExecContext(self.planner, Tunables(c.cruise_speed, c.lookahead, c.max_turn_rate,
@@ -147,14 +151,14 @@ class RobotCore:
             from runtime.comms.ground import GroundServices
             from runtime.comms.telemetry import GcsTelemetry
             self.radio = Radio(*mavlink)
-            self.telemetry = GcsTelemetry(self.radio, self.id, cfg.datum, armed=cfg.robot.armed, gps=cfg.gps.enabled)
+            self.telemetry = GcsTelemetry(self.radio, self.id, cfg.datum, armed=cfg.robot.armed, gps=cfg.has_gps)
             self.ground = GroundServices(self.port, self.radio)
         self.period = 1.0 / c.rate
         self.mode = "auto"                       # the operator's: auto (takes tasks), hold (paused), rtl (goes home)
         self.home: tuple[float, float] | None = None    # the first pose: where RTL drives
         self._home_reached = False
         self._fixes: Sequence = ()               # the GPS fixes of this cycle (telemetry)
-        self.sensors = None                      # the base's sensors as last sensed
+        self.sensors = BaseSensors()             # the base's sensors as last sensed, with the sensors' ranges
         self._truth: tuple[float, float, float] | None = None     # Sensed.pose, when the host gives one
         self.last_step: float | None = None
         self._first_cycle: float | None = None
@@ -191,7 +195,7 @@ class RobotCore:
         self.stats.cycles += 1
         dt = 0.0 if self.last_step is None else now - self.last_step
         self.last_step = now
-        self.sensors = sensed.sensors
+        self.sensors = sensors_with(sensed.sensors, sensed.ranges)
         self._truth = sensed.pose
         self._fixes = sensed.fixes
         if sensed.pose is None:
@@ -199,7 +203,7 @@ class RobotCore:
         if self.home is None and self.pose() is not None:
             self.home = tuple(float(v) for v in self.pose()[:2])
         if self._perceive is not None:
-            self._perceive(self.pose(), getattr(self.sensors, "ranges", ()), now)
+            self._perceive(self.pose(), self.sensors.ranges, now)
         self._peers(self._comms(now, inbox, tick=True))
         command, progress = self._execute(now)
         self._report(now, inbox)
@@ -374,6 +378,16 @@ class RobotCore:
             "fleet_dropped": dict(self.node.dropped),
             "agent_dropped": _drops(self.agent),
         }
+
+
+def sensors_with(base_sensors, ranges: Sequence) -> BaseSensors:
+    """The base's sensors (none: the defaults) with the range sensors' readings after the base's own: what the
+    arbiter and the agent read.  Without such readings the base's object itself."""
+    if base_sensors is None:
+        base_sensors = BaseSensors()
+    if not ranges:
+        return base_sensors
+    return dataclasses.replace(base_sensors, ranges=tuple(base_sensors.ranges) + tuple(ranges))
 
 
 def _drops(agent) -> dict:

@@ -18,6 +18,19 @@ class BaseFacts:
     max_speed: float = 0.5            # m/s
     ranging: bool = False             # range sensors: an empty reading means nothing in range
     latches_faults: bool = False      # faults stay, and the base stands, until reset
+    # the sensor kinds the robot carries (its base's and its sensors: entries', e.g. ("laser", "sonar")), which
+    # the allocation is told; None: not known to the host (the agent reads them from the config)
+    kinds: tuple[str, ...] | None = None
+
+    @classmethod
+    def of(cls, base, sensors=()) -> "BaseFacts":
+        """What a host reads off an opened base and its ``sensors:`` parts (a part reporting ranges makes the robot
+        a ranging one; the kinds are the base's and the parts')."""
+        fp = base.footprint
+        lasers = any(s.reports == "ranges" for s in sensors)
+        kinds = tuple(sorted(set(getattr(base, "sensor_kinds", ())) | {s.kind for s in sensors}))
+        return cls(float(fp.radius), float(getattr(fp, "max_speed", 0.5)), bool(base.ranging or lasers),
+                   bool(base.latches_faults), kinds)
 
 
 class RobotPort:

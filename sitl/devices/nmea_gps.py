@@ -84,6 +84,17 @@ def rmc_sentence(t: float, lat: float, lon: float, speed: float, course_deg: Opt
 class NmeaGpsDevice:
     """Emulated GPS receiver on a link; call :meth:`service` with the sim time."""
 
+    @classmethod
+    def from_config(cls, body, cfg, robot_id=None, datum: Datum = Datum(), noise_sigma: float = 0.3,
+                    seed: int | None = None) -> "NmeaGpsDevice":
+        """The device for a ``sensors:`` entry ``cfg`` (:class:`runtime.drivers.nmea_gps.NmeaGpsConfig`); the
+        launcher gives the world's ``datum``, the fleet's GPS noise and the run's seed."""
+        return cls(body, datum, noise_sigma=noise_sigma, seed=int(robot_id or 0) if seed is None else seed,
+                   robot_id=robot_id)
+
+    def endpoint(self) -> dict:
+        return {"port": self.link.path, "baudrate": 9600}
+
     def __init__(self, body, datum: Datum, noise_sigma: float = 0.3, rate_hz: float = 5.0, seed: int = 0,
                  robot_id=None, link=None, *, speed_sigma: float = 0.05, talker: str = "GP",
                  decimals: int = 4, utc_start: datetime.datetime = UTC_START):

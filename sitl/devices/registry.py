@@ -29,6 +29,7 @@ DEVICES: dict[str, str] = {
 # Sensor emulators by ``sensors[].type`` (the keys of runtime.drivers.registry.SENSORS): ``from_config(body, cfg,
 # robot_id)`` on the robot's body, ``service(now)``, ``endpoint()`` and ``close()`` as a base's device.
 SENSOR_DEVICES: dict[str, str] = {
+    "nmea_gps": "sitl.devices.nmea_gps:NmeaGpsDevice",      # NMEA GPS on a pty, fixes from the body's true pose
     "rplidar": "sitl.devices.rplidar:RplidarDevice",        # RPLIDAR A1/A2 on a pty, beams from the world's ray casts
 }
 

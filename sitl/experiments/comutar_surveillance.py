@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import time
 from pathlib import Path
 
@@ -40,7 +39,7 @@ from runtime.errors import InputError
 from runtime.log import get_logger
 from sitl.experiments.progress import Progress
 from runtime.tasks import Task
-from sitl.experiments import report
+from sitl.experiments import executor, report
 
 log = get_logger("experiments.comutar")
 
@@ -59,8 +58,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenarios", default="A,B,C", help="any of A,B,C (default: %(default)s)")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--max-time", type=float, default=3000.0, help="sim seconds a run may take (default: %(default)s)")
-    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
-                        help="runs in this many processes at once (default: one per CPU, %(default)s)")
+    executor.add_arguments(parser)
     parser.add_argument("--quick", action="store_true", help="3 runs of 1, 2, 4, 8, 16 robots (a minute or so)")
     parser.add_argument("--no-sharing", action="store_true", help="skip the sensor-sharing run (Figs. 6-7)")
     parser.add_argument("--no-png", action="store_true", help="skip the figures")
@@ -191,8 +189,10 @@ def sharing_run(seed: int, max_time: float = 1500.0) -> dict:
 
 # ---------------------------------------------------------------------- the sweep
 
-def sweep(scenarios, counts, runs: int, seed: int, max_time: float, jobs: int) -> tuple[list[dict], dict]:
-    """Every (scenario, robots, run); returns the rows in order and the Fig. 4 trajectories."""
+def sweep(scenarios, counts, runs: int, seed: int, max_time: float, jobs: int,
+          cluster: str | None = None) -> tuple[list[dict], dict]:
+    """Every (scenario, robots, run) through the sweep executor (``--jobs``, ``--cluster``); returns the rows in
+    order and the Fig. 4 trajectories."""
     keys = [(s, n, r) for s in scenarios for n in counts for r in range(runs)]
     traced = {(s, FIG4[s], 0) for s in scenarios if FIG4[s] in counts}
     rows: dict = {}
@@ -207,15 +207,9 @@ def sweep(scenarios, counts, runs: int, seed: int, max_time: float, jobs: int) -
 
     # the longest runs (fewest robots) first, so the short ones fill the gaps at the end
     order = sorted(keys, key=lambda k: (k[1], k[0], k[2]))
-    if jobs <= 1 or len(keys) <= 1:
-        for k in order:
-            take(k, surveillance_run(*k, seed, max_time, k in traced))
-    else:
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-        with ProcessPoolExecutor(max_workers=min(jobs, len(keys))) as pool:
-            futs = {pool.submit(surveillance_run, *k, seed, max_time, k in traced): k for k in order}
-            for fut in as_completed(futs):
-                take(futs[fut], fut.result())
+    tasks = [(*k, seed, max_time, k in traced) for k in order]
+    for i, res in executor.run_each(surveillance_run, tasks, jobs, cluster):
+        take(order[i], res)
     return [rows[k] for k in keys], tracks
 
 
@@ -345,17 +339,18 @@ def run(args: argparse.Namespace) -> int:
     counts = [1, 2, 4, 8, 16] if args.quick else parse_counts(args.robots)
     runs = 3 if args.quick else args.runs
     scenarios = parse_scenarios(args.scenarios)
-    if runs < 1 or args.jobs < 1 or not args.max_time > 0:
-        raise InputError("--runs, --jobs: expected at least 1; --max-time: expected > 0")
+    if runs < 1 or not args.max_time > 0:
+        raise InputError("--runs: expected at least 1; --max-time: expected > 0")
+    executor.check_arguments(args)
     out = Path(args.out)
     t0 = time.perf_counter()
-    rows, tracks = sweep(scenarios, counts, runs, args.seed, args.max_time, args.jobs)
+    rows, tracks = sweep(scenarios, counts, runs, args.seed, args.max_time, args.jobs, args.cluster)
     wall = time.perf_counter() - t0
     summary = summarise(rows)
     written = [report.write_csv(out / "comutar_surveillance.csv", rows),
                report.write_csv(out / "comutar_surveillance_summary.csv", summary)]
     cmd = (f"mrta experiment comutar-surveillance --runs {runs} --robots {','.join(map(str, counts))} "
-           f"--scenarios {','.join(scenarios)} --seed {args.seed} --jobs {args.jobs}")
+           f"--scenarios {','.join(scenarios)} --seed {args.seed} {executor.command_flags(args)}")
     cpu = sum(r["wall_s"] for r in rows)
     unfinished = sum(1 for r in rows if not r["finished"])
     setup = (f"{len(REGION.waypoints())} waypoints 2 m apart over 16 x 16 m; Pioneer-sized discs (radius "

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import time
 from pathlib import Path
 
@@ -29,7 +28,7 @@ import numpy as np
 from runtime.errors import InputError
 from runtime.log import get_logger
 from sitl.experiments.progress import Progress
-from sitl.experiments import report
+from sitl.experiments import executor, report
 from sitl.foraging import scenario
 
 log = get_logger("experiments.dr_calibration")
@@ -56,7 +55,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dt", type=float, default=None, help="physics step (s; default: the world's, 0.05)")
     parser.add_argument("--check-dt", type=float, default=0.01,
                         help="finer physics step at which the check point (4 robots, 140 du) is run again (0: skip)")
-    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="cases run in this many processes")
+    executor.add_arguments(parser, what="cases")
     parser.add_argument("--quick", action="store_true",
                         help="a small size for tests: robots 1,2,4 at 140 and 400 du for 300 s, no dt check")
     parser.add_argument("--ship", action="store_true",
@@ -174,8 +173,8 @@ def _parse(v: str):
 
 
 def run_all(cases: list[tuple], args, done: dict[tuple, dict], out_csv: Path) -> dict[tuple, dict]:
-    """Run ``cases`` ((n, d_du, dt) each) not in ``done``, ``--jobs`` at a time, largest groups first; the CSV is
-    rewritten as each finishes, so an interrupted run can ``--resume``."""
+    """Run ``cases`` ((n, d_du, dt) each) not in ``done`` through the sweep executor (``--jobs``, ``--cluster``),
+    largest groups first; the CSV is rewritten as each finishes, so an interrupted run can ``--resume``."""
     todo = [c for c in cases if c not in done]
     order = sorted(todo, key=lambda c: (-c[0] * (1 + 4 * (c[2] < args.dt)), c[1]))
     progress = Progress(len(cases), log, done=len(cases) - len(todo))     # resumed runs count as done
@@ -187,15 +186,9 @@ def run_all(cases: list[tuple], args, done: dict[tuple, dict], out_csv: Path) ->
                       f"{100 * row['fraction_of_ideal']:.1f} % of ideal, I={row['I_wu_per_s']:.4f} wu/s",
                       wall=row["wall_s"])
 
-    if args.jobs <= 1 or len(order) <= 1:
-        for c in order:
-            finished(c, run_case(c[0], c[1], args.duration, args.seed, c[2], args.background))
-    else:
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-        with ProcessPoolExecutor(max_workers=min(args.jobs, len(order))) as pool:
-            jobs = {pool.submit(run_case, c[0], c[1], args.duration, args.seed, c[2], args.background): c for c in order}
-            for job in as_completed(jobs):
-                finished(jobs[job], job.result())
+    tasks = [(c[0], c[1], args.duration, args.seed, c[2], args.background) for c in order]
+    for k, row in executor.run_each(run_case, tasks, args.jobs, args.cluster):
+        finished(order[k], row)
     return done
 
 
@@ -296,8 +289,7 @@ def run(args: argparse.Namespace) -> int:
         robots, distances, args.duration, args.check_dt = (1, 2, 4), (140, 400), 300.0, 0.0
     if not (math.isfinite(args.duration) and args.duration > 0):
         raise InputError(f"--duration {args.duration!r}: expected seconds > 0")
-    if args.jobs < 1:
-        raise InputError(f"--jobs {args.jobs}: expected at least 1")
+    executor.check_arguments(args)
     if not 0 <= args.background <= 6:
         raise InputError(f"--background {args.background}: expected 0 to 6 robots per background object")
     if args.dt is None:
@@ -327,7 +319,7 @@ def run(args: argparse.Namespace) -> int:
     from sitl.experiments.dr_common import commit     # scikit-learn: loaded when the command runs
     cmd = (f"mrta experiment dr-calibration --robots {','.join(map(str, robots))} --distances {','.join(map(str, distances))} "
            f"--duration {args.duration:g} --seed {args.seed} --dt {args.dt:g} --check-dt {args.check_dt:g} "
-           f"--jobs {args.jobs}" + (f" --background {args.background}" if args.background else ""))
+           f"{executor.command_flags(args)}" + (f" --background {args.background}" if args.background else ""))
     setup = (f"One object of unlimited weight on the diagonal from D at distance d, {robots[0]}..{robots[-1]} "
              f"Pioneer-sized robots committed to it from the start (fixed commitments: the real transport executor in "
              f"the real executive, no agent), load {LOAD:g} wu, {SPEED:g} m/s, {LOAD_TIME:g} s per wu to load and to "

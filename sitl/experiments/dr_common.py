@@ -6,7 +6,12 @@ pybullet foraging harness (:mod:`sitl.foraging.harness`), one run per (cell, see
   (eq. 5's v).  A **setup** is the scenario: robots, objects present at once, weight, deadline, U_max, time
   limit, how many objects end the run.
 * :func:`run_one` runs one (cell, setup, seed) and returns its per-run row and per-object rows; :func:`run_all`
-  runs many in a process pool (``--jobs``) with a progress bar on the ``mrta.experiments`` logger.
+  runs many through the sweep executor (``--jobs`` local processes or ``--cluster``, :mod:`.executor`) with a
+  progress bar on the ``mrta.experiments`` logger, each finished run appended to ``OUT/NAME_done.jsonl`` so that
+  ``--resume`` goes on after a stop; the model travels with each run (its bytes), so a worker reads nothing of
+  the submitting machine's files.
+* :func:`estimate`: ``--estimate`` runs one short calibration run per kind of cell and prints the CPU time the
+  command would take, without running it.
 * :func:`resolve_model` finds the interference model: ``--model PATH``, else a model file shipped in
   runtime/allocation/dr/, else one fitted from the calibration's samples (results/dr-calibration/samples.csv),
   else a one-line InputError naming what to run.
@@ -17,8 +22,8 @@ Units: m, s, wu; the paper's tu and du convert at 1 tu = 0.12 s, 1 du = 1 cm (:m
 from __future__ import annotations
 
 import argparse
+import json
 import math
-import os
 import subprocess
 import time
 from dataclasses import dataclass, replace
@@ -32,7 +37,8 @@ from runtime.allocation.dr.options import DrOptions
 from runtime.errors import InputError
 from runtime.log import get_logger
 from sitl.experiments.progress import Progress
-from sitl.experiments import report
+from sitl.experiments import executor, report
+from sitl.experiments.executor import Carried
 from sitl.foraging import scenario
 from sitl.foraging.scenario import Dist
 
@@ -121,11 +127,12 @@ def config(cell: Cell, setup: Setup, seed: int, model: Path | None) -> "harness.
 
 # ---------------------------------------------------------------------- one run
 
-def run_one(cell: Cell, setup: Setup, seed: int, model: Path | None) -> dict:
-    """One run: ``{"run": row, "objects": [row, ...]}`` (plain values, picklable, CSV-ready)."""
+def run_one(cell: Cell, setup: Setup, seed: int, model: Path | Carried | None) -> dict:
+    """One run: ``{"run": row, "objects": [row, ...]}`` (plain values, picklable, CSV-ready); a carried model is
+    written where the run is (a worker of a cluster) and read from there."""
     from sitl.foraging import harness
 
-    cfg = config(cell, setup, seed, model)
+    cfg = config(cell, setup, seed, model.path() if isinstance(model, Carried) else model)
     t0 = time.perf_counter()
     fr = harness.ForagingRun(cfg)
     try:
@@ -172,26 +179,58 @@ def mean(values: Sequence[float]) -> float:
 
 # ---------------------------------------------------------------------- many runs
 
-def run_all(jobs: Sequence[tuple[Cell, Setup, int]], model: Path | None, workers: int) -> list[dict]:
-    """Every (cell, setup, seed) run, ``workers`` at a time; results in the order of ``jobs``."""
-    out: list[dict | None] = [None] * len(jobs)
-    progress = Progress(len(jobs), log)
-
-    def finished(k: int, res: dict) -> None:
-        out[k] = res
+def run_all(jobs: Sequence[tuple[Cell, Setup, int]], model: Path | None, workers: int, cluster: str | None = None,
+            checkpoint: Path | None = None, done: dict[str, dict] | None = None) -> list[dict]:
+    """Every (cell, setup, seed) run, ``workers`` at a time (or on ``cluster``); results in the order of ``jobs``.
+    Runs whose :func:`run_key` is in ``done`` are not run again; each new one is appended to ``checkpoint``."""
+    done = done or {}
+    keys = [run_key(cell, setup, seed, model) for cell, setup, seed in jobs]
+    out: list[dict | None] = [done.get(key) for key in keys]
+    todo = [k for k, r in enumerate(out) if r is None]
+    progress = Progress(len(jobs), log, done=len(jobs) - len(todo))
+    if len(todo) < len(jobs):
+        log.info("--resume: %d runs kept from %s, %d to run", len(jobs) - len(todo), checkpoint, len(todo))
+    carried = Carried.read(model) if model is not None else None
+    for k, res in executor.run_each(run_one, [(*jobs[k], carried) for k in todo], workers, cluster):
+        out[todo[k]] = res
+        if checkpoint is not None:
+            with checkpoint.open("a") as fh:
+                fh.write(json.dumps({"key": keys[todo[k]], "result": res}) + "\n")
         r = res["run"]
         progress.step(f"{r['cell']} seed {r['seed']}: {r['objects_done']} objects done, {r['moved_wu']:.0f} wu moved, "
                       f"{r['within_dl_pct']:.0f} % <= DL", wall=r["wall_s"])
+    return out
 
-    if workers <= 1 or len(jobs) <= 1:
-        for k, (cell, setup, seed) in enumerate(jobs):
-            finished(k, run_one(cell, setup, seed, model))
-    else:
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-        with ProcessPoolExecutor(max_workers=min(workers, len(jobs))) as pool:
-            futures = {pool.submit(run_one, cell, setup, seed, model): k for k, (cell, setup, seed) in enumerate(jobs)}
-            for fut in as_completed(futures):
-                finished(futures[fut], fut.result())
+
+def run_key(cell: Cell, setup: Setup, seed: int, model: Path | None) -> str:
+    """What makes a run's result: the cell, the setup, the seed and the model's bytes (``--resume`` keeps a run
+    only when all four are the same)."""
+    digest = Carried.read(model).digest if model is not None else "none"
+    return f"{cell!r} {setup!r} seed={seed} model={digest}"
+
+
+def load_checkpoint(path: Path) -> dict[str, dict]:
+    """The finished runs of ``path`` (one JSON object a line), by key; a line cut short by a stop is dropped, and
+    the file rewritten without it (so the next run appended starts on a line of its own)."""
+    out: dict[str, dict] = {}
+    try:
+        lines = path.read_text().splitlines()
+    except FileNotFoundError:
+        return out
+    except OSError as exc:
+        raise InputError(f"--resume: {path}: cannot read it ({exc.strerror})") from None
+    kept = []
+    for line in lines:
+        try:
+            entry = json.loads(line)
+            out[entry["key"]] = entry["result"]
+            kept.append(line)
+        except (ValueError, KeyError, TypeError):
+            log.warning("--resume: %s: dropped a line that is not a finished run", path)
+    if len(kept) < len(lines) or (lines and not path.read_text().endswith("\n")):
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text("".join(line + "\n" for line in kept))
+        tmp.replace(path)
     return out
 
 
@@ -233,15 +272,93 @@ def execute(args, name: str, cells: Sequence[Cell], setup: Setup, extra: str = "
     online = getattr(args, "online", False)
     cells = [replace(c, late=args.late, online=c.online or (online and c.uses_model)) for c in cells]
     jobs = [(cell, setup, seed) for seed in range(1, args.seeds + 1) for cell in cells]
+    checkpoint = out / f"{name}_done.jsonl"
+    done = load_checkpoint(checkpoint) if args.resume else {}
+    out.mkdir(parents=True, exist_ok=True)
+    if not args.resume:
+        checkpoint.unlink(missing_ok=True)
     t0 = time.perf_counter()
-    results = run_all(jobs, model, args.jobs)
+    results = run_all(jobs, model, args.jobs, args.cluster, checkpoint, done)
     wall = time.perf_counter() - t0
-    command = (f"mrta experiment {name.replace('_', '-')} --seeds {args.seeds} --jobs {args.jobs}{extra}"
+    command = (f"mrta experiment {name.replace('_', '-')} --seeds {args.seeds} {executor.command_flags(args)}{extra}"
                + (" --quick" if args.quick else "") + (f" --time-limit {args.time_limit:g}" if args.time_limit else "")
                + (f" --deadline {args.deadline:g}" if args.deadline else "")
                + (" --no-sonar" if args.no_sonar else "") + (f" --late {args.late}" if args.late != "all" else "")
                + (" --online" if online else ""))
     return Execution(results, source, command, wall, write_rows(out, name, results), args.late, online)
+
+
+def kind_of(cell: Cell) -> str:
+    """The cells that cost alike per simulated second: the auction, and whether robots learn on-line."""
+    return cell.auction + (" on-line" if cell.online else "")
+
+
+def estimate(args, name: str, cells: Sequence[Cell], setup: Setup) -> int:
+    """``--estimate``: one calibration run (seed 1) per kind of cell, cut at ``--estimate-time`` simulated s, gives
+    CPU s per simulated s and when objects get done (:func:`run_length`); a run of the command lasts until
+    ``max_objects`` are done (or its time limit), and the command is every (cell, seed).  Prints the figures; runs
+    nothing else."""
+    model, source = resolve_model(args.model, Path(args.out))
+    online = getattr(args, "online", False)
+    cells = [replace(c, late=args.late, online=c.online or (online and c.uses_model)) for c in cells]
+    short = replace(setup, time_limit=min(setup.time_limit, args.estimate_time))
+    kinds: dict[str, dict] = {}
+    for cell in cells:
+        if kind_of(cell) in kinds:
+            continue
+        cpu0 = time.process_time()
+        res = run_one(cell, short, 1, model)
+        cpu = time.process_time() - cpu0
+        r = res["run"]
+        kinds[kind_of(cell)] = {"cell": cell.label, "cpu": cpu, "sim": r["sim_s"],
+                                "finished": sorted(o["finished_s"] for o in res["objects"] if o["done"])}
+        print(f"calibration: {cell.label} seed 1, {r['sim_s']:.0f} simulated s: {cpu:.1f} CPU s "
+              f"({r['sim_s'] / cpu:.1f}x real time per core), {r['objects_done']} objects done")
+    # two readings of one short run bracket the rate: the whole run's (its start included: slow) and the steady
+    # one (first finish to last: few objects, so it can run fast); the estimate is the range between them
+    total, lines = [0.0, 0.0], []
+    for kind, k in kinds.items():
+        n = sum(1 for c in cells if kind_of(c) == kind) * args.seeds
+        want = setup.max_objects
+        both = [run_length(k["finished"], k["sim"], want, steady) for steady in (True, False)]
+        sims = [min(setup.time_limit, needed) for _, needed in both]
+        cpus = [k["cpu"] / k["sim"] * sim for sim in sims]
+        total = [t + n * c for t, c in zip(total, cpus)]
+        rate, needed = both[1]
+        note = ""
+        if want and needed > setup.time_limit:
+            need = f"about {needed:.0f}" if math.isfinite(needed) else "more (no object was done in the calibration)"
+            note = (f"; at the whole run's rate it ends at --time-limit {setup.time_limit:g} s with about "
+                    f"{min(want, rate * setup.time_limit):.0f} of {want} objects done: --time-limit {need} s "
+                    f"reaches {want}")
+        lines.append(f"  {kind}: {n} runs x {cpus[0]:.0f}-{cpus[1]:.0f} CPU s ({sims[0]:.0f}-{sims[1]:.0f} simulated s "
+                     f"each at {both[0][0] * 3600:.1f} steady - {rate * 3600:.1f} whole-run objects done per "
+                     f"simulated hour){note}")
+    command = (f"mrta experiment {name.replace('_', '-')} --seeds {args.seeds}"
+               + (f" --objects {args.objects}" if hasattr(args, "objects") else "")
+               + (f" --time-limit {args.time_limit:g}" if args.time_limit else "")
+               + (f" --deadline {args.deadline:g}" if args.deadline else "") + (" --quick" if args.quick else ""))
+    print(f"estimate for {command} (model: {source}):\n" + "\n".join(lines))
+    lo, hi = total
+    print(f"total: {lo:.0f}-{hi:.0f} CPU s = {lo / 3600:.1f}-{hi / 3600:.1f} CPU h; wall about "
+          f"{lo / args.jobs / 3600:.1f}-{hi / args.jobs / 3600:.1f} h on --jobs {args.jobs}, "
+          f"{lo / 3600 / 16:.1f}-{hi / 3600 / 16:.1f} h on 16 cores of a --cluster")
+    return 0
+
+
+def run_length(finished: Sequence[float], sim: float, want: int | None, steady: bool = True) -> tuple[float, float]:
+    """(objects done per simulated s, simulated s until ``want`` are done: inf if none was done, ``sim`` with no
+    ``want``) from one calibration run of ``sim`` s whose objects finished at ``finished`` s.  ``steady``: the rate
+    leaves out the start (robots drive out to the first objects): from the first finish to the last, when two or
+    more finished; else (or not ``steady``) what was done over the whole run."""
+    done = len(finished)
+    if steady and done >= 2 and finished[-1] > finished[0]:
+        rate = (done - 1) / (finished[-1] - finished[0])
+        return rate, (finished[0] + (want - 1) / rate) if want else sim
+    rate = done / sim if sim > 0 else 0.0
+    if not want:
+        return rate, sim
+    return rate, want / rate if rate > 0 else math.inf
 
 
 def objects_setup(args, full: Setup) -> Setup:
@@ -306,7 +423,15 @@ def read_samples(path: Path) -> list[tuple[float, float, float]]:
 def add_arguments(parser: argparse.ArgumentParser, seeds: int = 5, online: bool = True) -> None:
     """The options every dr-* command takes; ``online``: also ``--online`` (not for a table whose cells set it)."""
     parser.add_argument("--seeds", type=int, default=seeds, help="runs per cell, seeds 1..N (default %(default)s)")
-    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="runs in this many processes")
+    executor.add_arguments(parser)
+    parser.add_argument("--resume", action="store_true",
+                        help="go on after a stop: keep the runs OUT/NAME_done.jsonl holds for the same cell, setup, "
+                             "seed and model, run the rest")
+    parser.add_argument("--estimate", action="store_true",
+                        help="do not run: print the CPU time the command would take, from one short calibration "
+                             "run per kind of cell (auction, on-line or not)")
+    parser.add_argument("--estimate-time", type=float, default=600.0, metavar="S",
+                        help="simulated s of each --estimate calibration run (default %(default)s)")
     parser.add_argument("--quick", action="store_true", help="a small size for tests (a few seconds)")
     parser.add_argument("--model", default=None, metavar="PATH",
                         help="interference model JSON (default: the shipped one in runtime/allocation/dr/, else "
@@ -330,12 +455,13 @@ def add_arguments(parser: argparse.ArgumentParser, seeds: int = 5, online: bool 
 def check_arguments(args) -> None:
     if args.seeds < 1:
         raise InputError(f"--seeds {args.seeds}: expected at least 1")
-    if args.jobs < 1:
-        raise InputError(f"--jobs {args.jobs}: expected at least 1")
+    executor.check_arguments(args)
     if args.time_limit is not None and not (math.isfinite(args.time_limit) and args.time_limit > 0):
         raise InputError(f"--time-limit {args.time_limit!r}: expected seconds > 0")
     if args.deadline is not None and not (math.isfinite(args.deadline) and args.deadline > 0):
         raise InputError(f"--deadline {args.deadline!r}: expected seconds > 0")
+    if not (math.isfinite(args.estimate_time) and args.estimate_time > 0):
+        raise InputError(f"--estimate-time {args.estimate_time!r}: expected seconds > 0")
 
 
 def apply_arguments(setup: Setup, args) -> Setup:

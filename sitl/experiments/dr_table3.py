@@ -99,6 +99,8 @@ def run(args: argparse.Namespace) -> int:
     C.check_arguments(args)
     setup = setup_of(args)
     out = Path(args.out)
+    if args.estimate:
+        return C.estimate(args, NAME, CELLS, setup)
     ex = C.execute(args, NAME, CELLS, setup)
     runs, objects, written = ex.runs, ex.objects, ex.written
     setup_text = (f"SR (single round; Greedy: every bidder awarded), hard deadline. {setup.describe()}. Interference "

@@ -130,6 +130,8 @@ def run(args: argparse.Namespace) -> int:
     C.check_arguments(args)
     setup = setup_of(args)
     out = Path(args.out)
+    if args.estimate:
+        return C.estimate(args, NAME, CELLS, setup)
     ex = C.execute(args, NAME, CELLS, setup, f" --objects {args.objects}")
     runs, objects, written = ex.runs, ex.objects, ex.written
     spread = C.pm([r["objects_done"] for r in runs])

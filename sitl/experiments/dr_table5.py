@@ -106,6 +106,8 @@ def run(args: argparse.Namespace) -> int:
     C.check_arguments(args)
     setup = setup_of(args)
     out = Path(args.out)
+    if args.estimate:
+        return C.estimate(args, NAME, tuple(CELLS.values()), setup)
     ex = C.execute(args, NAME, tuple(CELLS.values()), setup, f" --objects {args.objects}")
     runs, written = ex.runs, ex.written
     setup_text = (f"DR, NM_I, soft deadline. {setup.describe()}. The paper moves {PAPER_OBJECTS} objects per run; "

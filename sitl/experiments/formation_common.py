@@ -154,28 +154,24 @@ def closed_form_errors(instance: Instance, n: int, cases: int, repeats: int, see
 
 
 def closed_form_sweep(instance: Instance, sizes: Sequence[int], cases: int, repeats: int, seed: int,
-                      methods: Sequence[str], label: str = "", workers: int | None = None) -> dict[int, dict[str, np.ndarray]]:
-    """:func:`closed_form_errors` for every size, the sizes spread over ``workers`` processes (default:
-    one per CPU); ``instance`` must be picklable (a module-level function or a functools.partial)."""
+                      methods: Sequence[str], label: str = "", workers: int | None = None,
+                      cluster: str | None = None) -> dict[int, dict[str, np.ndarray]]:
+    """:func:`closed_form_errors` for every size, the sizes spread over ``workers`` processes (default: one per
+    CPU) or ``cluster`` (the sweep executor); ``instance`` must be picklable (a module-level function or a
+    functools.partial)."""
+    from sitl.experiments import executor
+
     methods = [m for m in methods if m in CLOSED_FORM]
     if not methods:
         return {}
     workers = workers or os.cpu_count() or 1
     out: dict[int, dict[str, np.ndarray]] = {}
-    if workers == 1 or len(sizes) == 1:
-        for n in sizes:
-            out[n] = closed_form_errors(instance, n, cases, repeats, seed, methods)
-            log.info("%s closed form n=%d: %d samples of %d cases", label, n, repeats, cases)
-        return out
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-    with ProcessPoolExecutor(max_workers=min(workers, len(sizes))) as pool:
-        # largest sizes first: they take longest
-        jobs = {pool.submit(closed_form_errors, instance, n, cases, repeats, seed, methods): n
-                for n in sorted(sizes, reverse=True)}
-        for job in as_completed(jobs):
-            out[jobs[job]] = job.result()
-            log.info("%s closed form n=%d: %d samples of %d cases (%d/%d sizes)", label, jobs[job], repeats, cases,
-                     len(out), len(sizes))
+    order = sorted(sizes, reverse=True)          # largest sizes first: they take longest
+    tasks = [(instance, n, cases, repeats, seed, methods) for n in order]
+    for k, errors in executor.run_each(closed_form_errors, tasks, workers, cluster):
+        out[order[k]] = errors
+        log.info("%s closed form n=%d: %d samples of %d cases (%d/%d sizes)", label, order[k], repeats, cases,
+                 len(out), len(sizes))
     return {n: out[n] for n in sorted(out)}
 
 

@@ -21,6 +21,7 @@ import functools
 import math
 import os
 import statistics
+import tempfile
 import time
 from pathlib import Path
 
@@ -36,13 +37,13 @@ from runtime.planning.costs import cost_matrix, grid_for
 from runtime.planning.grid import CREATE2_RADIUS, OccupancyGrid, random_obstacle_world
 from runtime.planning.rrt import rrt_multi
 from runtime.planning.smoothing import path_length
-from sitl.experiments import report
+from sitl.experiments import executor, report
 from sitl.experiments import formation_common as fc
+from sitl.fleet_config import EXAMPLES
 
 log = get_logger("experiments.formation_world")
 
-ROOT = Path(__file__).resolve().parents[2]
-ROBOT_TEMPLATE = ROOT / "configs" / "robots" / "create2.yaml"
+ROBOT_TEMPLATE = EXAMPLES / "robots" / "create2.yaml"     # inside the installed package (runtime/examples)
 PLANNERS = ("astar", "rrt")
 PLANNER_LABELS = {"astar": "A*", "rrt": "RRT"}
 SPACING = 0.6            # m between robot starts, and between tasks (a Create 2 is 0.34 m across)
@@ -94,8 +95,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     d.add_argument("--drive-inflate", type=float, default=None,
                    help="obstacle inflation of the daemons' map (m; default: robot radius + half a cell)")
     d.add_argument("--cruise-speed", type=float, default=0.5, help="robot cruise speed when driving (m/s)")
-    d.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
-                   help="driven cells run in this many processes at once (default: one per CPU, %(default)s)")
+    executor.add_arguments(d, what="driven missions")
     d.add_argument("--drive-resume", default=None, metavar="CSV", nargs="+",
                    help="formation_world_drive.csv files of earlier runs with the same settings (later files win): "
                         "their missions are kept, only the missing ones are driven (so --drive-cases can grow "
@@ -411,7 +411,9 @@ def drive_one(key: tuple, args) -> dict:
                                                   args.rrt_iterations, args.rrt_raw)
     offline = fc.run_methods(c, [m], optimum).get(m) if np.all(np.isfinite(c)) else None
     timeout = args.drive_timeout or mission_timeout(a_star, c, args.cruise_speed)
-    run_dir = out / "drive" / f"{p}_{n}r_{percent}pct_case{case}_{m}"
+    name = f"{p}_{n}r_{percent}pct_case{case}_{m}"
+    # the daemons' files: under --out where the sweep runs on this machine, else in the worker's temporary directory
+    run_dir = Path(args.drive_dir) / name if getattr(args, "drive_dir", None) else Path(tempfile.mkdtemp(prefix="mrta-drive-")) / name
     fleet_path = write_fleet(run_dir, world, robots, yaws, tasks, p, args.cruise_speed, timeout,
                              args.seed * 1000 + case, inflate)
     d = drive_mission(fleet_path, run_dir, m, timeout)
@@ -446,18 +448,14 @@ def drive_all(keys: list[tuple], done: dict[tuple, dict], args) -> list[dict]:
                  "in %.0f s", len(have), len(keys), p, n, pct, case, m, row["planned_cost"], row["driven_m"],
                  row["arrived"], n, row["sim_s"], row["wall_s"])
 
-    if args.jobs == 1 or len(todo) <= 1:
-        for k in todo:
-            finished(k, drive_one(k, args))
-    else:
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-        plain = argparse.Namespace(**{k: v for k, v in vars(args).items() if not callable(v)})   # picklable
-        with ProcessPoolExecutor(max_workers=min(args.jobs, len(todo))) as pool:
-            # case by case, so that a run cut short leaves whole cases; in a case the largest fleets first
-            # (they take longest, the small ones fill the gaps)
-            jobs = {pool.submit(drive_one, k, plain): k for k in sorted(todo, key=lambda k: (k[3], -k[1]))}
-            for job in as_completed(jobs):
-                finished(jobs[job], job.result())
+    plain = argparse.Namespace(**{k: v for k, v in vars(args).items() if not callable(v)})   # picklable
+    on_this_machine = executor.kind(args.cluster) in ("pool", "local")
+    plain.drive_dir = str((Path(args.out) / "drive").resolve()) if on_this_machine else None
+    # case by case, so that a run cut short leaves whole cases; in a case the largest fleets first (they take
+    # longest, the small ones fill the gaps)
+    order = sorted(range(len(todo)), key=lambda i: (todo[i][3], -todo[i][1]))
+    for i, row in executor.run_each(drive_one, [(k, plain) for k in todo], args.jobs, args.cluster, order):
+        finished(todo[i], row)
     rows = [have[k] for k in keys]
     if rows and not todo:
         report.write_csv(path, rows)          # every mission came from --drive-resume: nothing wrote it yet
@@ -618,8 +616,7 @@ def _check(args) -> tuple:
         raise InputError(f"--cases {args.cases}: expected at least 1")
     if args.drive and args.drive_cases < 1:
         raise InputError(f"--drive-cases {args.drive_cases}: expected at least 1")
-    if args.jobs < 1:
-        raise InputError(f"--jobs {args.jobs}: expected at least 1")
+    executor.check_arguments(args)
     if args.rrt_iterations < 1:
         raise InputError(f"--rrt-iterations {args.rrt_iterations}: expected at least 1")
     robots = fc.parse_ints(args.robots, "--robots", 2, 250)
@@ -675,7 +672,7 @@ def run(args: argparse.Namespace) -> int:
            f"--planners {args.planners} --methods {','.join(methods)} --size {args.size:g} "
            f"--resolution {args.resolution:g} --seed {args.seed}" + (" --rrt-raw" if args.rrt_raw else ""))
     if args.drive:
-        cmd += f" --drive --drive-cases {args.drive_cases} --cruise-speed {args.cruise_speed:g} --jobs {args.jobs}"
+        cmd += f" --drive --drive-cases {args.drive_cases} --cruise-speed {args.cruise_speed:g} {executor.command_flags(args)}"
         if args.drive_robots:
             cmd += f" --drive-robots {args.drive_robots}"
         if args.drive_inflate is not None:

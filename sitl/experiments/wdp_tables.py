@@ -19,7 +19,7 @@ from runtime.allocation.coalition import winner_determination as wd
 from runtime.allocation.coalition.wdp_model import Problem, TaskBid
 from runtime.errors import InputError
 from runtime.log import get_logger
-from sitl.experiments import report
+from sitl.experiments import executor, report
 
 log = get_logger("experiments.wdp_tables")
 
@@ -100,6 +100,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--node-cap", type=int, default=1_000_000,
                         help="nodes per instance before BFS or IDA* gives up (cell reported as capped)")
     parser.add_argument("--no-png", action="store_true", help="skip the figure")
+    # default 1: the tables report seconds, which cells running side by side on shared cores would inflate
+    executor.add_arguments(parser, jobs=1, what="cells")
 
 
 def run_cell(rng: random.Random, dist: str, n_robots: int, n_tasks: int, n_bids: int, runs: int,
@@ -128,6 +130,12 @@ def run_cell(rng: random.Random, dist: str, n_robots: int, n_tasks: int, n_bids:
     return {"capped_idastar": capped["idastar"], "capped_bfs": capped["bfs"], **mean}
 
 
+def seeded_cell(seed: str, *rest) -> dict:
+    """:func:`run_cell` with its own generator seeded by ``seed`` (a task of the sweep executor: every cell alike
+    wherever and in whatever order it runs)."""
+    return run_cell(random.Random(seed), *rest)
+
+
 def _paper_index(dist: str, n_bids: int) -> int | None:
     bids = PAPER_BIDS[dist]
     return bids.index(n_bids) if n_bids in bids else None
@@ -147,6 +155,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--node-cap {args.node_cap}: expected at least 1")
     if args.robots < 1:
         raise InputError(f"--robots {args.robots}: expected at least 1")
+    executor.check_arguments(args)
     tasks = _ints(args.tasks, "--tasks")
     cols = {"random": _ints(args.random_bids, "--random-bids"), "uniform": _ints(args.uniform_bids, "--uniform-bids")}
     sizes = _range(args.random_sizes, "--random-sizes")
@@ -163,29 +172,34 @@ def run(args: argparse.Namespace) -> int:
     plan = [("random", sizes, rows), ("uniform", sizes, rows)]
     if sens is not None and sens != sizes:
         plan.append(("random", sens, sens_rows))
-    for dist, dsizes, target in plan:
-        for n_tasks in tasks:
-            for n_bids in cols[dist]:
-                rng = random.Random(f"{args.seed}/{dist}/{dsizes}/{n_tasks}/{n_bids}")
-                cell = run_cell(rng, dist, args.robots, n_tasks, n_bids, args.runs, dsizes, values, args.node_cap)
-                k = _paper_index(dist, n_bids)
-                paper = (dist, n_tasks) in PAPER_NODES and k is not None and args.robots == 10
-                row = {"distribution": dist, "random_sizes": f"{dsizes[0]}-{dsizes[1]}" if dist == "random" else "3",
-                       "tasks": n_tasks, "bids": n_bids, "runs": args.runs,
-                       "idastar_nodes": cell["ida_nodes"], "idastar_last_pass_nodes": cell["ida_last"],
-                       "idastar_last_pass_expanded": cell["ida_exp"], "idastar_passes": cell["ida_iter"],
-                       "paper_idastar_nodes": PAPER_NODES[(dist, n_tasks)]["idastar"][k] if paper else float("nan"),
-                       "bfs_nodes": cell["bfs_nodes"],
-                       "paper_bfs_nodes": PAPER_NODES[(dist, n_tasks)]["bfs"][k] if paper else float("nan"),
-                       "idastar_s": cell["ida_s"],
-                       "paper_idastar_s": PAPER_SECONDS[(dist, n_tasks)]["idastar"][k] if paper else float("nan"),
-                       "bfs_s": cell["bfs_s"],
-                       "paper_bfs_s": PAPER_SECONDS[(dist, n_tasks)]["bfs"][k] if paper else float("nan"),
-                       "idastar_capped_runs": cell["capped_idastar"], "bfs_capped_runs": cell["capped_bfs"],
-                       "node_cap": args.node_cap}
-                target.append(row)
-                log.info("%s %s %d tasks %d bids: ida %.0f bfs %.0f", dist, dsizes, n_tasks, n_bids,
-                         cell["ida_nodes"], cell["bfs_nodes"])
+    specs = [(dist, dsizes, target, n_tasks, n_bids) for dist, dsizes, target in plan for n_tasks in tasks
+             for n_bids in cols[dist]]
+    cells: dict[int, dict] = {}
+    for i, cell in executor.run_each(seeded_cell, [
+            (f"{args.seed}/{dist}/{dsizes}/{n_tasks}/{n_bids}", dist, args.robots, n_tasks, n_bids, args.runs, dsizes,
+             values, args.node_cap) for dist, dsizes, _, n_tasks, n_bids in specs], args.jobs, args.cluster):
+        cells[i] = cell
+        dist, dsizes, _, n_tasks, n_bids = specs[i]
+        log.info("%s %s %d tasks %d bids: ida %.0f bfs %.0f (%d/%d cells)", dist, dsizes, n_tasks, n_bids,
+                 cell["ida_nodes"], cell["bfs_nodes"], len(cells), len(specs))
+    for i, (dist, dsizes, target, n_tasks, n_bids) in enumerate(specs):
+        cell = cells[i]
+        k = _paper_index(dist, n_bids)
+        paper = (dist, n_tasks) in PAPER_NODES and k is not None and args.robots == 10
+        row = {"distribution": dist, "random_sizes": f"{dsizes[0]}-{dsizes[1]}" if dist == "random" else "3",
+               "tasks": n_tasks, "bids": n_bids, "runs": args.runs,
+               "idastar_nodes": cell["ida_nodes"], "idastar_last_pass_nodes": cell["ida_last"],
+               "idastar_last_pass_expanded": cell["ida_exp"], "idastar_passes": cell["ida_iter"],
+               "paper_idastar_nodes": PAPER_NODES[(dist, n_tasks)]["idastar"][k] if paper else float("nan"),
+               "bfs_nodes": cell["bfs_nodes"],
+               "paper_bfs_nodes": PAPER_NODES[(dist, n_tasks)]["bfs"][k] if paper else float("nan"),
+               "idastar_s": cell["ida_s"],
+               "paper_idastar_s": PAPER_SECONDS[(dist, n_tasks)]["idastar"][k] if paper else float("nan"),
+               "bfs_s": cell["bfs_s"],
+               "paper_bfs_s": PAPER_SECONDS[(dist, n_tasks)]["bfs"][k] if paper else float("nan"),
+               "idastar_capped_runs": cell["capped_idastar"], "bfs_capped_runs": cell["capped_bfs"],
+               "node_cap": args.node_cap}
+        target.append(row)
     elapsed = time.perf_counter() - t0
     report.write_csv(out / "wdp_tables.csv", rows + sens_rows)
     sections = _sections(rows, args, sizes, values, elapsed)
@@ -243,7 +257,8 @@ def _sections(rows: list[dict], args, sizes, values, elapsed: float) -> list[tup
         f"in every pass; last pass = the final pass only, counting the nodes generated or only those expanded "
         f"(g + h at or above the threshold); the paper's IDA* numbers sit beside the last pass, expanded "
         f"(note C). Every uncapped run was checked against the DP optimum. "
-        f"Command: `mrta experiment wdp-tables --runs {args.runs} --node-cap {args.node_cap} --seed {args.seed}`. "
+        f"Command: `mrta experiment wdp-tables --runs {args.runs} --node-cap {args.node_cap} --seed {args.seed} "
+        f"{executor.command_flags(args)}`. "
         f"Wall time {elapsed:.1f} s.")))
     titles = {("random", "nodes"): "Table 3: nodes, random bids", ("random", "s"): "Table 4: seconds, random bids",
               ("uniform", "nodes"): "Table 5: nodes, uniform bids", ("uniform", "s"): "Table 6: seconds, uniform bids"}

@@ -105,6 +105,17 @@ class Scenario:
                 return f"robot {rid} is still moving on P{t}"
         return None
 
+    def progress(self, run) -> str:
+        """The run so far, for the progress line (its tasks are never done: positions are held, then reached)."""
+        if not run.handovers[0].done:
+            return "positions not handed in yet"
+        live = set(run.live_robots())
+        assignment = {rid: t for rid, t in self.assignment(run).items() if rid in live and t is not None}
+        reached = sum(1 for rid, t in assignment.items()
+                      if math.dist(self.positions[t], run.true_pose(rid)[:2]) <= self.cfg.tolerance)
+        need = min(len(self.positions), len(self.fleet.robots))
+        return f"positions held {len(set(assignment.values()))}/{need}, reached {reached}/{need}"
+
     def unreachable(self, run) -> str | None:
         """The goal cannot be met any more: robots died, and fewer are left than positions to hold."""
         left = len(self.fleet.robots) - len(run.dead())

@@ -13,7 +13,9 @@ from typing import Any, Literal, Optional
 from runtime import tasks as T
 from runtime.config.build import ConfigError, Tagged, rng
 from runtime.config.world import check_inside
-from runtime.messages import DONE, OPEN, STATE_NAMES
+from runtime.messages import CLEARED, DONE, OPEN, STATE_NAMES, WITHDRAWN
+
+FINISHED = (DONE, CLEARED)       # a task done counts as done after a clear too (cleared = done, then cleared)
 
 
 @functools.lru_cache(maxsize=None)
@@ -91,21 +93,35 @@ class Scenario:
         return out
 
     def goal(self, run) -> bool:
-        """Every task handed in done (a fleet waiting for an operator keeps running: the launcher judges it
-        by this when it is stopped)."""
+        """Every task handed in done, at least one (a fleet waiting for an operator keeps running: the launcher
+        judges it by this when it is stopped)."""
         return self.shortfall(run) is None
 
     def shortfall(self, run) -> str | None:
-        """What keeps the goal from being met (one line), or None: every task handed in done."""
+        """What keeps the goal from being met (one line), or None: every task handed in done or withdrawn by a
+        clear, and at least one done."""
         due = [h for h in run.handovers if not h.done]
         if due:
             return f"{sum(len(h.items) for h in due)} task(s) not handed in yet (next at {min(h.at for h in due):g} s)"
         ours = {tid for h in run.handovers for tid in h.task_ids}
         open_ = [label for h in run.handovers for label, tid in zip(h.labels, h.task_ids)
-                 if tid is None or run.task_state(tid) != DONE]
+                 if tid is None or run.task_state(tid) not in FINISHED + (WITHDRAWN,)]
         open_ += [f"{tid >> 16}.{tid & 0xFFFF}" for tid, rec in sorted(run.table().items())
                   if tid not in ours and rec.state == OPEN]          # handed in by another ground station
-        return f"{', '.join(open_)} not done" if open_ else None
+        if open_:
+            return f"{', '.join(open_)} not done"
+        return self.idle(run)
+
+    def idle(self, run) -> str | None:
+        """One line when the run had no work to judge it by (nothing handed in, or every task withdrawn by a clear
+        before a robot did it), else None."""
+        rows = self.summary(run)
+        if not rows["tasks"]:
+            return "nothing was handed in: no task to judge the run by"
+        if rows["done"] == 0 and rows["withdrawn"] == len(rows["tasks"]):
+            return (f"nothing was done: the {rows['withdrawn']} task(s) handed in were all withdrawn by a clear "
+                    f"before a robot did them")
+        return None
 
     def unreachable(self, run) -> str | None:
         return None                       # a lost robot's tasks go to the others: only a refusal ends it early
@@ -125,8 +141,10 @@ class Scenario:
                 rows.append({"label": "op", "task": tid, "x": rec.x, "y": rec.y, "at": run.first_seen(tid),
                              "to": tid >> 16, "state": STATE_NAMES.get(rec.state), "by": run.done_by.get(tid, ()),
                              "done_at": run.done_at.get(tid)})
-        done = sum(r["state"] == "done" for r in rows)
-        return {"tasks": rows, "valid": bool(rows) and done == len(rows), "done": done, "driven": dict(run.driven)}
+        done = sum(r["state"] in ("done", "cleared") for r in rows)
+        withdrawn = sum(r["state"] == "withdrawn" for r in rows)
+        return {"tasks": rows, "valid": done > 0 and done + withdrawn == len(rows), "done": done,
+                "withdrawn": withdrawn, "driven": dict(run.driven)}
 
     @staticmethod
     def print_summary(res: dict, out) -> None:
@@ -140,4 +158,9 @@ class Scenario:
                   f"{by:>7}  {done_at:>11}", file=out)
         if res["driven"]:
             print("driven (m): " + ", ".join(f"R{rid} {d:.1f}" for rid, d in sorted(res["driven"].items())), file=out)
-        print(f"tasks done: {res['done']}/{len(res['tasks'])}   sim time {res['sim_time']:.1f} s", file=out)
+        withdrawn = res.get("withdrawn", 0)
+        cleared = sum(r["state"] == "cleared" for r in res["tasks"])
+        print(f"tasks done: {res['done']}/{len(res['tasks']) - withdrawn}"
+              + (f" ({cleared} of them cleared after)" if cleared else "")
+              + (f", {withdrawn} withdrawn by a clear before done" if withdrawn else "")
+              + f"   sim time {res['sim_time']:.1f} s", file=out)

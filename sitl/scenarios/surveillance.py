@@ -190,7 +190,7 @@ class Scenario:
         if tid is None or run.task_state(tid) != DONE:
             short.append("the region is not surveyed yet")
         if self.least <= self.cfg.clearance:
-            short.append(f"R{self.cfg.borrower} came within {self.least:.3f} m of a pillar at {self.least_at:.1f} s")
+            short.append(self._close_call())
         if self.cfg.kill_provider is not None:
             if self.killed is None:
                 short.append("the sensor robot not killed yet")
@@ -205,8 +205,13 @@ class Scenario:
 
     def unreachable(self, run) -> str | None:
         if self.least <= self.cfg.clearance:
-            return f"R{self.cfg.borrower} touched a pillar"
+            return self._close_call()
         return None
+
+    def _close_call(self) -> str:
+        what = "touched a pillar" if self.least <= 0.0 else f"came within {self.least:.3f} m of a pillar"
+        return (f"R{self.cfg.borrower} {what} at {self.least_at:.1f} s (the fleet's scenario.clearance asks for more "
+                f"than {self.cfg.clearance:g} m)")
 
     def summary(self, run) -> dict:
         rows = []

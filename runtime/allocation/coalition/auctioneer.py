@@ -355,7 +355,9 @@ class Auctioneer:
         report to it, and a task really done elsewhere leaves the table as done."""
         if m.sender == self.robot_id:
             return                           # my own, routed back to me: _complete recorded it
-        if m.task not in self.view.tasks or (self.active and m.task in self.coalitions):
+        if m.task not in self.view.tasks or self.active or m.sender != self.view.auctioneer():
+            # nor is it taken from a robot that is not the auctioneer as far as I know, or while I am: a
+            # CoalitionDone forged in an unsigned fleet would keep a task I offer from ever being offered again
             self.stats.ignored += 1
             return
         c = self.coalitions.get(m.task)

@@ -13,7 +13,8 @@ able to say what it needs of the share-restricted resources (its constraint func
 A robot's :func:`catalogue` follows from its sensors: every robot can survey, detect obstacles in range
 data and avoid obstacles in a list; only a robot with a laser or a sonar ring has a reader producing range
 data.  A Create has neither (it must borrow another robot's); a Pioneer 3-DX has its sonar ring
-(``base.sonar``); ``allocation.sensors: [laser]`` adds a (simulated) laser.
+(``base.sonar``); a ``sensors:`` entry of ``type: rplidar`` is a laser (the robot's host tells the agent its sensor
+kinds: ``AgentContext.sensors``).
 """
 from __future__ import annotations
 
@@ -32,10 +33,13 @@ SURVEY, SENSOR, AVOID = "survey", "sensor", "avoid"        # ActionSpec.motion
 
 # the sensors a reader can read, and the data they make (Mb/s when streamed to another robot)
 SENSORS = {
-    "laser": Sensor(fov=math.pi, range=8.0),               # 181 beams, 180 deg, 8 m (Stage's default laser)
+    # the paper's laser (181 beams, 180 deg ahead, 8 m: Stage's default), which the kinematic reproduction simulates;
+    # an RPLIDAR (all round, 12 m; a sensors: entry of type rplidar, kind "laser") is claimed as that subset of it
+    "laser": Sensor(fov=math.pi, range=8.0),
     "sonar": Sensor(fov=2 * math.pi, range=5.0),           # a Pioneer ring: all round, 5 m
 }
-LASER_RATE = 181 * 2 * 10 * 8 / 1e6                        # 181 ranges x 2 bytes x 10 Hz: 0.029 Mb/s
+LASER_RATE = 181 * 2 * 10 * 8 / 1e6                        # 181 ranges x 2 bytes x 10 Hz: 0.029 Mb/s (an A1's
+#                                                            360 x 2 x 5.5 Hz is 0.032: under the same link budgets)
 SONAR_RATE = 16 * 2 * 10 * 8 / 1e6                         # 16 ranges x 2 bytes x 10 Hz: 0.0026 Mb/s
 OBSTACLES_RATE = 16 * 12 * 5 * 8 / 1e6                     # 16 discs x 12 bytes x 5 Hz: 0.0077 Mb/s
 
@@ -102,10 +106,13 @@ def catalogue(sensors: Iterable[str] = ()) -> Catalogue:
     return Catalogue(tuple(sorted(acts, key=lambda a: a.code)), have)
 
 
-def sensors_of(base, options=None) -> tuple[str, ...]:
-    """A robot's sensors from its config: its base's (a Pioneer 3-DX, ``type: arcos``, has a sonar ring unless
-    ``sonar: false``; a Create has none) plus ``allocation.sensors``."""
-    out = set(getattr(options, "sensors", ()) or ())
+def sensors_of(base, entries: Iterable = ()) -> tuple[str, ...]:
+    """A robot's sensor kinds from its config: its base's (a Pioneer 3-DX, ``type: arcos``, has a sonar ring unless
+    ``sonar: false``; a Create has none) plus the kinds of its ``sensors:`` ``entries`` (an ``rplidar``: "laser")."""
+    out = set()
     if getattr(base, "type", None) == "arcos" and getattr(base, "sonar", False):
         out.add("sonar")
+    if entries:
+        from runtime.drivers.registry import sensor_class
+        out.update(sensor_class(e.type).kind for e in entries)
     return tuple(sorted(out))

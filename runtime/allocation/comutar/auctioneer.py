@@ -331,8 +331,10 @@ class Auctioneer:
         return []
 
     def on_done(self, m, now: float) -> None:
-        """Another auctioneer completed ``m.task`` (roles changed hands): never announce it again."""
-        if m.sender != self.me:
+        """Another auctioneer completed ``m.task`` (roles changed hands): never announce it again.  Only from the
+        robot that is the task's auctioneer now as far as I know (never me: I would know), so a CmDone forged in
+        an unsigned fleet cannot end my job."""
+        if m.sender != self.me and m.sender == self.a.auctioneer_of(m.task):
             self.jobs.pop(m.task, None)
             self.finished.setdefault(m.task, m.auction)
 

@@ -100,7 +100,7 @@ class Bidder:
         self.o = agent.options
         self.slots: dict[int, Slot] = {}
         self.holdings: dict[int, Holding] = {}          # task -> holding
-        self.done: set[int] = set()                     # tasks the auctioneer said are complete
+        self.done: dict[int, int] = {}                  # task -> the auction its auctioneer said completed it
         self._n = itertools.count(1)
         self._q = itertools.count(1)
         self.stats = BidderStats()
@@ -211,7 +211,8 @@ class Bidder:
     def on_announce(self, m, now: float) -> list:
         self.stats.announcements += 1
         task = self.a.tasks.get(m.task)
-        if task is None or m.task in self.done:
+        done = self.done.get(m.task)
+        if task is None or (done is not None and done >> 16 == m.auction >> 16 and not _later(m.auction, done)):
             self.stats.ignored += 1
             return []
         held = self.holdings.get(m.task)
@@ -410,6 +411,9 @@ class Bidder:
         return [CmResign(self.me, self.a.auctioneer_of(task_id), h.auction, task_id)]
 
     def on_cancel(self, m, now: float) -> None:
+        if m.auction >> 16 != m.sender:                 # only an auction's auctioneer takes its award back
+            self.stats.ignored += 1
+            return
         h = self.holdings.get(m.task)
         if h is not None and h.auction == m.auction:
             self.a.log.info("task %d: award %s cancelled by robot %d", m.task, _auction_name(m.auction), m.sender)
@@ -417,8 +421,17 @@ class Bidder:
         self.release_auction(m.auction)
 
     def on_done(self, m, now: float) -> None:
-        self.done.add(m.task)
-        self.drop(m.task)
+        """The task's auctioneer says it is complete: release it, and take no announcement of it up to that auction
+        (a later one, which only an auctioneer that still has the task makes, is taken: so a CmDone forged in an
+        unsigned fleet keeps the task from nobody for good).  From any other robot: ignored."""
+        if m.sender != self.a.auctioneer_of(m.task) or m.auction >> 16 != m.sender:
+            self.stats.ignored += 1
+            return
+        if m.task not in self.done or _later(m.auction, self.done[m.task]):
+            self.done[m.task] = m.auction
+        h = self.holdings.get(m.task)
+        if h is None or not _later(h.auction, m.auction):
+            self.drop(m.task)
 
     def _reports(self, now: float) -> list:
         out = []

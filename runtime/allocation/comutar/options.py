@@ -16,8 +16,6 @@ from runtime.config.build import rng
 @dataclass(frozen=True)
 class ComutarOptions:
     method: Literal["comutar"] = "comutar"
-    # what the robot brings beyond its base (a Pioneer's sonar ring comes from base.sonar): a simulated laser
-    sensors: tuple[Literal["laser", "sonar"], ...] = ()
     link_capacity: float = field(default=1.0, metadata=rng(0.0, 1000.0))     # Mb/s for data streams between robots
     processor: float = field(default=0.8, metadata=rng(0.0, 64.0))           # cores given to allocated actions
     speed: float = field(default=0.25, metadata=rng(0.01, 2.0))              # m/s: the c-space window's top speed

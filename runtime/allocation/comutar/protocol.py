@@ -51,6 +51,7 @@ from runtime.tasks import FAILED as P_FAILED, Commitment, Progress, Task
 
 KINDS = ("surveillance", "avoid_obstacles")
 CHOOSE_PERIOD = 0.25                      # s between re-evaluations of the nearest waypoint (at once on news)
+CLAIM_STALE = 5                           # status periods without a surveyor's CmSurvey before its claim is dropped
 STREAM_PERIOD = {A.RANGE_DATA: 0.1, A.OBSTACLE_LIST: 0.2}   # s: the 10 Hz and 5 Hz of ActionSpec.rates
 SENSE_FRESH = 0.5                         # s: a provider streams only readings newer than this
 SELF_ECHO = 0.12                          # m past a consumer's body: a streamed disc this close is the consumer itself
@@ -67,7 +68,7 @@ class ComutarAgent:
         self.log = get_logger("alloc.comutar", self.robot_id)
         self.peers = frozenset(int(p) for p in ctx.peers) - {self.robot_id}
         self.lost: set[int] = set()
-        self.catalogue = A.catalogue(self.options.sensors if sensors is None else sensors)
+        self.catalogue = A.catalogue(sensors or ())
         self.window = C.Window(v_max=self.options.speed, w_max=self.options.turn_rate)
         self.ledger = Ledger()
         me = self.robot_id
@@ -90,6 +91,7 @@ class ComutarAgent:
         self.bidder = Bidder(self)
         self.auction = Auctioneer(self)
         self._status_at: dict[int, float] = {}
+        self._survey_heard: dict[tuple[int, int], float] = {}     # (task, surveyor) -> its last CmSurvey
         self._choose_at: dict[int, float] = {}
         self._region_at: dict[int, float] = {}
         self._refused: set[int] = set()
@@ -431,7 +433,8 @@ class ComutarAgent:
 
     def _streams(self, now: float) -> list:
         """What my readers and detectors serving other robots send them: my sensor's discs (range data: one per
-        echo; the obstacle list: the same discs, and my own body), at 10 Hz and 5 Hz, from a fresh reading."""
+        echo; the obstacle list: the same discs, and my own body), at 10 Hz and 5 Hz, from a fresh reading, nearest
+        me first; when they are more than one stream carries (a laser's), nearest the region I keep in view."""
         if self.pose is None or now - self.sensed_at > SENSE_FRESH:
             return []
         out = []
@@ -448,7 +451,8 @@ class ComutarAgent:
                 if info == A.OBSTACLE_LIST:
                     discs = np.vstack([discs, [[self.pose[0], self.pose[1], self.estimator.profile.radius]]])
                 ox, oy = self.position
-                order = np.argsort(np.hypot(discs[:, 0] - ox, discs[:, 1] - oy))
+                region = self.region(tid) if len(discs) > MAX_DISCS else None
+                order = stream_order(discs, (ox, oy), None if region is None else region[1:3])
                 packed = [v for v in (pack_disc(*discs[i], ox, oy) for i in order) if v is not None]
                 out.append(CmStream(self.robot_id, consumer, tid, A.INFO[info], float(now), ox, oy,
                                     tuple(packed[:MAX_DISCS])))
@@ -458,6 +462,9 @@ class ComutarAgent:
     def _surveys(self, now: float) -> list:
         out = []
         for tid, board in self.boards.items():
+            for r in [r for r in board.claims if r != self.robot_id
+                      and now - self._survey_heard.get((tid, r), now) > CLAIM_STALE * self.options.status_period]:
+                board.forget(r)          # a surveyor that left the task (resigned, cancelled) no longer holds a claim
             held = tid in self.bidder.holdings
             if held and self.pose is not None and now >= self._choose_at.get(tid, -math.inf):
                 self._choose_at[tid] = now + CHOOSE_PERIOD
@@ -518,6 +525,7 @@ class ComutarAgent:
             board = self.boards.get(msg.task)
             if board is None or msg.sender == self.robot_id:
                 return []
+            self._survey_heard[(msg.task, msg.sender)] = now
             target = msg.target - 1 if 0 < msg.target <= len(board.points) else None
             if board.merge(msg.sender, map(int.__sub__, msg.visited, itertools.repeat(1)), target, msg.claimed):
                 self._status_at[msg.task] = self._choose_at[msg.task] = -math.inf
@@ -547,11 +555,22 @@ class ComutarAgent:
 
 
 def make_agent(ctx: AgentContext, sensors: Sequence[str] | None = None) -> ComutarAgent:
-    """The agent for a robot; ``sensors`` default to what its base has (``ctx.base``: a Pioneer's sonar ring)
-    plus ``ctx.options.sensors`` (:func:`~runtime.allocation.comutar.actions.sensors_of`)."""
+    """The agent for a robot; ``sensors`` default to the kinds its host found (``ctx.sensors``: the base's and
+    the ``sensors:`` entries'), else to what its base config has (``ctx.base``: a Pioneer's sonar ring,
+    :func:`~runtime.allocation.comutar.actions.sensors_of`)."""
+    if sensors is None and ctx.sensors is not None:
+        sensors = tuple(ctx.sensors)
     if sensors is None and ctx.base is not None:
-        sensors = A.sensors_of(ctx.base, ctx.options)
+        sensors = A.sensors_of(ctx.base)
     return ComutarAgent(ctx, sensors)
+
+
+def stream_order(discs: np.ndarray, own, region=None) -> np.ndarray:
+    """The indices of ``discs`` in the order a stream packs them (it carries the first :data:`MAX_DISCS`): nearest
+    ``own`` (the provider's x, y) first, or, when they are more than a stream carries (a laser's revolution) and the
+    consumer's ``region`` (x, y) is known, nearest that: what the consumer may run into."""
+    near = region if region is not None and len(discs) > MAX_DISCS else own
+    return np.argsort(np.hypot(discs[:, 0] - near[0], discs[:, 1] - near[1]))
 
 
 def shadowed(discs: np.ndarray, origin, depth: float, step: float = 0.15) -> np.ndarray:

@@ -428,6 +428,9 @@ class DrAgent:
         if info is None:
             self.dropped["too many unknown tasks"] += 1
             return []
+        if not info.ledger.plausible(m.robot, m.taken, m.delivered, m.returned):
+            self.dropped["entry beyond the object's weight"] += 1
+            return []
         info.ledger.merge(m.robot, m.loads, m.taken, m.deliveries, m.delivered, m.returned)
         self.world.mentioned(m.robot, now)
         if m.sender == info.leader or m.sender == self.robot_id:

@@ -120,6 +120,7 @@ class Leader:
         self.settled: tuple[int, ...] = ()
         self.released: set[int] = set()
         self.rr = 0
+        self._disowned: dict[int, float] = {}      # carrier whose state names the task no more -> since when
         self.finished: Finish | None = None
         self.mine = host.capacity(info)
         self._last_value = 0.0
@@ -272,10 +273,21 @@ class Leader:
         world, ledger = self.host.world, self.info.ledger
         for r in [r for r, j in self.members.items() if now - j.heard > self.o.member_timeout]:
             self.drop(r, now, f"silent for {self.o.member_timeout:g} s")
-        for r in ledger.carriers():
+        carriers = ledger.carriers()
+        for r in list(self._disowned):
+            if r not in carriers:
+                del self._disowned[r]
+        for r in carriers:
             if world.silent(r, now, self.o.member_timeout) and ledger.give_back(r):
                 self.host.log.warning("task %d: robot %d silent for %.1f s: its load goes back to the object",
                                       self.task, r, self.o.member_timeout)
+                out.append(ledger.message(self.me, self.task, r))
+                self.next_check = now
+            elif self._unclaimed(r, now) and ledger.give_back(r):
+                # its state has not named the task for member_timeout: a load it never took (a DrLoad forged in
+                # its name, in an unsigned fleet) or one it no longer carries goes back, as a silent robot's does
+                self.host.log.warning("task %d: robot %d has not held it for %.1f s: its load goes back to the "
+                                      "object", self.task, r, self.o.member_timeout)
                 out.append(ledger.message(self.me, self.task, r))
                 self.next_check = now
         if not self.working:
@@ -311,6 +323,15 @@ class Leader:
         return out
 
     # ------------------------------------------------------------------ messages from robots
+    def _unclaimed(self, r: int, now: float) -> bool:
+        """Robot ``r`` (a carrier in the books) has stated, for ``member_timeout``, that it holds no share of this
+        task: its last states named other tasks or none."""
+        p = self.host.world.peers.get(r)
+        if r == self.me or p is None or p.state is None or self.task in p.tasks:
+            self._disowned.pop(r, None)
+            return False
+        return now - self._disowned.setdefault(r, now) > self.o.member_timeout
+
     def heard_from(self, r: int, now: float) -> None:
         """A sign that ``r`` still works on this task (a report, or its state naming the task)."""
         j = self.members.get(r)
@@ -349,6 +370,9 @@ class Leader:
 
     def on_load(self, m, now: float) -> list:
         ledger = self.info.ledger
+        if not ledger.plausible(m.sender, m.taken, m.delivered, m.returned):
+            self.host.dropped["entry beyond the object's weight"] += 1
+            return []
         ledger.merge(m.sender, m.seq - 1, m.taken, m.deliveries, m.delivered, m.returned)
         before = ledger.entry(m.sender).loads
         ledger.grant(m.sender, m.seq, m.wu)
@@ -361,6 +385,9 @@ class Leader:
 
     def on_deliver(self, m, now: float) -> list:
         ledger = self.info.ledger
+        if not ledger.plausible(m.sender, m.taken, m.delivered, m.returned):
+            self.host.dropped["entry beyond the object's weight"] += 1
+            return []
         ledger.merge(m.sender, m.loads, m.taken, m.seq, m.delivered, m.returned)
         self.heard_from(m.sender, now)
         return [ledger.message(self.me, self.task, m.sender)]

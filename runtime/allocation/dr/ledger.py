@@ -64,7 +64,23 @@ class Ledger:
     def entry(self, robot: int) -> Entry:
         return self.entries.setdefault(robot, Entry())
 
+    def plausible(self, robot: int, taken: float, delivered: float, returned: float) -> bool:
+        """A view of ``robot``'s entry that the object's weight allows: no more taken, delivered or returned than W,
+        and no more taken (less returned) by the whole group than W.  Entries only grow, so one view beyond these
+        (forged, in an unsigned fleet) would stay for good and make every genuine report after it look stale;
+        such a view is refused instead.  True while W is unknown (the task is not in this robot's table yet)."""
+        if self.weight is None:
+            return True
+        top = self.weight * (1 + 1e-5) + EPS           # the wire's float32 rounds each value by ~6e-8 of it
+        if max(taken, delivered, returned) > top:
+            return False
+        others = sum(e.taken - e.returned for r, e in self.entries.items() if r != robot)
+        mine = self.entries.get(robot, Entry())
+        return others + max(taken, mine.taken) - max(returned, mine.returned) <= top
+
     def merge(self, robot: int, loads, taken, deliveries, delivered, returned) -> bool:
+        if not self.plausible(robot, taken, delivered, returned):
+            return False
         if not (loads or deliveries or returned) and robot not in self.entries:
             return False                              # an empty entry adds nothing
         return self.entry(robot).merge(loads, taken, deliveries, delivered, returned)

@@ -53,7 +53,7 @@ from collections import Counter
 from typing import Callable, Mapping, Sequence
 
 from runtime.allocation.formation.assignment import LOST_PROBES, MAX_TASKS, NO_TASK, TaskBook
-from runtime.allocation.formation.messages import Price, Status, TaskInfo, addressed_to
+from runtime.allocation.formation.messages import MAX_VALUE, Price, Status, TaskInfo, addressed_to
 from runtime.log import get_logger
 from runtime.messages import BROADCAST
 
@@ -298,25 +298,37 @@ class EpsAuctionAgent:
     def _cost(self, task: int) -> float:
         return 0.0 if task in self._dummies else self.book.cost(task)
 
-    def _values(self):
+    def _values(self, out_of_reach=()):
         for t in list(self.book.positions) + sorted(self._dummies):
             c = self._cost(t)
-            if math.isfinite(c):
+            if math.isfinite(c) and t not in out_of_reach:
                 yield -c - self.price.get(t, 0.0), t
 
-    def _bid(self, now: float) -> list:
+    def _best(self, out_of_reach) -> tuple[float, int | None, float]:
         best_v, best_t, second_v = -INF, None, -INF
-        for v, t in self._values():
+        for v, t in self._values(out_of_reach):
             if best_t is None or v > best_v or (v == best_v and t < best_t):
                 if best_t is not None:
                     second_v = max(second_v, best_v)
                 best_v, best_t = v, t
             else:
                 second_v = max(second_v, v)
-        if best_t is None:
-            return []
+        return best_v, best_t, second_v
+
+    def _bid(self, now: float) -> list:
+        """Bid for my best task.  A task whose price I would have to raise past the protocol's largest price
+        (``MAX_VALUE``: a price my peers refuse) is out of reach and I bid for the next best: in an unsigned fleet a
+        forged Price at the maximum must not make every genuine bid for that task one its peers refuse."""
+        out_of_reach: set[int] = set()
+        while True:
+            best_v, best_t, second_v = self._best(out_of_reach)
+            if best_t is None:
+                return []
+            increment = (best_v - second_v if second_v > -INF else 0.0) + self.eps
+            if self.price.get(best_t, 0.0) + increment <= MAX_VALUE:
+                break
+            out_of_reach.add(best_t)
         task = best_t
-        increment = (best_v - second_v if second_v > -INF else 0.0) + self.eps
         new = self.price.get(task, 0.0) + increment
         displaced = self.holder.get(task, 0)
         if displaced and displaced != self.robot_id and displaced in self.alive:

@@ -6673,36 +6673,38 @@ class MAVLink_mrta_table_request_message(MAVLink_message):
     """
     Send me your task table (one MRTA_TASK_RECORD per task); `digest`
     is mine, so an equal table needs no answer (a ground station sends
-    0 and gets the table with each task's holders).
+    0 and gets the table with each task's holders). With `task` set:
+    send me that task's record, if you have it.
     """
 
     id = MAVLINK_MSG_ID_MRTA_TABLE_REQUEST
     msgname = "MRTA_TABLE_REQUEST"
-    fieldnames = ["target_system", "digest"]
-    ordered_fieldnames = ["digest", "target_system"]
-    fieldtypes = ["uint8_t", "uint32_t"]
+    fieldnames = ["target_system", "digest", "task"]
+    ordered_fieldnames = ["digest", "task", "target_system"]
+    fieldtypes = ["uint8_t", "uint32_t", "uint32_t"]
     fielddisplays_by_name: Dict[str, str] = {}
     fieldenums_by_name: Dict[str, str] = {}
     fieldunits_by_name: Dict[str, str] = {}
-    native_format = bytearray(b"<IB")
-    orders = [1, 0]
-    lengths = [1, 1]
-    array_lengths = [0, 0]
-    crc_extra = 255
-    unpacker = struct.Struct("<IB")
+    native_format = bytearray(b"<IIB")
+    orders = [2, 0, 1]
+    lengths = [1, 1, 1]
+    array_lengths = [0, 0, 0]
+    crc_extra = 123
+    unpacker = struct.Struct("<IIB")
     instance_field = None
     instance_offset = -1
 
-    def __init__(self, target_system: int, digest: int):
+    def __init__(self, target_system: int, digest: int, task: int):
         MAVLink_message.__init__(self, MAVLink_mrta_table_request_message.id, MAVLink_mrta_table_request_message.msgname)
         self._fieldnames = MAVLink_mrta_table_request_message.fieldnames
         self._instance_field = MAVLink_mrta_table_request_message.instance_field
         self._instance_offset = MAVLink_mrta_table_request_message.instance_offset
         self.target_system = target_system
         self.digest = digest
+        self.task = task
 
     def pack(self, mav: "MAVLink", force_mavlink1: bool = False) -> bytes:
-        return self._pack(mav, self.crc_extra, self.unpacker.pack(self.digest, self.target_system), force_mavlink1=force_mavlink1)
+        return self._pack(mav, self.crc_extra, self.unpacker.pack(self.digest, self.task, self.target_system), force_mavlink1=force_mavlink1)
 
 
 # Define name on the class for backwards compatibility (it is now msgname).
@@ -19275,29 +19277,33 @@ class MAVLink(object):
         """
         self.send(self.mrta_robot_state_encode(target_system, state, tasks, x, y, known, digest), force_mavlink1=force_mavlink1)
 
-    def mrta_table_request_encode(self, target_system: int, digest: int) -> MAVLink_mrta_table_request_message:
+    def mrta_table_request_encode(self, target_system: int, digest: int, task: int) -> MAVLink_mrta_table_request_message:
         """
         Send me your task table (one MRTA_TASK_RECORD per task); `digest` is
         mine, so an equal table needs no answer (a ground station
-        sends 0 and gets the table with each task's holders).
+        sends 0 and gets the table with each task's holders). With
+        `task` set: send me that task's record, if you have it.
 
         target_system             : Destination robot id, 0 = every peer. (type:uint8_t)
         digest                    : CRC-32 of the requester's table. (type:uint32_t)
+        task                      : 0: the whole table. A fleet task id: that task's record only, asked of the robot that minted it by a robot that heard of the task from someone else (it holds the task until its origin confirms it). (type:uint32_t)
 
         """
-        return MAVLink_mrta_table_request_message(target_system, digest)
+        return MAVLink_mrta_table_request_message(target_system, digest, task)
 
-    def mrta_table_request_send(self, target_system: int, digest: int, force_mavlink1: bool = False) -> None:
+    def mrta_table_request_send(self, target_system: int, digest: int, task: int, force_mavlink1: bool = False) -> None:
         """
         Send me your task table (one MRTA_TASK_RECORD per task); `digest` is
         mine, so an equal table needs no answer (a ground station
-        sends 0 and gets the table with each task's holders).
+        sends 0 and gets the table with each task's holders). With
+        `task` set: send me that task's record, if you have it.
 
         target_system             : Destination robot id, 0 = every peer. (type:uint8_t)
         digest                    : CRC-32 of the requester's table. (type:uint32_t)
+        task                      : 0: the whole table. A fleet task id: that task's record only, asked of the robot that minted it by a robot that heard of the task from someone else (it holds the task until its origin confirms it). (type:uint32_t)
 
         """
-        self.send(self.mrta_table_request_encode(target_system, digest), force_mavlink1=force_mavlink1)
+        self.send(self.mrta_table_request_encode(target_system, digest, task), force_mavlink1=force_mavlink1)
 
     def mrta_task_info_encode(self, target_system: int, round: int, task: int, x: float, y: float, n_tasks: int) -> MAVLink_mrta_task_info_message:
         """

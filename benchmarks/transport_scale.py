@@ -1,0 +1,362 @@
+"""UDP beside Zenoh client/router beside Zenoh peer mesh, at N robots, in one process: the transports' cost when every
+robot sends signed agent frames to every other.
+
+Each robot is a real :class:`runtime.comms.link.MavlinkLink` (signed, the fleet key) on its transport: ``udp`` (one
+socket each, every frame sent to the N-1 peer addresses), ``zenoh-client`` (one Zenoh session each, a client of one
+router, a Python session in router mode in the same process; each frame published once) or ``zenoh-peer`` (sessions
+in peer mode, each listening on loopback and seeded with robot 1's endpoint; Zenoh's gossip builds the mesh).  All in
+this one process (N links polled in turn by one thread, which sleeps 1 ms when a pass brought nothing; Zenoh's own
+threads beside it), so CPU is the whole process's (the router's included) and latency includes the wait for the
+polling loop to come round (with N links, one pass of N polls and the N sends).
+
+Per transport and N: time until every robot counts every other alive (membership: heartbeats over UDP, liveliness
+tokens over Zenoh), then ``--seconds`` of traffic, every robot sending one Bid (a 39-byte signed MAVLink 2 frame) to
+all at ``--rate`` Hz: deliveries per second (and the share of the N (N-1) expected), p50/p99 latency, CPU per
+delivered frame and per robot-second, resident memory per robot (the process's growth over opening the links, /
+N).  Then with ``--auction N``: the epsilon auction (BS) on in-process robot cores over each transport (Fleet(links=)),
+N tasks, to every task held once: frames published per robot, sim and wall seconds to converge, and whether the
+assignment equals the in-memory bus's.  Prints a markdown table; asserts nothing.
+
+    PYTHONPATH=. python benchmarks/transport_scale.py --robots 10 50 100 --seconds 4
+    PYTHONPATH=. python benchmarks/transport_scale.py --robots 10 --auction 10 50
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import os
+import socket
+import statistics
+import time
+
+from runtime.allocation.formation import messages as M
+from runtime.comms.link import MavlinkLink
+
+KEY = bytes(range(32))
+TRANSPORTS = ("udp", "zenoh-client", "zenoh-peer")
+
+
+def free_port(kind=socket.SOCK_DGRAM) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def rss() -> float:
+    """Resident memory of this process, MB."""
+    with open("/proc/self/statm") as fh:
+        return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e6
+
+
+class Net:
+    """N links on one transport (and the router it needs)."""
+
+    def __init__(self, kind: str, ids, fleet: str):
+        self.kind, self.router, self.links = kind, None, {}
+        try:
+            self._open(kind, list(ids), fleet)
+        except BaseException:
+            self.close()
+            raise
+
+    def _open(self, kind: str, ids: list, fleet: str) -> None:
+        from runtime.comms.zenoh_transport import ZenohTransport, open_router
+
+        if kind == "udp":
+            for r in ids:                # bound to free ports first, then told each other's addresses
+                self.links[r] = MavlinkLink(r, "127.0.0.1:0", [], None, signing_key=KEY)
+            for r, link in self.links.items():
+                link.udp.peers = [o.address for q, o in self.links.items() if q != r]
+            return
+        if kind == "zenoh-client":
+            ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
+            self.router = open_router([ep])
+            for r in ids:
+                t = ZenohTransport(r, fleet, connect=[ep], lease=3.0)
+                self.links[r] = MavlinkLink(r, "127.0.0.1:0", [], None, signing_key=KEY, transport=t)
+            return
+        seed = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"        # robot 1's; the others any free port
+        for r in ids:
+            t = ZenohTransport(r, fleet, mode="peer", listen=[seed if r == ids[0] else "tcp/127.0.0.1:0"],
+                               connect=[] if r == ids[0] else [seed], lease=3.0)
+            self.links[r] = MavlinkLink(r, "127.0.0.1:0", [], None, signing_key=KEY, transport=t)
+
+    def close(self) -> None:
+        for link in self.links.values():
+            link.close()
+        if self.router is not None:
+            self.router.close()
+
+
+def membership(net: Net, limit: float) -> tuple[float, float]:
+    """(seconds until every link counts every other alive, or inf; the share of (robot, peer) pairs alive then)."""
+    n = len(net.links)
+    t0 = time.monotonic()
+    while True:
+        now = time.monotonic()
+        for link in net.links.values():
+            link.poll(now)
+        alive = sum(len(link.peers_alive) for link in net.links.values())
+        if alive == n * (n - 1):
+            return now - t0, 1.0
+        if now - t0 > limit:
+            return math.inf, alive / (n * (n - 1))
+        time.sleep(0.005)
+
+
+def traffic(net: Net, seconds: float, rate: float) -> dict:
+    links = net.links
+    n = len(links)
+    sent: dict[tuple[int, int], float] = {}
+    lat: list[float] = []
+    period = 1.0 / rate
+    cpu0, t0 = time.process_time(), time.monotonic()
+    next_send, seq, end = t0, 0, t0 + seconds
+    while True:
+        now = time.monotonic()
+        if now >= end + 1.0:
+            break
+        if now >= next_send and now < end:
+            seq += 1
+            for r, link in links.items():
+                sent[(r, seq)] = time.monotonic()
+                link.send_agent([M.Bid(r, 0, 1, seq, 0.5)], now)
+            next_send += period
+        got = len(lat)
+        for link in links.values():
+            for m in link.poll(now):
+                if isinstance(m, M.Bid) and m.auction == 1:
+                    lat.append(time.monotonic() - sent[(m.sender, m.task)])
+        if len(lat) == got:
+            time.sleep(0.001)           # nothing came: wait as a daemon between cycles does, not spin
+    cpu = time.process_time() - cpu0
+    expected = seq * n * (n - 1)
+    lat.sort()
+    return {"delivered": len(lat), "expected": expected, "per_s": len(lat) / seconds,
+            "p50": lat[len(lat) // 2] if lat else math.nan, "p99": lat[int(len(lat) * 0.99)] if lat else math.nan,
+            "cpu": cpu, "cpu_per_frame_us": 1e6 * cpu / max(1, len(lat)), "cpu_per_robot_s": cpu / (n * seconds),
+            "peer_sent": sum(link.counters.peer_sent for link in links.values()) / n,
+            "dropped": sum(link.counters.kernel_dropped + link.counters.queue_dropped for link in links.values())}
+
+
+def scale(kinds, robots, seconds, rate, connect_limit) -> list[dict]:
+    for kind in kinds:                  # imports, the dialect and Zenoh's runtime loaded before any row is measured
+        warm = Net(kind, (1, 2), f"warm{kind.replace('-', '')}")
+        membership(warm, 10.0)
+        warm.close()
+    rows = []
+    for n in robots:
+        for kind in kinds:
+            m0 = rss()
+            t0 = time.monotonic()
+            net = Net(kind, range(1, n + 1), f"bench{n}{kind.replace('-', '')}")
+            opened = time.monotonic() - t0
+            try:
+                t_member, share = membership(net, connect_limit)
+                mem = (rss() - m0) / n
+                row = {"transport": kind, "n": n, "open_s": opened, "member_s": opened + t_member,
+                       "member_share": share, "mb_per_robot": mem}
+                row.update(traffic(net, seconds, rate))
+            finally:
+                net.close()
+            rows.append(row)
+            print(_row(row), flush=True)
+    return rows
+
+
+HEAD = ("| transport | N | full membership (s) | deliveries/s | delivered | p50 (ms) | p99 (ms) | CPU/frame (us) | "
+        "CPU/robot/s (ms) | frames sent/robot | MB/robot |\n|---|---|---|---|---|---|---|---|---|---|---|")
+
+
+def _row(r: dict) -> str:
+    member = f"{r['member_s']:.2f}" if math.isfinite(r["member_s"]) else f"never ({100 * r['member_share']:.0f} %)"
+    return (f"| {r['transport']} | {r['n']} | {member} | {r['per_s']:.0f} | "
+            f"{100 * r['delivered'] / max(1, r['expected']):.1f} % | {1e3 * r['p50']:.1f} | {1e3 * r['p99']:.1f} | "
+            f"{r['cpu_per_frame_us']:.0f} | {1e3 * r['cpu_per_robot_s']:.1f} | {r['peer_sent']:.0f} | "
+            f"{r['mb_per_robot']:.2f} |")
+
+
+# ---------------------------------------------------------------------------------------------- auctions
+
+def auction(kinds, sizes, speedup: float) -> list[dict]:
+    from runtime.allocation import registry
+    from runtime.inprocess import Fleet, Kinematic, robot_config
+    from runtime.robot.core import RobotCore
+    from runtime.robot.ports import BaseFacts
+    from runtime.tasks.goto import Goto
+    import random
+
+    rows = []
+    for n in sizes:
+        rng = random.Random(n)
+        starts = {r: (rng.uniform(-10, 10), rng.uniform(-10, 10), 0.0) for r in range(1, n + 1)}
+        tasks = [Goto(rng.uniform(-10, 10), rng.uniform(-10, 10)) for _ in range(n)]
+
+        def assigned(f) -> dict:
+            """task -> the robots holding it, or that did it."""
+            out = {t: tuple(v) for t, v in f.holders().items()}
+            for t, robots in f.done().items():
+                out.setdefault(t, tuple(robots))
+            return out
+
+        def settler(ids, still: float = 2.0):
+            """A stop test: every task assigned to one robot, unchanged for ``still`` sim seconds."""
+            last = {"a": None, "since": 0.0}
+
+            def settled(f) -> bool:
+                a = assigned(f)
+                if a != last["a"]:
+                    last["a"], last["since"] = a, f.now
+                return (set(a) == set(ids) and all(len(v) == 1 for v in a.values())
+                        and f.now - last["since"] >= still)
+            settled.last = last            # when the assignment last changed
+            return settled
+
+        def fleet(links=None):
+            m = registry.method("auction")
+            facts = BaseFacts(radius=0.17, max_speed=0.5, ranging=True)
+            cores = {r: RobotCore(robot_config(r, tuple(starts), m.options(), period=0.1), facts,
+                                  method=m, base_config=None) for r in starts}
+            return Fleet(cores, Kinematic(starts, 0.5), period=0.1, links=links)
+
+        ref = fleet()
+        ref.run(0.5)
+        ids = ref.hand_in(1, tasks)
+        ref.run(120.0, stop=settler(ids))
+        want = assigned(ref)
+        where = dict(zip(ids, tasks))
+
+        def cost(holders) -> float:
+            return sum(math.dist(starts[v[0]][:2], (where[t].x, where[t].y)) for t, v in holders.items())
+        from scipy.optimize import linear_sum_assignment
+        import numpy as np
+        c = np.array([[math.dist(starts[r][:2], (g.x, g.y)) for g in tasks] for r in sorted(starts)])
+        rr, cc = linear_sum_assignment(c)
+        optimum = float(c[rr, cc].sum())
+        print(f"N={n}: in-memory bus {100 * (cost(want) / optimum - 1):+.2f} % over the optimum", flush=True)
+        for kind in kinds:
+            net = Net(kind, starts, f"auc{n}{kind.replace('-', '')}")
+            try:
+                f = fleet(net.links)
+                membership(net, 60.0)
+                msgs = {"n": 0}
+                inner = f.bus.send
+
+                def count(batch, now):
+                    msgs["n"] += len(batch)
+                    inner(batch, now)
+                f.bus.send = count
+                sent0 = {r: link.counters.peer_sent for r, link in net.links.items()}
+                t0, s0, cpu0 = time.monotonic(), f.now, time.process_time()
+
+                def pace(fl):
+                    ahead = (fl.now - s0) / speedup - (time.monotonic() - t0)
+                    if ahead > 0:
+                        time.sleep(ahead)
+                ids = f.hand_in(1, tasks)
+                done = settler(ids)
+                f.run(f.now + 120.0, stop=done, observe=pace)
+                got = assigned(f)
+                per = [net.links[r].counters.peer_sent - sent0[r] for r in starts]
+                rows.append({"transport": kind, "n": n, "sim_s": done.last["since"] - s0, "wall_s": time.monotonic() - t0,
+                             "cpu_s": time.process_time() - cpu0, "frames_per_robot": statistics.mean(per),
+                             "msgs_per_robot": msgs["n"] / n,
+                             "settled": done(f), "same": got == want,
+                             "gap": 100 * (cost(got) / optimum - 1) if got else math.nan})
+                print(_auction_row(rows[-1]), flush=True)
+            finally:
+                net.close()
+    return rows
+
+
+AUCTION_HEAD = ("| transport | N | converged | sim s to the final assignment | wall s | CPU s | agent messages/robot | frames sent/robot | "
+                "= in-memory assignment | cost over optimum |\n|---|---|---|---|---|---|---|---|---|---|")
+
+
+def _auction_row(r: dict) -> str:
+    return (f"| {r['transport']} | {r['n']} | {r['settled']} | {r['sim_s']:.1f} | {r['wall_s']:.1f} | "
+            f"{r['cpu_s']:.1f} | {r['msgs_per_robot']:.1f} | {r['frames_per_robot']:.0f} | {r['same']} | {r['gap']:+.2f} % |")
+
+
+# ---------------------------------------------------------------------------------------------- loss detection
+
+def detect(timeout: float = 3.0) -> None:
+    """How soon a peer that stops is reported lost by the link (``peers_lost``), wall clock: over UDP when its
+    heartbeats stop; over Zenoh when its process is frozen (SIGSTOP: its socket stays open, as a robot out of radio
+    range; the router drops it when its lease, ``comms.heartbeat_timeout``, runs out) and when it is killed (its
+    socket closed)."""
+    import signal
+    import subprocess
+    import sys
+    from runtime.comms.zenoh_transport import ZenohTransport, open_router
+
+    for trial in range(3):
+        ports = free_port(), free_port()
+        a = MavlinkLink(1, f"127.0.0.1:{ports[0]}", [f"127.0.0.1:{ports[1]}"], None, heartbeat_timeout=timeout)
+        b = MavlinkLink(2, f"127.0.0.1:{ports[1]}", [f"127.0.0.1:{ports[0]}"], None, heartbeat_timeout=timeout)
+        stop = time.monotonic() + 2.3 + 0.3 * trial
+        while True:
+            now = time.monotonic()
+            if now < stop:
+                b.poll(now)
+            a.poll(now)
+            if a.peers_lost(now):
+                print(f"udp: heartbeats stopped, lost after {now - stop:.2f} s (timeout {timeout} s)")
+                break
+            time.sleep(0.005)
+        a.close()
+        b.close()
+    ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
+    router = open_router([ep])
+    for how in (signal.SIGSTOP, signal.SIGKILL):
+        a = MavlinkLink(1, "127.0.0.1:0", [], None, heartbeat_timeout=timeout,
+                        transport=ZenohTransport(1, "detect", connect=[ep], lease=timeout))
+        child = subprocess.Popen([sys.executable, "-c", (
+            "from runtime.comms.zenoh_transport import ZenohTransport\nimport time\n"
+            f"t = ZenohTransport(2, 'detect', connect=['{ep}'], lease={timeout})\nprint('up', flush=True)\n"
+            "time.sleep(600)\n")], stdout=subprocess.PIPE, text=True)
+        child.stdout.readline()
+        t0 = time.monotonic()
+        while 2 not in a.peers_alive and time.monotonic() - t0 < 10:
+            a.poll(time.monotonic())
+            time.sleep(0.01)
+        child.send_signal(how)
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 30:
+            now = time.monotonic()
+            a.poll(now)
+            if 2 in a.peers_lost(now):
+                print(f"zenoh: {signal.Signals(how).name}, lost after {now - t0:.2f} s (lease {timeout} s)")
+                break
+            time.sleep(0.005)
+        child.kill()
+        child.wait()
+        a.close()
+    router.close()
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--robots", type=int, nargs="*", default=[10, 50, 100])
+    p.add_argument("--transports", nargs="+", default=list(TRANSPORTS), choices=TRANSPORTS)
+    p.add_argument("--seconds", type=float, default=4.0, help="of traffic per row")
+    p.add_argument("--rate", type=float, default=5.0, help="frames per robot per second")
+    p.add_argument("--connect-limit", type=float, default=60.0, help="s to wait for full membership")
+    p.add_argument("--auction", type=int, nargs="*", default=[], help="fleet sizes for the auction runs")
+    p.add_argument("--speedup", type=float, default=2.0, help="auction runs: sim seconds per wall second")
+    p.add_argument("--detect", action="store_true", help="also time how soon a stopped peer is reported lost")
+    args = p.parse_args()
+    logging.disable(logging.WARNING)
+    if args.robots:
+        print(HEAD)
+        scale(args.transports, args.robots, args.seconds, args.rate, args.connect_limit)
+    if args.auction:
+        print(AUCTION_HEAD)
+        auction(args.transports, args.auction, args.speedup)
+    if args.detect:
+        detect()
+
+
+if __name__ == "__main__":
+    main()

@@ -765,3 +765,24 @@ def test_replaying_a_recording_without_frames_names_the_file(tmp_path, capsys):
     assert cli.main(["log", "replay", str(tmp_path / "r.mcap"), "--to", "127.0.0.1:9"]) == 2
     err = capsys.readouterr().err.strip()
     assert str(tmp_path / "r.mcap") in err and "expected raw MAVLink frames" in err
+
+
+def test_a_laser_revolution_is_one_laser_scan_at_one_degree_steps(tmp_path):
+    """A laser's (bearing, distance) pairs become one foxglove.LaserScan over [-pi, pi) in 1-degree bins: each
+    reading in its bin, the nearest where two share one, NaN where none came back (the readings stay points on
+    /robot_N/ranges too)."""
+    import math
+    rec = Recorder(tmp_path / "scan.mcap")
+    readings = [(math.radians(a), 2.0 + a / 1000.0) for a in range(0, 360, 2)]          # every other degree
+    readings += [(math.radians(90.2), 1.0), (math.radians(-180.0), 3.0)]                  # 90 deg twice; -180 = 180
+    rec.scan(3, 1.5, readings + [(math.nan, 1.0), (0.0, math.inf)])                       # not finite: left out
+    rec.close()
+    r = read_messages(tmp_path / "scan.mcap")
+    assert r.channels["/robot_3/scan"] == TOPICS["/robot_{id}/scan"] == "foxglove.LaserScan"
+    (m,) = [m for m in r.messages if m.topic == "/robot_3/scan"]
+    scan = m.data
+    assert scan.frame_id == "robot_3" and len(scan.ranges) == 360
+    assert scan.start_angle == pytest.approx(-math.pi) and scan.end_angle == pytest.approx(math.pi - math.pi / 180)
+    at = {round(math.degrees(scan.start_angle) + i): d for i, d in enumerate(scan.ranges)}     # -180 .. 179
+    assert at[0] == pytest.approx(2.0) and at[90] == pytest.approx(1.0) and at[-180] == pytest.approx(2.18)
+    assert at[44] == pytest.approx(2.044) and math.isnan(at[45]) and at[-2] == pytest.approx(2.358)

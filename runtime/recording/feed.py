@@ -50,6 +50,7 @@ class CoreFeed:
         self.received = received
         self._path = None
         self._bumpers = None
+        self._laser: object = ()
         self._held: dict[int, tuple] = {}
         self._table: dict[int, tuple] = {}
         self._drawn = False
@@ -101,13 +102,16 @@ class CoreFeed:
         rec.check()
 
     def _sensors(self, now: float, sensors) -> None:
-        """What the base senses: its range readings as points, its bumpers when they change.  The place for the
-        robot's own sensors (``sensors:`` in the robot's config, e.g. an RPLIDAR) once the core hands them out: a
-        laser as ``/robot_N/scan`` (``foxglove.LaserScan``: start angle, step, ranges) beside ``ranges``."""
+        """What the robot senses: every range reading as points (the base's and its lasers'), a laser's revolution
+        also as ``/robot_N/scan`` (``foxglove.LaserScan``), its bumpers when they change."""
         rec, rid = self.rec, self.id
         ranges = getattr(sensors, "ranges", ())
         if ranges:
             rec.ranges(rid, now, ranges)
+        laser = getattr(self.core, "laser", ())
+        if laser and laser != self._laser:           # a new revolution (the sensor repeats its last until then)
+            self._laser = laser
+            rec.scan(rid, now, laser)
         bump = (sensors.bump_left, sensors.bump_right, sensors.wheel_drop, tuple(getattr(sensors, "faults", ())))
         if bump != self._bumpers:
             self._bumpers = bump

@@ -25,6 +25,7 @@ from runtime.log import get_logger
 
 WORLD = "world"                     # the fixed frame every pose is in
 CHUNK = 256 * 1024                  # bytes of messages per MCAP chunk: what a killed recorder loses at most
+SCAN_BINS = 360                     # a laser scan's equal angular steps (1 degree: an RPLIDAR A1's resolution)
 LIVE_BACKLOG = 16384                # messages the live server holds per client before it drops the oldest
 TOPICS = {                          # topic (robot topics: {id} is the robot id) -> schema name
     "/robot_{id}/pose": "foxglove.PoseInFrame",        # the robot's own estimate, every control cycle
@@ -33,6 +34,7 @@ TOPICS = {                          # topic (robot topics: {id} is the robot id)
     "/robot_{id}/path": "foxglove.PosesInFrame",       # the path the robot follows, when it changes
     "/robot_{id}/command": "mrta.WheelCommand",        # (v, w) to the base, every control cycle
     "/robot_{id}/ranges": "foxglove.PointCloud",       # range readings (sonar, laser) in the robot's frame
+    "/robot_{id}/scan": "foxglove.LaserScan",          # the robot's laser (sensors: rplidar), one revolution
     "/robot_{id}/bumpers": "mrta.Bumpers",             # bumpers and wheel drops, when they change
     "/world": "foxglove.SceneUpdate",                  # arena, obstacles and task places coloured by state
     "/allocation": "mrta.AllocationEvent",             # messages sent and received, commitments, progress, tasks
@@ -404,6 +406,24 @@ class Recorder:
         fields = [m.PackedElementField(name=n, offset=4 * i, type=f32) for i, n in enumerate("xyz")]
         self._log(self._robot(rid, "ranges"), m.PointCloud(timestamp=self._ts(ns), frame_id=f"robot_{rid}",
                                                            point_stride=12, fields=fields, data=data), ns)
+
+    def scan(self, rid: int, now: float, ranges, bins: int = SCAN_BINS) -> None:
+        """A laser's ``(bearing, distance)`` pairs (robot frame) as one ``foxglove.LaserScan`` in ``robot_{rid}``:
+        the schema wants ranges at equal steps, so each reading goes to its bin of ``bins`` over [-pi, pi) (the
+        nearest, where two share one; an RPLIDAR A1's 360 readings a revolution each get their own at 360) and a
+        bin with none is NaN (no return)."""
+        ns = self.stamp(now)
+        step = 2.0 * math.pi / bins
+        out = [math.nan] * bins
+        for b, d in ranges:
+            if math.isfinite(b) and math.isfinite(d):
+                i = int(round((math.remainder(b, 2.0 * math.pi) + math.pi) / step)) % bins
+                if not d >= out[i]:          # NaN (empty) or farther: this one
+                    out[i] = d
+        m = self.m
+        self._log(self._robot(rid, "scan"), m.LaserScan(timestamp=self._ts(ns), frame_id=f"robot_{rid}",
+                                                        start_angle=-math.pi, end_angle=math.pi - step,
+                                                        ranges=out), ns)
 
     def bumpers(self, rid: int, now: float, left: bool, right: bool, wheel_drop: bool, faults=()) -> None:
         self._json(self._robot(rid, "bumpers"), {"robot": rid, "left": bool(left), "right": bool(right),

@@ -159,6 +159,7 @@ class RobotCore:
         self._home_reached = False
         self._fixes: Sequence = ()               # the GPS fixes of this cycle (telemetry)
         self.sensors = BaseSensors()             # the base's sensors as last sensed, with the sensors' ranges
+        self.laser: Sequence = ()                # the sensors: entries' own readings, as last sensed
         self._truth: tuple[float, float, float] | None = None     # Sensed.pose, when the host gives one
         self.last_step: float | None = None
         self._first_cycle: float | None = None
@@ -196,6 +197,7 @@ class RobotCore:
         dt = 0.0 if self.last_step is None else now - self.last_step
         self.last_step = now
         self.sensors = sensors_with(sensed.sensors, sensed.ranges)
+        self.laser = sensed.ranges                 # the sensors: entries' own readings (a laser's revolution)
         self._truth = sensed.pose
         self._fixes = sensed.fixes
         if sensed.pose is None:

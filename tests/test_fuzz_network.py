@@ -103,8 +103,8 @@ def recording(monkeypatch) -> list:
     runs = []
 
     class Recording(launcher.Lockstep):
-        def __init__(self, fleet):
-            super().__init__(fleet)
+        def __init__(self, fleet, *args, **kw):
+            super().__init__(fleet, *args, **kw)
             runs.append(self)
 
     monkeypatch.setattr(launcher, "Lockstep", Recording)

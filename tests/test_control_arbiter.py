@@ -269,3 +269,17 @@ def test_what_stands_at_the_goal_is_not_passed():
     assert avoid.dead_ahead() == 0.0
     avoid.goal_distance = 3.0
     assert avoid.dead_ahead() > 0
+
+
+_MIDS = tuple(tuple((a + b) / 2 for a, b in zip(axis, axis[1:])) for axis in (ARCS.speeds, ARCS.turn_rates))
+
+
+@settings(max_examples=200, deadline=None)
+@given(v=st.one_of(st.floats(-1.0, 1.0), st.sampled_from(ARCS.speeds + _MIDS[0]), st.floats(width=64)),
+       w=st.one_of(st.floats(-3.0, 3.0), st.sampled_from(ARCS.turn_rates + _MIDS[1]), st.floats(width=64)))
+def test_nearest_is_the_first_argmin_of_the_distance_on_each_axis(v, w):
+    # arc values, midpoints between neighbours (ties: the first wins), NaN and infinities included
+    iv = int(np.argmin(np.abs(np.asarray(ARCS.speeds) - v)))
+    iw = int(np.argmin(np.abs(np.asarray(ARCS.turn_rates) - w)))
+    assert ARCS.nearest(v, w) == iv * len(ARCS.turn_rates) + iw
+    assert ARCS.nearest(np.float64(v), np.float64(w)) == iv * len(ARCS.turn_rates) + iw      # numpy scalars too

@@ -60,16 +60,23 @@ class ArcSet:
         """Turn rate of every arc (flat; read-only, computed once)."""
         return _frozen(np.tile(np.asarray(self.turn_rates), len(self.speeds)))
 
-    @cached_property
-    def _axes(self) -> tuple[np.ndarray, np.ndarray]:
-        return _frozen(np.asarray(self.speeds)), _frozen(np.asarray(self.turn_rates))
-
     def nearest(self, v: float, w: float) -> int:
         """Index of the arc closest to (v, w), each axis measured in its own spacing."""
-        speeds, turns = self._axes
-        iv = int(np.argmin(np.abs(speeds - v)))
-        iw = int(np.argmin(np.abs(turns - w)))
+        v, w = float(v), float(w)        # Python floats: the same first closest index as np.argmin, no numpy calls
+        iv = _first_closest(self.speeds, v)
+        iw = _first_closest(self.turn_rates, w)
         return iv * len(self.turn_rates) + iw
+
+
+def _first_closest(axis: tuple[float, ...], x: float) -> int:
+    """``int(np.argmin(np.abs(np.asarray(axis) - x)))``: the first index of the least distance (0 when ``x`` is
+    NaN, as argmin of all-NaN is)."""
+    best, at = math.inf, 0
+    for i, a in enumerate(axis):
+        d = abs(a - x)
+        if d < best:
+            best, at = d, i
+    return at
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:

@@ -126,6 +126,7 @@ class AvoidObstacles:
     _ranges_at: float = field(default=-math.inf, repr=False)
     _ahead: tuple[float, float] = field(default=(0.0, -math.inf), repr=False)
     _gaps: list = field(default_factory=list, repr=False)       # (time, gap ahead) over the closing window
+    _lane_memo: tuple | None = field(default=None, repr=False)  # ((points, goal, radius, margin), lane gap)
 
     def on_bumpers(self, left: bool, right: bool, now: float) -> None:
         """Bumper state: a press starts (or extends) a back-up-and-turn-away manoeuvre."""
@@ -200,8 +201,8 @@ class AvoidObstacles:
         at = np.flatnonzero(m.ravel() >= 0)                           # only these can hold an interval
         rows = at // len(pts)
         a, root, g = a.ravel()[at], np.sqrt(np.maximum(m.ravel()[at], 0.0)), k.g[rows]
-        lo = np.searchsorted(k.speeds, (a - root) / g, side="left")  # first speed in the interval ...
-        hi = np.searchsorted(k.speeds, (a + root) / g, side="right")  # ... and one past the last
+        lo = k.speeds.searchsorted((a - root) / g, side="left")      # first speed in the interval ...
+        hi = k.speeds.searchsorted((a + root) / g, side="right")     # ... and one past the last
         if k.nv <= _WORD:
             steps_hit = _steps_hit(k, rows, lo, hi)[:, :k.nv]
         else:                                                         # speeds in words of _WORD
@@ -211,14 +212,15 @@ class AvoidObstacles:
 
     def ballot(self, arcs: ArcSet, now: float) -> Ballot:
         n = len(arcs.v)
+        m = _arc_masks(arcs)
         votes, veto = np.zeros(n), np.zeros(n, dtype=bool)
         if self.backing_up(now):
             votes = peak(arcs, self.backup_speed, self._turn, width=0.2)
-            votes = np.where(arcs.v > 0, -1.0, votes)
-            veto |= arcs.v > 0
+            votes = np.where(m.forward, -1.0, votes)
+            veto |= m.forward
         if now - self._ranges_at <= self.range_timeout and len(self._points):
             ttc = self.time_to_collision(arcs, self.horizon, steps=24)
-            veto |= (ttc <= self.veto_time) & (arcs.v != 0)
+            veto |= (ttc <= self.veto_time) & m.moving
             hits = np.isfinite(ttc)
             votes = np.where(hits, np.minimum(votes, -(1.0 - ttc / self.horizon)), votes)
             ahead = self.dead_ahead()
@@ -229,8 +231,7 @@ class AvoidObstacles:
             else:
                 ahead = 0.0                         # what is ahead goes our way, or stands: follow it, do not pass
             if ahead > 0 and self.keep_right > 0:
-                wmax = float(np.max(np.abs(arcs.w))) or 1.0
-                votes = votes - ahead * self.keep_right * np.where(arcs.v > 0, arcs.w / wmax, 0.0)
+                votes = votes - ahead * self.keep_right * m.right
         return Ballot(_clip1(votes), veto)
 
     def to_pass(self, now: float) -> bool:
@@ -258,6 +259,15 @@ class AvoidObstacles:
         pts = self._points
         if len(pts) == 0:
             return math.inf
+        key = (pts, self.goal_distance, self.radius, self.margin)
+        cached = self._lane_memo
+        if cached is not None and cached[0][0] is pts and cached[0][1:] == key[1:]:
+            return cached[1]     # the same readings and goal as the last call this cycle (dead_ahead, to_pass)
+        gap = self._lane_gap_of(pts)
+        self._lane_memo = (key, gap)
+        return gap
+
+    def _lane_gap_of(self, pts: np.ndarray) -> float:
         clearance = self.radius + self.margin
         lane = (pts[:, 0] > 0) & (np.abs(pts[:, 1]) < clearance) & (pts[:, 0] < self.goal_distance - 2 * self.radius)
         if not lane.any():
@@ -274,6 +284,20 @@ class AvoidObstacles:
         if not math.isfinite(gap):
             return 0.0
         return float(min(max(1.0 - gap / self.ahead_range, 0.0), 1.0))
+
+
+@dataclass(frozen=True)
+class _Masks:
+    """What :meth:`AvoidObstacles.ballot` needs of an arc set every cycle, computed once (read-only)."""
+    forward: np.ndarray       # arcs.v > 0
+    moving: np.ndarray        # arcs.v != 0
+    right: np.ndarray         # keep-right direction per arc: w / max |w| on forward arcs, 0 elsewhere
+
+
+@lru_cache(maxsize=16)
+def _arc_masks(arcs: ArcSet) -> _Masks:
+    wmax = float(np.max(np.abs(arcs.w))) or 1.0
+    return _Masks(_frozen(arcs.v > 0), _frozen(arcs.v != 0), _frozen(np.where(arcs.v > 0, arcs.w / wmax, 0.0)))
 
 
 @dataclass(frozen=True)
@@ -296,11 +320,13 @@ _WORD = 63                # speeds per word of bits
 
 def _steps_hit(k: "_Rays", rows: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """(nw, _WORD): per turn rate and speed (within a word, lo and hi in 0.._WORD), how many of the steps hit,
-    given intervals [lo, hi) of speeds hit in rows (turn rate, step).  Each row's speeds hit become bits (speed i:
+    given intervals [lo, hi) of speeds hit in rows (turn rate, step; ascending).  Each row's speeds hit become bits (speed i:
     bit i; an empty interval adds none); OR along the steps gives the speeds hit by each step, and as that only
     grows, the steps with a speed's bit set count back from the last to its first hit."""
     hit = np.zeros(len(k.rays), dtype=np.uint64)
-    np.bitwise_or.at(hit, rows, k.bit[hi] - k.bit[lo])
+    if len(rows):                         # rows ascend: OR each run of equal rows at once (ufunc.at is slow)
+        starts = np.flatnonzero(np.concatenate(([True], rows[1:] != rows[:-1])))
+        hit[rows[starts]] = np.bitwise_or.reduceat(k.bit[hi] - k.bit[lo], starts)
     by_then = np.bitwise_or.accumulate(hit.reshape(k.nw, k.steps), axis=1).astype("<u8", copy=False)
     bits = np.unpackbits(np.ascontiguousarray(by_then.T).view(np.uint8).reshape(k.steps, k.nw * 8), axis=1,
                          bitorder="little")

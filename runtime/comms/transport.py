@@ -21,7 +21,10 @@ A transport has:
   key for the loss model (None when ``copies``);
 * ``membership() -> [(robot id, joined)]``: robots seen joining or leaving since the last call (UDP: none);
 * ``check_drops(counters)``: brings ``kernel_dropped`` (UDP) or ``queue_dropped`` up to what it dropped unread;
-* ``close()``.
+* ``close()``;
+* ``peer_addresses``: True if ``comms.peers`` addresses are used (and so must resolve);
+* ``check_config(comms, file)`` (a classmethod): ConfigError naming ``file`` and the key unless the transport's own
+  keys of ``comms`` can work (``mrta daemon --check``).
 """
 from __future__ import annotations
 
@@ -36,13 +39,17 @@ TRANSPORTS = {
 }
 
 
-def open_transport(comms, robot_id: int, what: str = "comms.transport"):
-    """The peer transport ``comms`` (a robot config's ``comms``) names, opened; None for ``udp`` (the link opens
-    its own socket).  InputError (one line) when the transport's package is missing or it cannot open."""
-    name = comms.transport
-    if name == "udp":
-        return None
+def transport_class(name: str, what: str = "comms.transport") -> type:
+    """The class of transport ``name`` (its module imported; a transport imports its engine only when opened)."""
     if name not in TRANSPORTS:
         raise InputError(f"{what}: expected one of {', '.join(TRANSPORTS)}, got {name!r}")
     module, cls = TRANSPORTS[name]
-    return getattr(importlib.import_module(module), cls).from_config(comms, robot_id)
+    return getattr(importlib.import_module(module), cls)
+
+
+def open_transport(comms, robot_id: int, what: str = "comms.transport"):
+    """The peer transport ``comms`` (a robot config's ``comms``) names, opened; None for ``udp`` (the link opens
+    its own socket).  InputError (one line) when the transport's package is missing or it cannot open."""
+    if comms.transport == "udp":
+        return None
+    return transport_class(comms.transport, what).from_config(comms, robot_id)

@@ -112,6 +112,11 @@ class UdpTransport:
     :meth:`receive`, :meth:`membership`, :meth:`check_drops`, :meth:`close`.  The link keeps everything else."""
 
     copies = True            # destinations() are receivers: the link's loss model draws once per copy when sending
+    peer_addresses = True    # a frame goes to each comms.peers address: they must resolve
+
+    @classmethod
+    def check_config(cls, comms, file: str) -> None:
+        """Nothing beyond the peer addresses (``peer_addresses``) and ``comms.listen``, checked by the loader."""
 
     def __init__(self, family: int, listen_addr, peers, what: str = "comms.listen", sock: socket.socket | None = None,
                  listen: str | None = None):

@@ -104,6 +104,20 @@ class ZenohTransport:
     """One robot's Zenoh session: publishes its peer frames, queues the fleet's, watches liveliness tokens."""
 
     copies = False           # a frame is published once: the link draws its loss model per sender on receipt
+    peer_addresses = False   # peers are ids: their frames come through the router
+
+    @classmethod
+    def check_config(cls, comms, file: str) -> None:
+        """A client names its router(s); a Zenoh config file exists.  Peers are ids: their frames come through the
+        router, so their addresses are not used."""
+        from pathlib import Path
+
+        from runtime.config.build import ConfigError
+        z = comms.zenoh
+        if z.mode == "client" and not z.connect:
+            raise ConfigError(file, "comms.zenoh.connect", "the segment's router endpoint(s) (client mode)", [])
+        if z.config is not None and not Path(z.config).is_file():
+            raise ConfigError(file, "comms.zenoh.config", "a Zenoh JSON5 config file", z.config)
 
     def __init__(self, robot_id: int, fleet: str = "fleet", *, mode: str = "client", connect=(), listen=(),
                  congestion: str = "drop", lease: float | None = None, queue: int = QUEUE, file: str | None = None):

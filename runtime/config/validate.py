@@ -28,6 +28,8 @@ def validate(cfg) -> None:
     file = cfg.source or "<config>"
     comms = cfg.comms
     resolve_address(comms.listen, file, "comms.listen", listen=True)
+    from runtime.comms.transport import transport_class
+    transport = transport_class(comms.transport)
     seen: set[int] = set()
     for i, peer in enumerate(comms.peers):
         if peer.id == cfg.robot.id:
@@ -36,12 +38,9 @@ def validate(cfg) -> None:
         if peer.id in seen:
             raise ConfigError(file, f"comms.peers[{i}].id", "a peer id listed once", peer.id)
         seen.add(peer.id)
-        if comms.transport == "udp":           # over zenoh a peer is an id: its frames come through the router
+        if transport.peer_addresses:
             resolve_address(peer.address, file, f"comms.peers[{i}].address")
-    if comms.transport == "zenoh" and comms.zenoh.mode == "client" and not comms.zenoh.connect:
-        raise ConfigError(file, "comms.zenoh.connect", "the segment's router endpoint(s) (client mode)", [])
-    if comms.transport == "zenoh" and comms.zenoh.config is not None and not Path(comms.zenoh.config).is_file():
-        raise ConfigError(file, "comms.zenoh.config", "a Zenoh JSON5 config file", comms.zenoh.config)
+    transport.check_config(comms, file)            # the transport's own keys (routers, its config file)
     if comms.gcs is not None:
         resolve_address(comms.gcs, file, "comms.gcs")
     if cfg.planning.map is not None:

@@ -43,10 +43,11 @@ class Daemon:
             from runtime.drivers.registry import open_base
             base = open_base(cfg.base, self.id)
         self.base = base
-        from runtime.drivers.registry import open_sensor
-        # the sensors: entries (and an older config's gps: section); ``gps`` given stands for the GPS entries
-        self.sensor_parts = [gps if gps is not None and e.type == "nmea_gps" else open_sensor(e, self.id)
-                             for e in cfg.sensor_list()]
+        from runtime.drivers.registry import open_sensor, sensor_class
+        # the sensors: entries (and an older config's gps: section); ``gps`` given stands for those giving fixes
+        self.sensor_entries = cfg.sensor_list()
+        self.sensor_parts = [gps if gps is not None and sensor_class(e.type).reports == "fixes"
+                             else open_sensor(e, self.id) for e in self.sensor_entries]
         self.gps = next((s for s in self.sensor_parts if s.reports == "fixes"), None)
         if link is None:
             from runtime.comms.link import open_link
@@ -71,7 +72,7 @@ class Daemon:
             if hasattr(part, "open"):
                 part.open(now)
         self.log.info("open: base %s, sensors %s, listening %s, peers over %s, allocation %s%s", self.cfg.base.type,
-                      ", ".join(f"{e.type} {e.port}" for e in self.cfg.sensor_list()) or "none",
+                      ", ".join(f"{e.type} {e.port}" for e in self.sensor_entries) or "none",
                       self.cfg.comms.listen, self.cfg.comms.transport, self.core.method.name,
                       "" if self.core.node.armed else " (disarmed)")
 
@@ -165,7 +166,7 @@ class Daemon:
             "cpu_seconds": s.cpu_seconds, "wall_seconds": s.wall_seconds,
             "base": vars(self.base.stats) if hasattr(self.base, "stats") else {},
             "sensors": [{"type": e.type, "usable": bool(getattr(p, "usable", False))}
-                        for e, p in zip(self.cfg.sensor_list(), self.sensor_parts)],
+                        for e, p in zip(self.sensor_entries, self.sensor_parts)],
             "link": self.link.counters.as_dict() if hasattr(self.link, "counters") else {},
         })
         return snap

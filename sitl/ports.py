@@ -7,6 +7,13 @@ import socket
 from runtime import config as C
 
 
+def free_port(udp: bool = False, host: str = "127.0.0.1") -> int:
+    """A port free on ``host`` now (TCP, or UDP with ``udp``), for one server the caller starts next."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM if udp else socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
+
+
 def free_udp_base(n: int, start: int = 21000, stride: int = 97) -> int:
     """A base port such that base .. base+n+1 are all free UDP ports on 127.0.0.1."""
     for base in range(start, 60000, stride):

@@ -4,13 +4,7 @@ robots split among them in blocks of consecutive ids, as robots share a radio se
 started again on the same endpoint (a router restart), or unlinked from the others (a segment split)."""
 from __future__ import annotations
 
-import socket
-
-
-def free_tcp_port(host: str = "127.0.0.1") -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind((host, 0))
-        return s.getsockname()[1]
+from sitl.ports import free_port
 
 
 class Segments:
@@ -21,7 +15,7 @@ class Segments:
         robots = self.robots = sorted(robots)
         k = max(1, min(int(k), len(robots)))
         self.fleet = fleet
-        self.endpoints = [f"tcp/{host}:{free_tcp_port(host)}" for _ in range(k)]
+        self.endpoints = [f"tcp/{host}:{free_port(host=host)}" for _ in range(k)]
         self.links: list[list[str]] = [[] if i == 0 else [self.endpoints[0]] for i in range(k)]
         per = -(-len(robots) // k)
         self.segment = {rid: i // per for i, rid in enumerate(robots)}      # robot id -> its router's index

@@ -16,6 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"
 
 
+
 def port_block(start: int = 21000) -> int:
     """Where this test process looks for free UDP ports: each pytest-xdist worker from its own block.  A block
     found free is released before the fleet binds it, so two workers searching the same range could both take it."""

@@ -24,16 +24,11 @@ from runtime.errors import InputError  # noqa: E402
 from runtime.recording import summary  # noqa: E402
 from runtime.recording.read import read_messages  # noqa: E402
 from runtime.recording.recorder import TOPICS, Recorder  # noqa: E402
+from sitl.ports import free_port  # noqa: E402
 from tests.sitl_util import worker_fleet  # noqa: E402
 
 ROBOT_TOPICS = ("pose", "truth", "command", "path", "bumpers", "mavlink", "stats")
 SUBPROTOCOL = "foxglove.sdk.v1"        # what foxglove-sdk 0.30's server speaks (the successor of foxglove.websocket.v1)
-
-
-def _free_tcp_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 class LiveClient(threading.Thread):
@@ -119,7 +114,7 @@ def recorded_run(tmp) -> dict:
     allocation events while it runs."""
     from sitl import launcher
 
-    port = _free_tcp_port()
+    port = free_port()
     client = LiveClient(port, {"/robot_1/pose", "/allocation"})
     seen = {}
     logs = LogCapture()
@@ -583,7 +578,7 @@ def test_one_live_view_shows_a_process_fleet_whole(tmp_path):
     robots = [{"id": 1, "start": [-1.0, 0.0, 1.5708]}, {"id": 2, "start": [1.0, 0.0, 1.5708]}]
     f = launcher.build(_fleet_copy(tmp_path, robots=robots, scenario={"type": "mission", "tasks": tasks}),
                        tmp_path / "run")
-    port = _free_tcp_port()
+    port = free_port()
     topics = {f"/robot_{rid}/{t}" for rid in (1, 2) for t in ("pose", "allocation")}
     client = LiveClient(port, topics)
     client.start()
@@ -715,7 +710,7 @@ def test_log_replay_sends_the_recorded_frames_to_a_ground_station_at_their_pace(
             rec.frame(rid, 0.05 * k, "rx", b"\xfd\x00junk", ("127.0.0.1", 14601))
             sent.append((rid, k))
     rec.close()
-    port = _free_udp_port()
+    port = free_port(udp=True)
     conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255)
     try:
         start = time.monotonic()
@@ -733,12 +728,6 @@ def test_log_replay_sends_the_recorded_frames_to_a_ground_station_at_their_pace(
     assert got == [(rid, k, k) for rid, k in sent]
     assert took >= 0.95 * 19 * 0.05 / 4
     assert "sent 40 frames" in capsys.readouterr().out
-
-
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.mark.parametrize("argv, says", [

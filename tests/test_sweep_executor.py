@@ -7,7 +7,6 @@ import importlib.util
 import json
 import os
 import shutil
-import socket
 import subprocess
 import tempfile
 from dataclasses import replace
@@ -18,6 +17,7 @@ from runtime import cli
 from sitl.experiments import dr_common as C
 from sitl.experiments import executor
 from sitl.experiments.executor import Carried
+from sitl.ports import free_port
 
 GREEDY = C.Cell("Greedy", "greedy", "NM_NI", "soft")
 SETUP = replace(C.QUICK, max_objects=1)            # one object done ends a run: ~1.5 CPU s
@@ -108,9 +108,7 @@ def test_bad_cluster_or_jobs_is_one_line(given, expected, tmp_path, capsys):
 
 def test_no_scheduler_at_the_address_is_one_line(tmp_path, monkeypatch, capsys):
     pytest.importorskip("distributed", reason="the [cluster] extra (dask, distributed) is not installed")
-    with socket.socket() as s:                      # a free loopback port nobody listens on
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
+    port = free_port()                              # a free loopback port nobody listens on
     monkeypatch.setattr(executor, "CONNECT_TIMEOUT", 2.0)
     assert cli.main(["experiment", "dr-table3", "--quick", "--cluster", f"tcp://127.0.0.1:{port}",
                      "--out", str(tmp_path)]) == 2
@@ -131,18 +129,12 @@ def test_without_dask_cluster_says_which_extra(monkeypatch, tmp_path, capsys):
     assert "pip install 'mrta-runtime[cluster]'" in capsys.readouterr().err
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.mark.ray
 @pytest.mark.slow
 @pytest.mark.skipif(importlib.util.find_spec("ray") is None,
                     reason="Ray is not installed (the [ray] extra, ~358 MB: not in the test extra)")
 def test_ray_returns_the_rows_of_jobs_1(local_rows, tmp_path):
-    gcs, client = _free_port(), _free_port()
+    gcs, client = free_port(), free_port()
     env = {**os.environ, "RAY_ADDRESS": ""}
     temp = tempfile.mkdtemp(prefix="ray-")          # short: Ray's socket paths must fit 107 characters
     subprocess.run(["ray", "start", "--head", "--node-ip-address", "127.0.0.1", "--port", str(gcs),

@@ -25,7 +25,8 @@ from runtime.inprocess import Fleet, Kinematic, kinematic, robot_config  # noqa:
 from runtime.robot.core import RobotCore  # noqa: E402
 from runtime.robot.ports import BaseFacts  # noqa: E402
 from runtime.tasks.goto import Goto  # noqa: E402
-from sitl.segments import Segments, free_tcp_port  # noqa: E402
+from sitl.segments import Segments  # noqa: E402
+from sitl.ports import free_port
 
 KEY = bytes(range(32))
 OTHER_KEY = bytes(range(1, 33))
@@ -330,7 +331,7 @@ def test_a_segment_split_carries_on_each_side_and_merges_on_rejoin(segments, fle
 
 def test_a_router_with_access_control_refuses_what_its_rules_deny(tmp_path, links):
     """Zenoh's own access control on the router (mrta router --config FILE): robot 3 may not publish to the fleet."""
-    seg = SimpleNamespace(fleet=f"t{next(_fleets)}", segment={}, endpoints=[f"tcp/127.0.0.1:{free_tcp_port()}"])
+    seg = SimpleNamespace(fleet=f"t{next(_fleets)}", segment={}, endpoints=[f"tcp/127.0.0.1:{free_port()}"])
     acl = tmp_path / "router.json5"
     acl.write_text(json.dumps({"access_control": {
         "enabled": True, "default_permission": "allow",
@@ -393,13 +394,13 @@ def _zlink(rid, fleet, **zenoh_kw) -> MavlinkLink:
 
 def test_peer_mode_needs_no_router_and_a_client_takes_its_second_router_when_the_first_is_down(segments):
     fleet = f"t{next(_fleets)}"
-    seed = f"tcp/127.0.0.1:{free_tcp_port()}"
+    seed = f"tcp/127.0.0.1:{free_port()}"
     made = [_zlink(1, fleet, mode="peer", listen=[seed])]
     try:
         made += [_zlink(r, fleet, mode="peer", listen=["tcp/127.0.0.1:0"], connect=[seed]) for r in (2, 3)]
         wait_routes(made[2], made[:2])                     # 3 reaches 2 through the mesh gossip built
         seg = segments(1)
-        dead = f"tcp/127.0.0.1:{free_tcp_port()}"         # nothing listens there
+        dead = f"tcp/127.0.0.1:{free_port()}"         # nothing listens there
         a, b = (_zlink(r, seg.fleet, connect=[dead, seg.endpoints[0]]) for r in (1, 2))
         made += [a, b]
         wait_routes(b, [a])
@@ -454,21 +455,13 @@ def _flip_cut(bit: int, keep: int) -> bytes:
     return bytes(frame[:keep])
 
 
-def free_udp_port() -> int:
-    import socket
-
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
 def test_a_daemon_whose_router_does_not_answer_exits_2_naming_its_config(tmp_path, capsys):
     from runtime import cli
 
     robot = tmp_path / "robot.yaml"
     robot.write_text("robot: {id: 1}\ngps: {enabled: false}\nbase: {type: create_oi, port: 'loop://'}\n"
-                     f"comms: {{listen: '127.0.0.1:{free_udp_port()}', gcs: null, transport: zenoh,\n"
-                     f"        zenoh: {{connect: ['tcp/127.0.0.1:{free_tcp_port()}']}}}}\n")
+                     f"comms: {{listen: '127.0.0.1:{free_port(udp=True)}', gcs: null, transport: zenoh,\n"
+                     f"        zenoh: {{connect: ['tcp/127.0.0.1:{free_port()}']}}}}\n")
     assert cli.main(["daemon", str(robot), "--duration", "1"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{robot}: comms.zenoh.connect: cannot open a Zenoh session" in err, err

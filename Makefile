@@ -3,6 +3,10 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
+# tests/test_mavproxy_station.py drives the real MAVProxy, headless. Installed without its requirements: they include
+# vtk (565 MB) and opencv (288 MB) for its 3D map and camera modules, which a headless station never imports, and
+# which cost about 12 s of every fresh make test; what its core imports (pymavlink, pyserial, numpy) is in the base.
+MAVPROXY := 'MAVProxy>=1.8.75'
 
 .PHONY: run test test-fast bench clean
 
@@ -10,6 +14,7 @@ $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -e '.[test]'
+	$(PY) -m pip install -q --no-deps $(MAVPROXY)
 	@touch $(STAMP)
 
 run: $(STAMP)

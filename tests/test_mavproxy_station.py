@@ -1,4 +1,5 @@
-"""The real MAVProxy (``mavproxy.py`` from this Python's environment, the test extra ``MAVProxy>=1.8.75``) against
+"""The real MAVProxy (``mavproxy.py`` from this Python's environment; make test installs it without its map and
+camera requirements) against
 operator_4 signed with the key of a passphrase (`mrta key FILE --passphrase P`, `mrta sitl run FLEET --key FILE`):
 with `signing key P` it loads the parameters (no FTP timeout), uploads a waypoint file whose home line the robot
 skips, sees every waypoint reached, reads the mission back and disarms and arms robot 1; without the passphrase it
@@ -20,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-pytest.importorskip("MAVProxy")
+pytest.importorskip("MAVProxy", reason="MAVProxy is not installed: make test installs it (pip install --no-deps 'MAVProxy>=1.8.75', see the Makefile)")
 
 MAVPROXY = Path(sys.executable).parent / "mavproxy.py"
 PASSPHRASE = "op4-mavproxy"
@@ -118,7 +119,7 @@ def fleet(request, tmp_path):
     from tests.sitl_util import shipped_fleet
 
     if not MAVPROXY.exists():
-        pytest.skip(f"no {MAVPROXY} (pip install 'MAVProxy>=1.8.75')")
+        pytest.skip(f"no {MAVPROXY} (make test installs it: pip install --no-deps 'MAVProxy>=1.8.75')")
     how = getattr(request, "param", "passphrase")
     key_file = tmp_path / "fleet.key"
     assert main(["key", str(key_file), "--passphrase", PASSPHRASE]) == 0

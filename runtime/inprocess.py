@@ -96,7 +96,8 @@ class Hosted:
     def __init__(self, core: RobotCore, timeout: float):
         self.core = core
         self.robot_id = core.id
-        self.liveness = Liveness([p.id for p in core.cfg.comms.peers], timeout)
+        # a core that takes robots joining at run time hears any robot's heartbeats, as the daemon's link does
+        self.liveness = Liveness(None if core.joins else [p.id for p in core.cfg.comms.peers], timeout)
 
     @property
     def node(self):
@@ -137,7 +138,8 @@ class FixedAgent:
     def _nothing(self, *args) -> list:
         return []
 
-    add_tasks = withdraw_tasks = on_message = on_tick = on_peer_lost = on_progress = set_available = _nothing
+    add_tasks = withdraw_tasks = on_message = on_tick = on_peer_lost = on_peer_joined = on_progress = set_available = \
+        _nothing
 
     def pop_events(self):
         return []
@@ -196,6 +198,11 @@ class Kinematic:
 
     def remove(self, robot: int) -> None:
         self.commands.pop(robot, None)
+
+    def add(self, robot: int, pose: Sequence[float]) -> None:
+        """A robot that joins the fleet at run time, at ``pose`` (x, y[, heading])."""
+        self.poses[int(robot)] = (float(pose[0]), float(pose[1]), float(pose[2]) if len(pose) > 2 else 0.0)
+        self.driven.setdefault(int(robot), 0.0)
 
 
 class Discs:
@@ -395,8 +402,32 @@ class Fleet:
             self.bus.links[robot].close()      # its session dies with it
         self.motion.remove(robot)
 
+    def join(self, core: RobotCore, pose: Sequence[float], link=None) -> None:
+        """Robot ``core`` starts now at ``pose``, mid-run (its config may name no peers): on the bus from its first
+        cycle, heartbeating as the others do (``link``: its real link, for a fleet on links).  The robots already
+        there take it into their rosters when its first message reaches them, if their cores take joins
+        (``RobotCore(joins=True)``, or a transport that lets robots join).  The motion must take robots at run time
+        (:meth:`Kinematic.add`)."""
+        rid = core.id
+        if rid in self.robots:
+            raise ValueError(f"robot {rid} is already in the fleet")
+        if not hasattr(self.motion, "add"):
+            raise TypeError(f"{type(self.motion).__name__} cannot take a robot at run time")
+        h = Hosted(core, core.cfg.comms.heartbeat_timeout)
+        self.motion.add(rid, pose)
+        self.robots[rid] = h
+        if isinstance(self.bus, LinkBus):
+            if link is None:
+                raise ValueError(f"robot {rid}: a fleet on links needs the joiner's link")
+            self.bus.links[rid] = link
+            h.liveness = LinkLiveness(link)
+        else:
+            self.bus.agents[rid] = h
+            self.beats.agents[rid] = Beats(rid, h.liveness)
+        self._next_beat[rid] = self.now
+
     def live(self) -> list[int]:
-        return [r for r in self.robots if r not in self.bus.down]
+        return sorted(r for r in self.robots if r not in self.bus.down)
 
     def upload(self, to: int, items, now: float | None = None) -> list[int]:
         """Mission items ``(command, frame, params, x, y)`` accepted by robot ``to`` as an operator's upload is;
@@ -508,22 +539,31 @@ def kind_of(spec) -> str:
 
 # ---------------------------------------------------------------------------------------------- a kinematic fleet
 
-def kinematic(starts: Mapping[int, Sequence[float]], method: str | Method, options=None, *,
-              speed: float = 0.25, radius: float = 0.17, period: float = 0.1, heartbeat_timeout: float = 3.0,
-              **bus) -> Fleet:
-    """A fleet of ``starts`` ({id: (x, y[, heading])}) running allocation ``method`` (a registry name or a Method;
-    ``options`` default its defaults) with :class:`Kinematic` motion at cruise ``speed``: the real agents and
-    executors, bodies of ``radius`` that never touch.  ``bus``: the in-memory bus's delay, jitter, drop,
-    duplicate, seed."""
+def kinematic_core(rid: int, ids: Sequence[int], method: str | Method, options=None, *, speed: float = 0.25,
+                   radius: float = 0.17, period: float = 0.1, heartbeat_timeout: float = 3.0,
+                   joins: bool = False) -> RobotCore:
+    """The core of robot ``rid`` of a :func:`kinematic` fleet whose roster is ``ids`` (``(rid,)``: a robot whose
+    config names no peers, to :meth:`Fleet.join` a fleet whose cores take ``joins``)."""
     from runtime.allocation import registry
 
     m = registry.method(method) if isinstance(method, str) else method
     options = m.options() if options is None else options
-    ids = tuple(sorted(int(r) for r in starts))
     # ranging: the robot's (empty) range readings are the truth in a world without bodies, so an idle robot never
     # makes way for a peer's reported position (nothing can touch it)
     facts = BaseFacts(radius=radius, max_speed=max(speed, 0.5), ranging=True)
-    cores = {r: RobotCore(robot_config(r, ids, options, speed=speed, period=period,
-                                       heartbeat_timeout=heartbeat_timeout), facts, method=m, base_config=None)
-             for r in ids}
-    return Fleet(cores, Kinematic(starts, facts.max_speed), period=period, heartbeat_timeout=heartbeat_timeout, **bus)
+    return RobotCore(robot_config(rid, ids, options, speed=speed, period=period, heartbeat_timeout=heartbeat_timeout),
+                     facts, method=m, base_config=None, joins=joins)
+
+
+def kinematic(starts: Mapping[int, Sequence[float]], method: str | Method, options=None, *,
+              speed: float = 0.25, radius: float = 0.17, period: float = 0.1, heartbeat_timeout: float = 3.0,
+              joins: bool = False, **bus) -> Fleet:
+    """A fleet of ``starts`` ({id: (x, y[, heading])}) running allocation ``method`` (a registry name or a Method;
+    ``options`` default its defaults) with :class:`Kinematic` motion at cruise ``speed``: the real agents and
+    executors, bodies of ``radius`` that never touch.  ``joins``: robots outside the roster may join at run time
+    (:meth:`Fleet.join`).  ``bus``: the in-memory bus's delay, jitter, drop, duplicate, seed."""
+    ids = tuple(sorted(int(r) for r in starts))
+    cores = {r: kinematic_core(r, ids, method, options, speed=speed, radius=radius, period=period,
+                               heartbeat_timeout=heartbeat_timeout, joins=joins) for r in ids}
+    return Fleet(cores, Kinematic(starts, max(speed, 0.5)), period=period, heartbeat_timeout=heartbeat_timeout,
+                 **bus)

@@ -1,9 +1,17 @@
 """The interface every allocation family implements, and what a registry entry says about a method.
 
 An :class:`Agent` is a sans-IO state machine for one robot: built from an :class:`AgentContext` (robot
-id, configured peers, estimator, options), it takes tasks at any time, messages, ticks, lost peers,
-progress from execution and the operator's arm/disarm; it returns the messages to send and exposes the
-robot's :class:`~runtime.tasks.Commitment` s.  It never opens a socket, sleeps or reads the wall clock:
+id, configured peers, estimator, options), it takes tasks at any time, messages, ticks, lost peers, joined
+peers, progress from execution and the operator's arm/disarm; it returns the messages to send and exposes the
+robot's :class:`~runtime.tasks.Commitment` s.
+
+The roster the agent is built with is the config's ``comms.peers``.  Over a transport that lets robots join at
+run time (:mod:`runtime.comms.transport`, ``joins``: Zenoh) the robot core hands it each robot that joins, once,
+with :meth:`Agent.on_peer_joined`, before that robot's first message (the mirror of :meth:`Agent.on_peer_lost`):
+the family decides what a join means (a new round includes it, the next call for bids counts its bids).  A peer
+lost and heard again is not a join: each family takes it back by its messages, as before.  ``on_peer_joined`` is
+the one optional member: an agent without it keeps the roster it was built with (messages from a joiner are then
+dropped by the family as from a robot outside the fleet).  It never opens a socket, sleeps or reads the wall clock:
 every input carries ``now``.  The same agent runs in the daemon, in tests on the in-memory bus, and in
 fast experiment loops.
 
@@ -39,7 +47,7 @@ class Estimator(Protocol):
 @dataclass
 class AgentContext:
     robot_id: int
-    peers: tuple[int, ...]             # configured peers (robot ids), not this robot
+    peers: tuple[int, ...]             # configured peers (robot ids), not this robot; joins come later
     estimator: Estimator
     options: Any                       # the method's options dataclass (the config's allocation section)
     base: Any = None                   # the robot config's base section (what the robot is and senses), if known
@@ -54,6 +62,7 @@ class Agent(Protocol):
     def on_message(self, msg: Any, now: float) -> list: ...
     def on_tick(self, now: float) -> list: ...
     def on_peer_lost(self, robot_id: int, now: float) -> list: ...
+    def on_peer_joined(self, robot_id: int, now: float) -> list: ...       # optional (the module docstring)
     def on_progress(self, progress: Progress, now: float) -> list: ...
     def set_available(self, available: bool, now: float) -> list: ...
 

@@ -32,6 +32,11 @@ class Silence:
         self.heard: dict[int, float] = {}
         self.lost: set[int] = set()
 
+    def admit(self, peer: int) -> None:
+        """Track ``peer`` from now on too (a robot that joined the fleet at run time)."""
+        if self.peers is not None:
+            self.peers |= {int(peer)}
+
     def hear(self, sender: int, now: float) -> None:
         if self.peers is None or sender in self.peers:
             self.heard[sender] = max(now, self.heard.get(sender, now))
@@ -60,6 +65,10 @@ class PeerLiveness:
         self.messages = Silence(peers, timeout)
         self.beats_silent: set[int] = set()      # peers whose heartbeats the host reported silent, not back yet
         self.lost: set[int] = set()              # reported lost, not heard since
+
+    def admit(self, peer: int) -> None:
+        """Track ``peer`` too: a robot that joined the fleet at run time."""
+        self.messages.admit(peer)
 
     def hear(self, sender: int, now: float) -> None:
         self.messages.hear(sender, now)

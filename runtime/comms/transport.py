@@ -23,6 +23,8 @@ A transport has:
 * ``check_drops(counters)``: brings ``kernel_dropped`` (UDP) or ``queue_dropped`` up to what it dropped unread;
 * ``close()``;
 * ``peer_addresses``: True if ``comms.peers`` addresses are used (and so must resolve);
+* ``joins``: True if a robot not in ``comms.peers`` reaches the fleet and is reached by it (no address needed), so
+  the robot core may take it into the roster at run time when its first message arrives (UDP: False);
 * ``check_config(comms, file)`` (a classmethod): ConfigError naming ``file`` and the key unless the transport's own
   keys of ``comms`` can work (``mrta daemon --check``).
 """
@@ -45,6 +47,11 @@ def transport_class(name: str, what: str = "comms.transport") -> type:
         raise InputError(f"{what}: expected one of {', '.join(TRANSPORTS)}, got {name!r}")
     module, cls = TRANSPORTS[name]
     return getattr(importlib.import_module(module), cls)
+
+
+def transport_joins(name: str) -> bool:
+    """Whether robots may join a fleet on transport ``name`` at run time (its class's ``joins``)."""
+    return bool(transport_class(name).joins)
 
 
 def open_transport(comms, robot_id: int, what: str = "comms.transport"):

@@ -113,6 +113,7 @@ class UdpTransport:
 
     copies = True            # destinations() are receivers: the link's loss model draws once per copy when sending
     peer_addresses = True    # a frame goes to each comms.peers address: they must resolve
+    joins = False            # a robot not in comms.peers has no address here: the roster is the config's
 
     @classmethod
     def check_config(cls, comms, file: str) -> None:

@@ -105,6 +105,7 @@ class ZenohTransport:
 
     copies = False           # a frame is published once: the link draws its loss model per sender on receipt
     peer_addresses = False   # peers are ids: their frames come through the router
+    joins = True             # a robot on the fleet's keys reaches every other: one not in comms.peers may join
 
     @classmethod
     def check_config(cls, comms, file: str) -> None:

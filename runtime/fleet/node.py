@@ -8,7 +8,8 @@ robot, a task done or withdrawn anywhere is taken back (``withdraw_tasks``), and
 done is marked in the table and broadcast.  The same object runs in the daemon and, with a simulated
 executor, on the in-memory bus in tests.
 
-Given its configured ``peers``, it takes messages only from them, and only fleet task ids (minted by a robot of
+Given its configured ``peers`` (and the robots that joined since: :meth:`FleetNode.on_peer_joined`), it takes
+messages only from them, and only fleet task ids (minted by a robot of
 the fleet, upper 16 bits); a task record that contradicts the table (same id, another command, frame,
 parameters or position) is dropped: a task's content never changes once entered, only its state and who did it
 (both merged as :mod:`runtime.fleet.table` says).  Each drop is
@@ -220,6 +221,16 @@ class FleetNode:
             else:
                 out += self._ask(tid, held, now)
         return out
+
+    def on_peer_joined(self, robot_id: int, now: float) -> list:
+        """A robot outside the roster joined the fleet (the core saw its first message over a transport that lets
+        robots join): its messages are taken from now, and the agent is told (the family decides what a join
+        means; an agent without ``on_peer_joined`` keeps its roster)."""
+        if self.peers is not None:
+            self.peers |= {int(robot_id)}
+        self._lost.discard(robot_id)
+        join = getattr(self.agent, "on_peer_joined", None)
+        return [] if join is None else join(robot_id, now)
 
     def on_peer_lost(self, robot_id: int, now: float) -> list:
         self._lost.add(robot_id)

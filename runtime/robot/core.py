@@ -28,7 +28,7 @@ from runtime.execution import peer_readings
 from runtime.execution.executive import NONE
 from runtime.fleet.node import Notice
 from runtime.log import get_logger
-from runtime.messages import FLEET_MESSAGES, OPEN
+from runtime.messages import FLEET_MESSAGES, MAX_ROBOT, OPEN
 from runtime.robot.ports import BaseFacts, RobotPort
 from runtime.robot.sensing import PoseEstimate
 from runtime.tasks.goto import Goto
@@ -78,6 +78,7 @@ class CoreStats:
     agent_sent: int = 0
     agent_received: int = 0
     peers_lost: list = field(default_factory=list)
+    peers_joined: list = field(default_factory=list)      # robots outside comms.peers taken into the roster
 
 
 class Radio:
@@ -111,14 +112,17 @@ class RobotCore:
     choices (escape turns; default its id).  ``base_config``: what the agent is told the robot is (default the
     config's ``base``; None: nothing).  ``method``: the allocation method (default the registry's entry named by
     ``cfg.allocation.method``; a host may give one that is not registered).  ``state_period``: s between the
-    fleet node's state broadcasts."""
+    fleet node's state broadcasts.  ``joins``: robots outside ``comms.peers`` join the roster when their first message
+arrives (default: whether the config's transport lets them, :func:`runtime.comms.transport.transport_joins`:
+Zenoh yes, UDP no; a host whose bus reaches every robot, as the in-memory bus does, may say True)."""
 
     def __init__(self, cfg, base: BaseFacts, *, mavlink=None, seed: int | None = None, base_config=...,
-                 method=None, state_period: float = 1.0):
+                 method=None, state_period: float = 1.0, joins: bool | None = None):
         from runtime.allocation import registry
         from runtime.allocation.agent import AgentContext
         from runtime.execution.executive import ExecContext, Executive, Tunables
         from runtime.comms.liveness import PeerLiveness
+        from runtime.comms.transport import transport_joins
         from runtime.fleet.node import FleetNode
         from runtime.planning.robot_planner import RobotPlanner, TravelEstimator
         from runtime.tasks import Profile
@@ -140,6 +144,8 @@ class RobotCore:
                                                    cfg.base if base_config is ... else base_config, base.kinds))
         self.node = FleetNode(self.id, self.agent, armed=cfg.robot.armed, peers=list(peers), state_period=state_period)
         self.liveness = PeerLiveness(peers, cfg.comms.heartbeat_timeout)    # lost: no heartbeat and no message
+        self.joins = transport_joins(cfg.comms.transport) if joins is None else bool(joins)
+        self.roster = set(peers)                 # the configured peers and the robots that joined since
         self.executive = Executive(ExecContext(self.planner, Tunables(c.cruise_speed, c.lookahead, c.max_turn_rate,
                                                                       c.goal_tolerance), self.log, radius,
                                                seed=self.id if seed is None else seed, robot_id=self.id))
@@ -217,8 +223,10 @@ class RobotCore:
         """One peer message at its own time, for hosts that deliver messages one by one (the in-memory bus);
         returns the messages to send at that time."""
         self.stats.agent_received += 1
-        self.liveness.hear(getattr(msg, "sender", None), now)
-        out = self.node.on_message(msg, now)
+        sender = getattr(msg, "sender", None)
+        out = self._admit(sender, now)
+        self.liveness.hear(sender, now)
+        out += self.node.on_message(msg, now)
         self.stats.agent_sent += len(out)
         return out
 
@@ -252,7 +260,9 @@ class RobotCore:
         out = []
         held, self._held_back = self._held_back, []
         for msg in inbox.peers:
-            self.liveness.hear(getattr(msg, "sender", None), now)
+            sender = getattr(msg, "sender", None)
+            out += self._admit(sender, now)
+            self.liveness.hear(sender, now)
         for msg in held + list(inbox.peers):
             if not tick and _for_agent(msg):
                 self._held_back.append(msg)           # service(): the agent hears it at the next step
@@ -276,6 +286,20 @@ class RobotCore:
         if tick:
             out += node.tick(now)
         return out
+
+    def _admit(self, sender, now: float) -> list:
+        """A message from a robot outside the roster: over a transport that lets robots join (``joins``), it joins
+        now, before its message is taken (the fleet node and the agent are told, its silence is tracked from here on
+        as a configured peer's).  The link took the message, so it is signed when the fleet signs; a robot is seen
+        only once it sends one, never from a liveliness token alone (the router is not trusted)."""
+        if (not self.joins or sender in self.roster or sender == self.id or not isinstance(sender, int)
+                or isinstance(sender, bool) or not 1 <= sender <= MAX_ROBOT):
+            return []
+        self.roster.add(sender)
+        self.liveness.admit(sender)
+        self.stats.peers_joined.append(sender)
+        self.log.info("peer %d joined the fleet (its first message): taken into the roster", sender)
+        return self.node.on_peer_joined(sender, now)
 
     def _never_heard(self, now: float, alive: Iterable[int]) -> list[int]:
         """Configured peers not heard once within ``comms.startup_grace`` of the first cycle, reported once:
@@ -371,7 +395,7 @@ class RobotCore:
             "tasks": [c.task_id for c in self.agent.commitments],
             "converged": bool(self.agent.converged), "arrived": self.executive.arrived,
             "cycles": s.cycles, "agent_sent": s.agent_sent, "agent_received": s.agent_received,
-            "peers_lost": s.peers_lost,
+            "peers_lost": s.peers_lost, "peers_joined": s.peers_joined,
             "gps_rejected": getattr(self.ekf, "gps_rejected", 0),
             "relocalised": self.ekf.stats.relocalised,     # the pose filter gave up its position and heading
             "made_way": self.executive.made_way,           # idle cycles spent moving off for another robot

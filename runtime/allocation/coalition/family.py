@@ -108,6 +108,13 @@ class CoalitionAgent:
         self.auction.update_role(now)
         return self._route(self.auction.on_peer_lost(robot_id, now), now)
 
+    def on_peer_joined(self, robot_id: int, now: float) -> list:
+        """A robot joined the fleet: its messages count from now.  A round open now keeps the robots it invited; the
+        next call for bids invites it once its state says it is idle, and its bids are counted from then.  A joiner
+        with a lower id than the auctioneer takes the role once heard, as a lower robot coming back does."""
+        self.view.join(robot_id)
+        return []
+
     def on_progress(self, p: Progress, now: float) -> list:
         return self._route(self.member.on_progress(p, now), now)
 

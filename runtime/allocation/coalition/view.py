@@ -1,7 +1,8 @@
 """What one robot knows of the fleet, shared by its auctioneer and member roles: the open tasks, the peers'
 last ``RobotState`` (state, tasks held, position), who is lost, and so who the auctioneer is.
 
-The auctioneer is the lowest-id live robot: this robot and every configured peer heard and not lost since.
+The auctioneer is the lowest-id live robot: this robot and every configured peer (or one that joined since) heard
+and not lost since.
 Every robot works it out alone from what it hears; views agree once the states have spread.
 """
 from __future__ import annotations
@@ -53,6 +54,12 @@ class FleetView:
         p = self.peers.setdefault(m.sender, Peer())
         p.state, p.tasks, p.x, p.y = m.state, tuple(m.tasks), x, y
         return True
+
+    def join(self, rid: int) -> None:
+        """A robot that joined the fleet at run time: a peer from now on (live once heard)."""
+        if rid != self.robot_id:
+            self.configured |= {int(rid)}
+            self.lost.discard(rid)
 
     def on_lost(self, rid: int) -> None:
         if rid in self.configured:

@@ -370,6 +370,17 @@ class ComutarAgent:
         self.bidder.release([r for r, s in self.bidder.slots.items() if not s.held])
         return self._route(out, now)
 
+    def on_peer_joined(self, robot_id: int, now: float) -> list:
+        """A robot joined the fleet: its messages count from now (it bids on the next ``CmAnnounce``, which goes to
+        every robot; an auction open now counts its bid if it comes before the auction closes) and, the live robots
+        having changed, the auctioneers' tasks are looked at again (``fleet_version``)."""
+        if robot_id == self.robot_id or (robot_id in self.peers and robot_id not in self.lost):
+            return []
+        self.peers |= {int(robot_id)}
+        self.lost.discard(robot_id)
+        self.fleet_version += 1
+        return []
+
     def on_peer_lost(self, robot_id: int, now: float) -> list:
         if robot_id not in self.peers:
             return []

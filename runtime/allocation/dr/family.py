@@ -230,6 +230,13 @@ class DrAgent:
     def set_localized(self, localized: bool) -> None:
         self.localized = bool(localized)
 
+    def on_peer_joined(self, robot_id: int, now: float) -> list:
+        """A robot joined the fleet: its messages count from now (its leadership requests, bids and reports).  A
+        leader's auction under way keeps the bids it has; the joiner bids in the next one it hears of."""
+        self.now = now
+        self.world.join(robot_id)
+        return []
+
     def on_peer_lost(self, robot_id: int, now: float) -> list:
         self.now = now
         if not self.world.known(robot_id):

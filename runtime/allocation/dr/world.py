@@ -100,6 +100,12 @@ class World:
     def known(self, rid) -> bool:
         return isinstance(rid, int) and not isinstance(rid, bool) and rid in self.configured
 
+    def join(self, rid: int) -> None:
+        """A robot that joined the fleet at run time: a peer from now on."""
+        if rid != self.robot_id:
+            self.configured |= {int(rid)}
+            self.lost.discard(rid)
+
     def heard(self, rid: int, now: float) -> None:
         self.lost.discard(rid)
         self.peers.setdefault(rid, Peer()).heard = now

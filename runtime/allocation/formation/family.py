@@ -207,6 +207,16 @@ class FormationAgent:
                 out += self._from(r, r.solver.on_peer_lost(robot_id, now), now)
         return out + self._settle(now)
 
+    def on_peer_joined(self, robot_id: int, now: float) -> list:
+        """A robot joined the fleet: a peer from now on.  Rounds going on keep their robots (a solver's problem is
+        fixed); the next round a free robot starts includes it when its state says it is free."""
+        self._now = now
+        if robot_id != self.robot_id and robot_id not in self.peers:
+            self.peers = tuple(sorted({*self.peers, int(robot_id)}))
+        self.lost.discard(robot_id)
+        self.view.setdefault(robot_id, PeerView())
+        return []
+
     def on_progress(self, p: Progress, now: float) -> list:
         self._now = now
         if p.event == P_DONE and p.task in self.tasks:

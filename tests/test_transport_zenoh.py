@@ -5,6 +5,7 @@ split off and rejoined, liveliness, the loss model on receipt, and forged frames
 Needs the [zenoh] extra (CI installs it with [test]); skipped, saying so, where it is missing."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
@@ -267,6 +268,55 @@ def test_a_fleet_over_routers_reaches_the_in_memory_assignment(segments, fleets,
     # (a frame the routers delivered twice while two of them link up is a replay to the link: bad_signature_dropped)
     assert all(link.counters.unsigned_dropped == 0 for link in f.bus.links.values())
     assert all(h.core.stats.peers_lost == [] for h in f.robots.values())
+
+
+def zenoh_core(rid: int, ids) -> RobotCore:
+    """Robot ``rid``'s core with a config whose transport is zenoh and whose roster is ``ids`` (``(rid,)``: none)."""
+    m = registry.method("auction")
+    cfg = robot_config(rid, ids, m.options(), period=0.1)
+    cfg = dataclasses.replace(cfg, comms=dataclasses.replace(cfg.comms, transport="zenoh"))
+    return RobotCore(cfg, BaseFacts(radius=0.17, max_speed=0.5, ranging=True), method=m, base_config=None)
+
+
+def test_a_robot_that_joins_through_the_router_is_seen_bids_and_does_the_task_nearest_it(segments):
+    """Three robots over one router; a fourth whose config names no peers starts mid-run.  Its liveliness token and
+    its first signed frame reach every robot: each takes it into its roster (the cores take joins because their
+    transport is zenoh), it bids and does the task nearest it; no task is held twice.  (The same in-process for
+    every family: tests/test_membership.py.)"""
+    seg = segments(1)
+    three = (1, 2, 3)
+
+    def link(r):
+        return MavlinkLink(r, "127.0.0.1:0", [], None, signing_key=KEY,
+                           transport=ZenohTransport(r, seg.fleet, connect=[seg.endpoints[0]], lease=3.0))
+    links = {}
+    try:
+        for r in three:
+            links[r] = link(r)
+        f = Fleet({r: zenoh_core(r, three) for r in three}, Kinematic({r: STARTS[r] for r in three}, 0.5),
+                  period=0.1, links=links)
+        joined(f)
+        new = zenoh_core(4, (4,))
+        assert new.joins and new.roster == set()
+        f.join(new, STARTS[4], link(4))
+        links[4] = f.bus.links[4]
+
+        def seen(fl):
+            return all(4 in fl.robots[r].core.roster for r in three) and fl.robots[4].core.roster == set(three)
+        run_paced(f, f.now + 10.0, stop=seen)
+        assert seen(f) and all(f.robots[r].core.stats.peers_joined == [4] for r in three)
+        ids = f.hand_in(1, [Goto(2.5, 2.4), Goto(-0.2, 0.3)])      # nearest robot 4, and robot 1
+        twice = []
+
+        def done(fl):
+            twice.extend((t, h) for t, h in fl.holders().items() if len(h) > 1)
+            return held_once(fl, ids) and 4 in fl.holders().get(ids[0], {})
+        run_paced(f, f.now + 20.0, stop=done)
+        assert held_once(f, ids) and f.holders()[ids[0]] == {4: (4,)} and not twice
+        assert all(f.robots[r].node.dropped["not a robot of the fleet"] == 0 for r in f.robots)
+    finally:
+        for k in links.values():
+            k.close()
 
 
 @pytest.mark.slow

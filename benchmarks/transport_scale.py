@@ -15,10 +15,13 @@ all at ``--rate`` Hz: deliveries per second (and the share of the N (N-1) expect
 delivered frame and per robot-second, resident memory per robot (the process's growth over opening the links, /
 N).  Then with ``--auction N``: the epsilon auction (BS) on in-process robot cores over each transport (Fleet(links=)),
 N tasks, to every task held once: frames published per robot, sim and wall seconds to converge, and whether the
-assignment equals the in-memory bus's.  Prints a markdown table; asserts nothing.
+assignment equals the in-memory bus's.  With ``--join``: a robot joining a fleet of three robot cores at run time,
+how soon it is in every roster and how soon every core reports it lost once it stops (:func:`joining`).  Prints
+markdown tables; asserts nothing.
 
     PYTHONPATH=. python benchmarks/transport_scale.py --robots 10 50 100 --seconds 4
     PYTHONPATH=. python benchmarks/transport_scale.py --robots 10 --auction 10 50
+    PYTHONPATH=. python benchmarks/transport_scale.py --robots --join
 """
 from __future__ import annotations
 
@@ -336,6 +339,138 @@ def detect(timeout: float = 3.0) -> None:
     router.close()
 
 
+# ---------------------------------------------------------------------------------------------- joining
+
+def _paced(f, until: float, stop) -> None:
+    """``f.run`` to ``until`` (sim s) with its clock held to wall time (one sim second per wall second)."""
+    t0, s0 = time.monotonic(), f.now
+
+    def pace(fl):
+        ahead = (fl.now - s0) - (time.monotonic() - t0)
+        if ahead > 0:
+            time.sleep(ahead)
+    f.run(until, stop=stop, observe=pace)
+
+
+def joining(trials: int = 3, timeout: float = 3.0) -> None:
+    """How soon a robot that joins a running fleet of three is in every robot core's roster (and they in its), and
+    how soon every core reports it lost once it stops, wall clock (the fleet's clock held to wall time; robot cores of
+    the auction method on real signed links, :class:`runtime.inprocess.Fleet` with ``links``).  Over Zenoh (one
+    router): the joiner's config names no peers; it stops with its session closed (killed) or with its session open
+    and its cycles stopped (hung: its connection up, nothing sent).  Over UDP, which takes no joins, the fourth robot
+    is configured from the start and killed, for the loss bound the joins must keep.  Each trial starts the join and
+    the stop at another point of the 1 s heartbeat period."""
+    from runtime.comms.zenoh_transport import ZenohTransport, open_router
+    from runtime.inprocess import Fleet, Kinematic, kinematic_core
+
+    PERIOD = 0.05                    # the daemon's control period (20 Hz): the cores notice at their next cycle
+    starts = {1: (0.0, 0.0, 0.0), 2: (2.0, 0.0, 0.0), 3: (0.0, 2.0, 0.0), 4: (2.0, 2.0, 0.0)}
+    print(f"| transport | how it stopped | session open (s) | its token/heartbeat at every link after (s) | in every "
+          f"core's roster after (s) | the fleet in its roster after (s) | lost by every link after (s) | "
+          f"lost by every core after (s) | bound |\n|---|---|---|---|---|---|---|---|---|")
+
+    def lost_times(f, victim, links, t_stop):
+        at_link, at_core = {}, {}
+
+        def stop(fl):
+            now = time.monotonic() - t_stop
+            for r in (1, 2, 3):
+                if r not in at_link and victim in getattr(links[r], "_beats").lost:
+                    at_link[r] = now
+                if r not in at_core and victim in fl.robots[r].core.stats.peers_lost:
+                    at_core[r] = now
+            return len(at_core) == 3
+        _paced(f, f.now + 4 * timeout, stop)
+        return max(at_link.values(), default=math.nan), max(at_core.values(), default=math.nan)
+
+    for how in ("killed", "hung"):
+        for trial in range(trials):
+            ep = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
+            router = open_router([ep])
+            links = {}
+            try:
+                def link(r):
+                    return MavlinkLink(r, "127.0.0.1:0", [], None, signing_key=KEY, heartbeat_timeout=timeout,
+                                       transport=ZenohTransport(r, "join", connect=[ep], lease=timeout))
+                for r in (1, 2, 3):
+                    links[r] = link(r)
+                cores = {r: kinematic_core(r, (1, 2, 3), "auction", period=PERIOD, heartbeat_timeout=timeout, joins=True)
+                         for r in (1, 2, 3)}
+                f = Fleet(cores, Kinematic({r: starts[r] for r in (1, 2, 3)}, 0.5), period=PERIOD, links=links)
+                _paced(f, 20.0, lambda fl: all(len(k.peers_alive) == 2 for k in links.values()))
+                _paced(f, f.now + 1.0 + 0.3 * trial, None)
+                t0 = time.monotonic()
+                links[4] = link(4)
+                opened = time.monotonic() - t0
+                f.join(kinematic_core(4, (4,), "auction", period=PERIOD, heartbeat_timeout=timeout, joins=True),
+                       starts[4], links[4])
+                t1, s1 = time.monotonic(), f.now
+                seen, alive = {}, {}
+
+                def everyone(fl):
+                    now = time.monotonic() - t1
+                    for r in (1, 2, 3):
+                        if r not in seen and 4 in fl.robots[r].core.roster:
+                            seen[r] = now
+                        if r not in alive and 4 in links[r].peers_alive:
+                            alive[r] = now
+                    if 4 not in seen and fl.robots[4].core.roster == {1, 2, 3}:
+                        seen[4] = now
+                    return len(seen) == 4 and len(alive) == 3
+                _paced(f, f.now + 10.0, everyone)
+                _paced(f, s1 + 2.0 + 0.3 * trial, None)      # stopping at another point of its 1 s schedule
+                t_stop = time.monotonic()
+                if how == "killed":
+                    f.kill(4)                        # its session closes
+                else:
+                    f.bus.down.add(4)                # nothing sent or polled again; its session stays open
+                    f.motion.remove(4)
+                link_lost, core_lost = lost_times(f, 4, links, t_stop)
+                fleet = max(seen[r] for r in (1, 2, 3))
+                print(f"| zenoh | {how} | {opened:.3f} | {max(alive.values()):.2f} | {fleet:.2f} | {seen[4]:.2f} | "
+                      f"{link_lost:.2f} | {core_lost:.2f} | {timeout:g} s after its last message |", flush=True)
+            finally:
+                for k in links.values():
+                    k.close()
+                router.close()
+    for trial in range(trials):                  # the in-process host's in-memory bus (10 ms delay), sim time
+        from runtime.inprocess import kinematic
+        f = kinematic({r: starts[r] for r in (1, 2, 3)}, "auction", period=PERIOD, heartbeat_timeout=timeout,
+                      joins=True)
+        f.run(1.0 + 0.3 * trial)
+        s1 = f.now
+        f.join(kinematic_core(4, (4,), "auction", period=PERIOD, heartbeat_timeout=timeout, joins=True), starts[4])
+        f.run(s1 + 5.0, stop=lambda fl: all(4 in fl.robots[r].core.roster for r in (1, 2, 3)))
+        fleet = f.now - s1
+        f.run(s1 + 5.0, stop=lambda fl: fl.robots[4].core.roster == {1, 2, 3})
+        mine = f.now - s1
+        f.run(s1 + 2.0 + 0.3 * trial)
+        s2 = f.now
+        f.kill(4)
+        f.run(s2 + 4 * timeout, stop=lambda fl: all(4 in fl.robots[r].core.stats.peers_lost for r in (1, 2, 3)))
+        print(f"| in-memory bus (sim s) | killed | | | {fleet:.2f} | {mine:.2f} | | {f.now - s2:.2f} | "
+              f"{timeout:g} s after its last message |", flush=True)
+    for trial in range(trials):
+        links = {r: MavlinkLink(r, "127.0.0.1:0", [], None, signing_key=KEY, heartbeat_timeout=timeout)
+                 for r in starts}
+        try:
+            for r, k in links.items():
+                k.udp.peers = [o.address for q, o in links.items() if q != r]
+            cores = {r: kinematic_core(r, tuple(starts), "auction", period=PERIOD, heartbeat_timeout=timeout)
+                     for r in starts}
+            f = Fleet(cores, Kinematic(starts, 0.5), period=PERIOD, links=links)
+            _paced(f, 20.0, lambda fl: all(len(k.peers_alive) == 3 for k in links.values()))
+            _paced(f, f.now + 2.0 + 0.3 * trial, None)
+            t_stop = time.monotonic()
+            f.kill(4)
+            link_lost, core_lost = lost_times(f, 4, links, t_stop)
+            print(f"| udp | killed (configured, no join) | | | | | {link_lost:.2f} | {core_lost:.2f} | "
+                  f"{timeout:g} s after its last message |", flush=True)
+        finally:
+            for k in links.values():
+                k.close()
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--robots", type=int, nargs="*", default=[10, 50, 100])
@@ -346,6 +481,8 @@ def main() -> None:
     p.add_argument("--auction", type=int, nargs="*", default=[], help="fleet sizes for the auction runs")
     p.add_argument("--speedup", type=float, default=2.0, help="auction runs: sim seconds per wall second")
     p.add_argument("--detect", action="store_true", help="also time how soon a stopped peer is reported lost")
+    p.add_argument("--join", action="store_true", help="also time how soon a robot joining a fleet of robot cores "
+                   "is in every roster, and how soon every core reports it lost once it stops")
     args = p.parse_args()
     logging.disable(logging.WARNING)
     if args.robots:
@@ -356,6 +493,8 @@ def main() -> None:
         auction(args.transports, args.auction, args.speedup)
     if args.detect:
         detect()
+    if args.join:
+        joining()
 
 
 if __name__ == "__main__":

@@ -225,12 +225,14 @@ class FleetNode:
     def on_peer_joined(self, robot_id: int, now: float) -> list:
         """A robot outside the roster joined the fleet (the core saw its first message over a transport that lets
         robots join): its messages are taken from now, and the agent is told (the family decides what a join
-        means; an agent without ``on_peer_joined`` keeps its roster)."""
+        means; an agent without ``on_peer_joined`` keeps its roster).  It is sent my state at once: a robot that
+        just started learns the fleet from the first state of each robot (and its table from their digests), not a
+        state period later."""
         if self.peers is not None:
             self.peers |= {int(robot_id)}
         self._lost.discard(robot_id)
         join = getattr(self.agent, "on_peer_joined", None)
-        return [] if join is None else join(robot_id, now)
+        return ([] if join is None else join(robot_id, now)) + [self.robot_state(int(robot_id))]
 
     def on_peer_lost(self, robot_id: int, now: float) -> list:
         self._lost.add(robot_id)

@@ -17,7 +17,8 @@ import pytest
 from runtime.allocation import registry
 from runtime.allocation.dr.options import DrOptions
 from runtime.inprocess import Fleet, kinematic, kinematic_core, robot_config
-from runtime.robot.core import RobotCore
+from runtime.messages import IDLE, RobotState
+from runtime.robot.core import Inbox, RobotCore, Sensed
 from runtime.robot.ports import BaseFacts
 from runtime.tasks.goto import Goto
 from runtime.tasks.rendezvous import Rendezvous
@@ -96,6 +97,22 @@ def test_a_core_takes_joins_when_its_transport_lets_robots_join():
     for transport, joins in (("udp", False), ("zenoh", True)):
         c = dataclasses.replace(cfg, comms=dataclasses.replace(cfg.comms, transport=transport))
         assert RobotCore(c, BaseFacts(radius=0.17), method=m, base_config=None).joins is joins
+
+
+def test_a_daemons_core_takes_a_join_from_its_inbox_and_sends_the_joiner_its_state():
+    """The daemon's path (messages in the cycle's ``Inbox``, not one by one): the joiner is in the roster, its
+    heartbeat silence is tracked, its state was taken (not dropped), and it is sent this robot's state at once."""
+    core = kinematic_core(1, (1, 2), "auction", joins=True)
+    still = Sensed(pose=(0.0, 0.0, 0.0))
+    core.step(0.0, still, Inbox(alive=[2]))
+    out = core.step(0.1, still, Inbox(peers=[RobotState(JOINER, 0, IDLE, (), 3.0, 4.0, 0, 0)], alive=[2, JOINER]))
+    assert core.roster == {2, JOINER} and core.stats.peers_joined == [JOINER]
+    assert core.node.positions[JOINER][:2] == (3.0, 4.0) and not core.node.dropped
+    assert any(isinstance(m, RobotState) and m.dest == JOINER for m in out.peer_messages())
+    assert core.liveness.due(5.0, beats_lost=[JOINER]) == [JOINER]      # lost by the configured peers' rule
+    stranger = kinematic_core(1, (1, 2), "auction")                       # UDP's: no joins
+    stranger.step(0.0, still, Inbox(peers=[RobotState(JOINER, 0, IDLE, (), 3.0, 4.0, 0, 0)]))
+    assert stranger.roster == {2} and stranger.node.dropped["not a robot of the fleet"] == 1
 
 
 def test_a_task_for_four_robots_is_done_once_a_fourth_joins_a_coalition_fleet():

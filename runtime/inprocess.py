@@ -20,6 +20,9 @@ a peer whose heartbeats are silent for ``heartbeat_timeout`` is reported to the 
 rule), which loses it once its messages have been silent as long (:mod:`runtime.comms.liveness`); a peer never
 heard is the core's own ``comms.startup_grace`` rule.
 
+A robot can start mid-run (:meth:`Fleet.join`; its config may name no peers): cores built with ``joins=True`` take
+it into their rosters at its first message, as over Zenoh.
+
 A robot's commitments can also be given instead of allocated (:func:`fixed_method`: the foraging calibration's fixed
 commitments), and ``bus=False`` runs robots that never talk (nothing is sent or delivered).
 """

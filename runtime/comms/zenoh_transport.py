@@ -24,7 +24,9 @@ filled by the session's thread; what overflows is counted in ``queue_dropped``, 
 
 Membership: liveliness tokens.  A token appearing (now, or already there when the robot starts) counts as the robot
 heard; its disappearing (the session closed, or its lease ran out: ``comms.heartbeat_timeout``) reports it lost to
-the link at once; the core still waits for its messages to be silent for the heartbeat timeout, as over UDP.
+the link at once; the core still waits for its messages to be silent for the heartbeat timeout, as over UDP.  A
+robot outside ``comms.peers`` joins the roster at its first message (``joins``; :meth:`RobotCore._admit
+<runtime.robot.core.RobotCore._admit>`), never by its token alone: the router is not trusted.
 
 :func:`open_router` opens a session in router mode (``mrta router``); a site may run ``zenohd`` instead: same wire.
 """

@@ -76,6 +76,30 @@ def test_a_robot_that_joins_mid_run_is_seen_bids_and_does_the_task_nearest_it(me
     assert f.now - t0 <= timeout + 2 * f.period
 
 
+def test_a_lowest_id_robot_joining_mid_round_waits_for_the_round_instead_of_splitting_it():
+    """Robot 1 joins while robots 2-4 auction three tasks: it is the lowest id and free, but it never heard that round
+    start; it holds off while they say they are allocating, so it starts no round of its own for the tasks they
+    trade (it did, before: the two rounds gave one task to robots 1 and 3 at once until the lower id kept it)."""
+    f = kinematic({2: (0.0, 0.0, 0.0), 3: (2.0, 0.0, 0.0), 4: (0.0, 2.0, 0.0)}, "auction", joins=True)
+    f.run(1.0)
+    ids = f.hand_in(2, [Goto(4.3, 4.2), Goto(0.2, 0.3), Goto(2.2, 0.1)])
+    f.run(f.now + 0.3)                                    # their round is under way
+    core = kinematic_core(1, (1,), "auction", period=f.period, joins=True)
+    f.join(core, (4.0, 4.0, 0.0))
+    split, settled_twice = [], []
+
+    def watch(fl):
+        if any(fl.robots[r].agent.allocating for r in (2, 3, 4)):
+            split.extend(rid for rid in core.agent.rounds if rid >> 16 == 1)
+        for t, h in fl.holders().items():
+            if sum(not fl.robots[r].agent.allocating for r in h) > 1:
+                settled_twice.append((fl.now, t, h))
+    f.run(f.now + 60.0, stop=lambda fl: set(fl.done()) == set(ids), observe=watch)
+    assert set(f.done()) == set(ids) and all(len(v) == 1 for v in f.done().values())
+    assert not split and not settled_twice, (split[:3], settled_twice[:3])
+    assert all(1 in f.robots[r].core.roster for r in (2, 3, 4))
+
+
 def test_without_joins_the_roster_is_the_configs_and_a_newcomer_is_not_taken():
     """Over UDP (the default) a core takes no joins: the newcomer's messages are dropped, it never bids, and the
     task nearest it is done by a robot of the roster."""

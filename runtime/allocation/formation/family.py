@@ -135,6 +135,7 @@ class FormationAgent:
         self._not_in_told: dict[int, float] = {}      # round I am not in -> when I last said so
         self._not_in_asked: dict[int, float] = {}     # round I am not in -> when it first asked me something
         self._invited: dict[int, tuple[RoundStart, float]] = {}   # round naming tasks my table lacks -> (it, when)
+        self._joined: dict[int, float] = {}           # peer -> when it joined my roster at run time
         self.log = get_logger(f"alloc.{getattr(self.options, 'method', 'formation')}", self.robot_id)
 
     # ------------------------------------------------------------------ what the daemon reads
@@ -209,10 +210,13 @@ class FormationAgent:
 
     def on_peer_joined(self, robot_id: int, now: float) -> list:
         """A robot joined the fleet: a peer from now on.  Rounds going on keep their robots (a solver's problem is
-        fixed); the next round a free robot starts includes it when its state says it is free."""
+        fixed); the next round a free robot starts includes it when its state says it is free.  For ``HOLD_OFF`` start
+        waits, its saying it is allocating holds me off starting a round whatever its id (:meth:`_held_off`): a robot
+        that joins a running fleet (all its peers join its roster) must not split a round it never heard start."""
         self._now = now
         if robot_id != self.robot_id and robot_id not in self.peers:
             self.peers = tuple(sorted({*self.peers, int(robot_id)}))
+            self._joined[int(robot_id)] = now
         self.lost.discard(robot_id)
         self.view.setdefault(robot_id, PeerView())
         return []
@@ -413,12 +417,21 @@ class FormationAgent:
         from when I was free, or until it is declared lost, instead of starting a round of my own and splitting
         the problem: each robot would take its own best, not the fleet's."""
         for p, v in self.view.items():
-            if p >= self.robot_id or p in self.lost:
+            if p in self.lost:
                 continue
             recent = v.at is not None and now - v.at <= self.options.start_wait
+            if p > self.robot_id:
+                # a robot that joined my roster lately: its round may have started before one of us was there (a
+                # robot joining a running fleet), so its allocating holds me off too, whatever its id
+                if recent and v.state == ALLOCATING and self._just_joined(p, now):
+                    return True
+                continue
             if (p in lower and not recent) or (recent and v.state == ALLOCATING):
                 return True
         return False
+
+    def _just_joined(self, p: int, now: float) -> bool:
+        return now - self._joined.get(p, -math.inf) <= HOLD_OFF * self.options.start_wait
 
     def _peer_free(self, p: int) -> bool:
         v = self.view.get(p)

@@ -23,11 +23,14 @@ from tests.codec_util import codec_registry_kept
 
 @pytest.fixture
 def toy(monkeypatch, tmp_path):
-    monkeypatch.setitem(registry.METHODS, "toy", "tests.toy_method:TOY")     # the one line
-    monkeypatch.setenv("MRTA_CACHE_DIR", str(tmp_path / "cache"))           # a dialect that includes toy.xml
-    monkeypatch.setattr(dialect, "_loaded", {})
-    monkeypatch.setattr(dialect, "_by_file", {})
+    # the codec's registry is kept first, so what it keeps is the fleet without the toy (kept after the line below, a
+    # process's first registration took the toy in and left it there for the tests after: ToyClaim with no message
+    # in the fleet's dialect)
     with codec_registry_kept():                                             # the rest of the suite never sees it
+        monkeypatch.setitem(registry.METHODS, "toy", "tests.toy_method:TOY")     # the one line
+        monkeypatch.setenv("MRTA_CACHE_DIR", str(tmp_path / "cache"))           # a dialect that includes toy.xml
+        monkeypatch.setattr(dialect, "_loaded", {})
+        monkeypatch.setattr(dialect, "_by_file", {})
         monkeypatch.setattr(codec, "_fleet_registered", False)             # registered as in a new process
         yield registry.method("toy")
 

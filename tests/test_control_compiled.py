@@ -8,7 +8,7 @@ import pytest
 
 from runtime.control import compiled
 from runtime.control.arbiter import Arbiter, ArcSet, Ballot
-from runtime.control.behaviours import AvoidObstacles, FollowPath, Stop
+from runtime.control.behaviours import AvoidObstacles, FollowPath, Stop, peak
 from runtime.control.pure_pursuit import PurePursuit
 
 pytestmark = pytest.mark.skipif(not compiled.ENABLED, reason="numba not installed (the fast extra)")
@@ -141,3 +141,12 @@ def test_pure_pursuit_window_edge_matches_numpy(monkeypatch):
             return p._project(0.5, float(y))
         fast, slow = both(monkeypatch, project)
         assert fast == slow, y
+
+
+def test_peak_matches_numpy(monkeypatch):
+    rng = np.random.default_rng(38)
+    for trial in range(100):
+        arcs = ARC_SETS[trial % 2]
+        v, w, width = float(rng.uniform(-0.3, 0.6)), float(rng.uniform(-3, 3)), float(rng.choice([0.15, 0.2, 1.0]))
+        fast, slow = both(monkeypatch, lambda: peak(arcs, v, w, width=width))
+        assert same(fast, slow), trial

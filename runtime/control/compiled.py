@@ -175,6 +175,18 @@ def project(a, d, len2_div, seg_len, len_div, start, end, x, y, fresh, lo, hi, l
 
 
 @_jit
+def peak_exponent(vs, ws, v, w, sv, sw, width2):
+    """``-0.5 * (((vs - v) / sv) ** 2 + ((ws - w) / sw) ** 2) / width2``: what
+    :func:`runtime.control.behaviours.peak` takes the exponential of."""
+    out = np.empty(vs.shape[0])
+    for k in range(vs.shape[0]):
+        a = (vs[k] - v) / sv
+        b = (ws[k] - w) / sw
+        out[k] = -0.5 * (a * a + b * b) / width2
+    return out
+
+
+@_jit
 def range_votes(votes, veto, ttc, moving, right, veto_time, horizon, keep, push):
     """:meth:`AvoidObstacles.ballot`'s range part, in place: moving arcs hitting within ``veto_time`` vetoed, arcs
     that hit voted at most ``-(1 - ttc / horizon)`` (``np.minimum``: NaN wins, a tie gives the second), with

@@ -35,6 +35,11 @@ class ArcSet:
                 raise InputError(f"arc set {name}: expected strictly increasing finite values, got {axis!r}")
         if 0.0 not in self.speeds:
             raise InputError(f"arc set speeds: expected 0.0 among them (to stop), got {self.speeds!r}")
+        object.__setattr__(self, "_hash", hash((self.speeds, self.turn_rates)))
+
+    def __hash__(self) -> int:
+        """The fields' hash, computed once: the behaviours' caches look an arc set up several times a cycle."""
+        return self._hash
 
     @classmethod
     def uniform(cls, max_speed: float = 0.5, max_reverse: float = 0.2, max_turn_rate: float = 2.0,

@@ -6,6 +6,9 @@ Target: the 3600 s run in under 30 s of wall time on one core (120x real time). 
 * the run's wall and CPU time and the real-time factor, with the cost split (physics, sonar, executive,
   agents, harness bookkeeping) that the harness measures, and the time spent inside pybullet's own calls and
   inside the daemons' allocation stack (:class:`CallClock`): what the run would take were everything else free;
+* the same run with the compiled kernels (:mod:`runtime.control.compiled`, numba) off, that is the numpy code
+  they stand in for (``--numpy-seconds``, default the same length; 0 skips it), and whether its result is the
+  same: what the kernels buy, in one run;
 * the same scenario, same agents and executives, in a world at pybullet's defaults: the full-fidelity
   Pioneer 3-DX multibody (:mod:`sitl.bodies.pioneer3dx`: chassis mesh, two driven wheels, caster; five
   pybullet ray casts per sonar), pybullet's default time step (1/240 s) and solver iterations (50), every
@@ -14,7 +17,7 @@ Target: the 3600 s run in under 30 s of wall time on one core (120x real time). 
 
 The method is an option: ``--method standin`` (default until the DR family exists: the test stand-in agent of
 tests/foraging_standin.py, each free robot joins the nearest object) or any registered method name that
-allocates transport tasks.  Usage: python benchmarks/foraging_speed.py [--seconds 3600] [--default-seconds 60]
+allocates transport tasks.  Usage: python benchmarks/foraging_speed.py [--seconds 3600] [--numpy-seconds S] [--default-seconds 60]
 """
 from __future__ import annotations
 
@@ -31,6 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from runtime.config.world import WorldConfig  # noqa: E402
+from runtime.control import compiled  # noqa: E402
 from runtime.fleet.node import FleetNode  # noqa: E402
 from sitl.sensing import sonar_ring as sonar  # noqa: E402
 from sitl.foraging.harness import ForagingConfig, ForagingRun  # noqa: E402
@@ -157,6 +161,9 @@ def split(timing: dict) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=3600.0, help="simulated s of the fast run (default 3600)")
+    ap.add_argument("--numpy-seconds", type=float, default=None,
+                    help="simulated s of the same run with the compiled kernels off (the numpy code, as before "
+                         "numba: default --seconds; 0 skips it)")
     ap.add_argument("--default-seconds", type=float, default=60.0,
                     help="simulated s of the run at pybullet's defaults (default 60; it is slow)")
     ap.add_argument("--robots", type=int, default=10)
@@ -171,11 +178,11 @@ def main() -> None:
                          sonar=not args.no_sonar, control_period=args.control_period)
     print(f"{args.robots} robots, 3 objects of 40 wu, method {args.method}, control period {cfg.control_period} s, "
           f"fast world: physics step {cfg.dt * 1000:g} ms, {cfg.solver_iterations} solver iterations, disc bodies, "
-          f"closed-form sonar")
+          f"closed-form sonar; compiled kernels {'on (numba)' if compiled.ENABLED else 'off (numba not installed)'}")
     timing, wall, cpu, res = measure(cfg)
     print(f"fast world, {args.seconds:g} s simulated: wall {wall:.1f} s, CPU {cpu:.1f} s, real-time factor "
-          f"{args.seconds / wall:.0f}x (target: wall < 30 s, 120x); objects done {len(res.finished)}, "
-          f"{res.moved:.0f} wu moved, {res.messages.sent} messages sent")
+          f"{args.seconds / wall:.0f}x, {args.seconds / cpu:.0f}x in CPU (target: wall < 30 s, 120x); objects done "
+          f"{len(res.finished)}, {res.moved:.0f} wu moved, {res.messages.sent} messages sent")
     print(f"  cost split: {split(timing)}")
     rest = sum(v for k, v in timing.items() if k not in ("total", "executive", "engine", "node"))
     print(f"  without the executive the rest (world, agents, harness) takes {rest:.1f} s: "
@@ -184,6 +191,21 @@ def main() -> None:
     print(f"  inside pybullet (its step, the motor targets and joint states) {timing['engine']:.1f} s, inside the "
           f"daemon's allocation stack (FleetNode and agent) {timing['node']:.1f} s: with the executive, the sonar and "
           f"every other line free the run would still take {floor:.1f} s ({args.seconds / max(floor, 1e-9):.0f}x)")
+    numpy_seconds = args.seconds if args.numpy_seconds is None else args.numpy_seconds
+    if numpy_seconds > 0 and compiled.ENABLED:
+        compiled.ENABLED = False                      # every kernel's caller takes its numpy code again
+        try:
+            t_np, w_np, c_np, r_np = measure(ForagingConfig(**{**cfg.__dict__, "time_limit": numpy_seconds}))
+        finally:
+            compiled.ENABLED = True
+        same = "" if numpy_seconds != args.seconds else (
+            ", the same result" if (len(r_np.finished), r_np.moved, r_np.messages.sent) ==
+            (len(res.finished), res.moved, res.messages.sent) else ", A DIFFERENT RESULT")
+        print(f"numpy code (kernels off), {numpy_seconds:g} s simulated: wall {w_np:.1f} s, CPU {c_np:.1f} s, "
+              f"{numpy_seconds / w_np:.0f}x real time, {numpy_seconds / c_np:.0f}x in CPU; objects done "
+              f"{len(r_np.finished)}, {r_np.moved:.0f} wu moved, {r_np.messages.sent} messages sent{same}; compiled "
+              f"is {c_np / numpy_seconds / (cpu / args.seconds):.2f}x faster in CPU per simulated second")
+        print(f"  cost split: {split(t_np)}")
     if args.default_seconds > 0:
         short = ForagingConfig(**{**cfg.__dict__, "time_limit": args.default_seconds})
         t_fast, w_fast, c_fast, _ = measure(short)

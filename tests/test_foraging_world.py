@@ -101,6 +101,14 @@ def test_sonar_sees_a_robot_ahead_and_to_the_left_at_its_range_and_bearing():
     assert not _reading_near(readings, -math.pi / 2, 2.0 - RADIUS, tol_distance=1.0)   # nothing to the right
 
 
+def test_readings_of_all_robots_at_once_are_each_robots_readings_bit_for_bit():
+    rng = np.random.default_rng(5)
+    ranges = rng.uniform(0.1, 6.0, (12, sonar.N_SONARS))
+    ranges[rng.random(ranges.shape) < 0.3] = sonar.MAX_RANGE
+    ranges[3] = sonar.MAX_RANGE                                    # no echo at all
+    assert sonar.readings_all(ranges) == [sonar.readings(r) for r in ranges]
+
+
 def test_sonar_sees_a_wall_and_nothing_beyond_its_range():
     with ForagingWorld({1: (3.0, 0.0, 0.0)}, size=10.0) as w:
         r = w.sonar()[0]

@@ -18,6 +18,7 @@ from typing import Protocol
 
 import numpy as np
 
+from runtime.control import compiled
 from runtime.errors import InputError
 
 
@@ -34,6 +35,11 @@ class ArcSet:
                 raise InputError(f"arc set {name}: expected strictly increasing finite values, got {axis!r}")
         if 0.0 not in self.speeds:
             raise InputError(f"arc set speeds: expected 0.0 among them (to stop), got {self.speeds!r}")
+        object.__setattr__(self, "_hash", hash((self.speeds, self.turn_rates)))
+
+    def __hash__(self) -> int:
+        """The fields' hash, computed once: the behaviours' caches look an arc set up several times a cycle."""
+        return self._hash
 
     @classmethod
     def uniform(cls, max_speed: float = 0.5, max_reverse: float = 0.2, max_turn_rate: float = 2.0,
@@ -140,12 +146,15 @@ class Arbiter:
                 raise InputError(f"arbiter behaviour {b.name} weight: expected a finite number >= 0, got {b.weight!r}")
 
     def decide(self, now: float) -> Decision:
-        arcs = self.arcs
+        arcs, fast = self.arcs, compiled.ENABLED
         ballots = [(b.ballot(arcs, now), b) for b in self.behaviours]
         total = np.zeros(len(arcs.v))
         veto = np.zeros(len(arcs.v), dtype=bool)
         for ballot, b in ballots:
-            total += b.weight * _clip1(ballot.votes)      # clipping maps +-inf to +-1, as nan_to_num then clip does
+            if fast and ballot.votes.dtype == np.float64:
+                compiled.weighted_sum(total, ballot.votes, float(b.weight))
+            else:
+                total += b.weight * _clip1(ballot.votes)  # clipping maps +-inf to +-1, as nan_to_num then clip does
             if ballot.veto is not None:
                 veto |= ballot.veto
         if np.isnan(total).any():                       # a NaN vote (or weight): sum again with NaN votes as 0
@@ -159,6 +168,12 @@ class Arbiter:
                 self._smoothers = (self.smoothing, smoothing_matrix(nv, self.smoothing),
                                    smoothing_matrix(nw, self.smoothing))
             grid = self._smoothers[1] @ grid @ self._smoothers[2].T
+        if fast:
+            scores, k = compiled.best_arc(grid.ravel(), veto)
+            if k < 0:
+                self.vetoed_all += 1
+                return Decision(0.0, 0.0, arcs.nearest(0.0, 0.0), scores)
+            return Decision(float(arcs.v[k]), float(arcs.w[k]), k, scores)
         scores = np.where(veto, -np.inf, grid.ravel())
         if veto.all():
             self.vetoed_all += 1

@@ -14,6 +14,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from runtime.control import compiled
 from runtime.control.arbiter import ArcSet, Ballot, _clip1, _frozen
 from runtime.control.pure_pursuit import PurePursuit
 from runtime.log import get_logger
@@ -32,6 +33,11 @@ def peak(arcs: ArcSet, v: float, w: float, width: float = 0.15) -> np.ndarray:
     """Votes in [-1, 1] peaking at +1 on (v, w) and falling off as a Gaussian of the distance in arc space
     (each axis scaled by its range; ``width`` is the standard deviation as a fraction of that range)."""
     sv, sw = _spread(arcs)
+    if compiled.ENABLED:                  # the exponent compiled, the exponential numpy's own
+        e = np.exp(compiled.peak_exponent(arcs.v, arcs.w, float(v), float(w), sv, sw, width ** 2))
+        e *= 2.0
+        e -= 1.0
+        return e
     d2 = ((arcs.v - v) / sv) ** 2 + ((arcs.w - w) / sw) ** 2
     return 2.0 * np.exp(-0.5 * d2 / width ** 2) - 1.0
 
@@ -191,6 +197,11 @@ class AvoidObstacles:
         k = _arc_rays(arcs, float(horizon), int(steps))
         clearance = self.radius + self.margin
         reach = k.reach + clearance
+        if compiled.ENABLED:                  # the same intervals, each speed's first hit kept as it is found
+            pts, lim = compiled.near_points(pts, reach, clearance * clearance)
+            if len(pts) == 0:
+                return np.full(len(arcs.v), np.inf)
+            return compiled.first_hits(k.rays @ pts.T, lim, k.g, k.speeds, k.first, k.nw, k.steps)
         d2 = (pts * pts).sum(axis=1)
         near = d2 <= reach * reach
         if not near.any():
@@ -220,19 +231,31 @@ class AvoidObstacles:
             veto |= m.forward
         if now - self._ranges_at <= self.range_timeout and len(self._points):
             ttc = self.time_to_collision(arcs, self.horizon, steps=24)
+            if compiled.ENABLED:
+                ahead = self._keep_right_ahead(now)
+                keep = ahead > 0 and self.keep_right > 0
+                compiled.range_votes(votes, veto, ttc, m.moving, m.right, self.veto_time, self.horizon, keep,
+                                     ahead * self.keep_right)
+                return Ballot(votes, veto)
             veto |= (ttc <= self.veto_time) & m.moving
             hits = np.isfinite(ttc)
             votes = np.where(hits, np.minimum(votes, -(1.0 - ttc / self.horizon)), votes)
-            ahead = self.dead_ahead()
-            if ahead > 0 and self.to_pass(now):
-                self._ahead = (ahead, now)
-            elif now - self._ahead[1] <= self.keep_right_hold:
-                ahead = self._ahead[0]              # held: turning right clears the lane, the pass is not done
-            else:
-                ahead = 0.0                         # what is ahead goes our way, or stands: follow it, do not pass
+            ahead = self._keep_right_ahead(now)
             if ahead > 0 and self.keep_right > 0:
                 votes = votes - ahead * self.keep_right * m.right
         return Ballot(_clip1(votes), veto)
+
+    def _keep_right_ahead(self, now: float) -> float:
+        """How close what is to be passed on the right is (0: nothing to pass), as :meth:`dead_ahead`, held
+        ``keep_right_hold`` s once the pass began."""
+        ahead = self.dead_ahead()
+        if ahead > 0 and self.to_pass(now):
+            self._ahead = (ahead, now)
+        elif now - self._ahead[1] <= self.keep_right_hold:
+            ahead = self._ahead[0]              # held: turning right clears the lane, the pass is not done
+        else:
+            ahead = 0.0                         # what is ahead goes our way, or stands: follow it, do not pass
+        return ahead
 
     def to_pass(self, now: float) -> bool:
         """Whether what is dead ahead is to be passed on the right: it comes towards the robot at ``oncoming_speed``
@@ -269,6 +292,8 @@ class AvoidObstacles:
 
     def _lane_gap_of(self, pts: np.ndarray) -> float:
         clearance = self.radius + self.margin
+        if compiled.ENABLED:
+            return compiled.lane_gap(pts, clearance, self.goal_distance - 2 * self.radius)
         lane = (pts[:, 0] > 0) & (np.abs(pts[:, 1]) < clearance) & (pts[:, 0] < self.goal_distance - 2 * self.radius)
         if not lane.any():
             return math.inf

@@ -15,6 +15,7 @@ from typing import Sequence
 
 import numpy as np
 
+from runtime.control import compiled
 from runtime.errors import InputError
 
 Pose = tuple[float, float, float]
@@ -86,6 +87,11 @@ class PurePursuit:
         if len(self._pts) == 1:
             return 0.0
         a, d, len2_div, seg_len, len_div, start, end = self._segs
+        if compiled.ENABLED:
+            fresh, self._fresh = self._fresh, False
+            return float(compiled.project(a, d, len2_div, seg_len, len_div, start, end, x, y, fresh,
+                                          self._progress - self.lookahead, self._progress + 3.0 * self.lookahead,
+                                          self.lookahead ** 2, self._progress))
         xy = np.array([x, y])
         t = np.einsum("ij,ij->i", xy - a, d) / len2_div
         t = np.minimum(np.maximum(t, 0.0), 1.0)

@@ -291,13 +291,17 @@ class FleetNode:
 
     @property
     def state(self) -> int:
+        return self._state(self.held())
+
+    def _state(self, held: tuple[int, ...]) -> int:
+        """The state, given what the agent holds (:meth:`held`: the agent's commitments are built on each read)."""
         if not self.armed:
             return DISARMED
         if not self.localized:
             return LOCALIZING
         if getattr(self.agent, "allocating", False):
             return ALLOCATING
-        return EXECUTING if self.agent.commitments else IDLE
+        return EXECUTING if held else IDLE
 
     def held(self) -> tuple[int, ...]:
         return tuple(c.task_id for c in self.agent.commitments)[:MAX_HELD]
@@ -309,7 +313,8 @@ class FleetNode:
 
     def _state_now(self, now: float) -> list:
         """My state to the peers: at once when it changes, else every ``state_period``."""
-        key = (self.state, self.held(), self.table.digest)
+        held = self.held()
+        key = (self._state(held), held, self.table.digest)
         if key == self._last_state and now < self._next_state:
             return []
         self._last_state = key

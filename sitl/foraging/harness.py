@@ -203,13 +203,14 @@ class _WorldMotion:
         world = self.world
         ranges = world.sonar()
         bumps = world.bumpers()
-        poses = world.poses
+        poses = world.poses.tolist()
+        bumps = bumps.tolist()
+        seen = sonar.readings_all(ranges) if self.sonar_on else None
         out = {}
         for r in robots:
             k = world.index[r]
-            out[r] = ((float(poses[k, 0]), float(poses[k, 1]), float(poses[k, 2])),
-                      BaseSensors(bump_left=bool(bumps[k, 0]), bump_right=bool(bumps[k, 1]),
-                                  ranges=sonar.readings(ranges[k]) if self.sonar_on else ()))
+            out[r] = (tuple(poses[k]), BaseSensors(bump_left=bumps[k][0], bump_right=bumps[k][1],
+                                                   ranges=seen[k] if seen is not None else ()))
         return out
 
     def command(self, robot, v, w):

@@ -136,13 +136,15 @@ class ForagingWorld:
         steps = max(1, int(round(seconds / self.dt)))
         heading = self.poses[:, 2].copy()
         step_v, step_w = ACCEL * self.dt, ROT_ACC * self.dt
-        for _ in range(steps):
-            self.velocity[:, 0] += np.clip(self.target[:, 0] - self.velocity[:, 0], -step_v, step_v)
-            self.velocity[:, 1] += np.clip(self.target[:, 1] - self.velocity[:, 1], -step_w, step_w)
+        live = np.flatnonzero(self.alive).tolist()
+        for _ in range(steps):            # (minimum of maximum: np.clip's values without its dispatch)
+            self.velocity[:, 0] += np.minimum(np.maximum(self.target[:, 0] - self.velocity[:, 0], -step_v), step_v)
+            self.velocity[:, 1] += np.minimum(np.maximum(self.target[:, 1] - self.velocity[:, 1], -step_w), step_w)
             mid = heading + 0.5 * self.velocity[:, 1] * self.dt        # heading at the middle of the step
-            vx, vy = self.velocity[:, 0] * np.cos(mid), self.velocity[:, 0] * np.sin(mid)
-            for k in np.flatnonzero(self.alive):
-                targets = (float(vx[k]), float(vy[k]), float(self.velocity[k, 1]))
+            vx, vy = (self.velocity[:, 0] * np.cos(mid)).tolist(), (self.velocity[:, 0] * np.sin(mid)).tolist()
+            w = self.velocity[:, 1].tolist()
+            for k in live:
+                targets = (vx[k], vy[k], w[k])
                 if targets != self._sent[k]:
                     self._sent[k] = targets
                     p.setJointMotorControlArray(self.bodies[k], [0, 1, 2], p.VELOCITY_CONTROL,
@@ -153,7 +155,7 @@ class ForagingWorld:
         self._read_poses()
 
     def _read_poses(self) -> None:
-        for k in np.flatnonzero(self.alive):
+        for k in np.flatnonzero(self.alive).tolist():
             states = p.getJointStates(self.bodies[k], [0, 1, 2], **self._kw)
             o = self._origin[k]
             self.poses[k] = (o[0] + states[0][0], o[1] + states[1][0],

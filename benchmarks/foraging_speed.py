@@ -178,7 +178,7 @@ def main() -> None:
                          sonar=not args.no_sonar, control_period=args.control_period)
     print(f"{args.robots} robots, 3 objects of 40 wu, method {args.method}, control period {cfg.control_period} s, "
           f"fast world: physics step {cfg.dt * 1000:g} ms, {cfg.solver_iterations} solver iterations, disc bodies, "
-          f"closed-form sonar; compiled kernels {'on (numba)' if compiled.ENABLED else 'off (numba not installed)'}")
+          f"closed-form sonar; compiled kernels {'on (numba)' if compiled.AVAILABLE else 'off (numba not installed)'}")
     timing, wall, cpu, res = measure(cfg)
     print(f"fast world, {args.seconds:g} s simulated: wall {wall:.1f} s, CPU {cpu:.1f} s, real-time factor "
           f"{args.seconds / wall:.0f}x, {args.seconds / cpu:.0f}x in CPU (target: wall < 30 s, 120x); objects done "
@@ -192,12 +192,9 @@ def main() -> None:
           f"daemon's allocation stack (FleetNode and agent) {timing['node']:.1f} s: with the executive, the sonar and "
           f"every other line free the run would still take {floor:.1f} s ({args.seconds / max(floor, 1e-9):.0f}x)")
     numpy_seconds = args.seconds if args.numpy_seconds is None else args.numpy_seconds
-    if numpy_seconds > 0 and compiled.ENABLED:
-        compiled.ENABLED = False                      # every kernel's caller takes its numpy code again
-        try:
+    if numpy_seconds > 0 and compiled.AVAILABLE:
+        with compiled.numpy_code():                   # every kernel's caller takes its numpy code again
             t_np, w_np, c_np, r_np = measure(ForagingConfig(**{**cfg.__dict__, "time_limit": numpy_seconds}))
-        finally:
-            compiled.ENABLED = True
         same = "" if numpy_seconds != args.seconds else (
             ", the same result" if (len(r_np.finished), r_np.moved, r_np.messages.sent) ==
             (len(res.finished), res.moved, res.messages.sent) else ", A DIFFERENT RESULT")

@@ -26,7 +26,7 @@ sys.path.insert(0, str(ROOT))
 from runtime.control import behaviours as A  # noqa: E402
 from runtime.control import compiled as _shipped  # noqa: E402
 
-_shipped.ENABLED = False                    # "shipped" below is the numpy code, not runtime/control/compiled.py
+_shipped.AVAILABLE = _shipped.ENABLED = False   # "shipped" below is the numpy code, not runtime/control/compiled.py
 
 try:
     from numba import njit, uint64

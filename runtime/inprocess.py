@@ -40,6 +40,7 @@ from runtime.allocation.agent import DONE, AgentContext, Method
 from runtime.allocation.bus import InMemoryBus
 from runtime.config.robot import CommsConfig, ControlConfig, Peer, PlanningConfig, RobotConfig, RobotIdentity
 from runtime.comms.liveness import Silence
+from runtime.control import compiled
 from runtime.control.cspace import advance
 from runtime.drivers.base import BaseSensors
 from runtime.robot.core import Inbox, Output, RobotCore, Sensed
@@ -312,6 +313,7 @@ class Fleet:
                  on_output: Callable[[int, Output, float], None] | None = None,
                  after_cycle: Callable[[float], None] | None = None,
                  after_advance: Callable[[float], None] | None = None):
+        compiled.enable()                   # many robots faster than real time: the executive's compiled kernels
         self.robots = {int(r): Hosted(c, heartbeat_timeout) for r, c in sorted(cores.items())}
         self.motion = motion
         self.period = float(period)

@@ -31,6 +31,7 @@ import yaml
 
 from runtime import config as C
 from runtime.clock import ClockPublisher, ScaledClock, SimClock
+from runtime.control import compiled
 from runtime.log import get_logger
 from sitl import fleet_config as FC
 from sitl.ports import INSTANCE_STRIDE, check_instance
@@ -536,6 +537,7 @@ def run_lockstep(f: Fleet, timeout: float | None = None, progress=None, on_step=
     ``on_step(fleet)`` is called after every control cycle (tests attach observers there).  ``record``: the run's
     MCAP (True: RUN_DIR/run.mcap, as `mrta sitl run` asks; a path; False: none, the default for tests and
     experiments); ``live``: serve it over the Foxglove WebSocket protocol."""
+    compiled.enable()           # many robots faster than real time in one process: the executive's compiled kernels
     run = Lockstep(f, record, live)
     timeout = timeout or f.fleet.timeout
     wait = getattr(f.fleet.scenario, "wait", False)

@@ -11,7 +11,12 @@ from runtime.control.arbiter import Arbiter, ArcSet, Ballot
 from runtime.control.behaviours import AvoidObstacles, FollowPath, Stop, peak
 from runtime.control.pure_pursuit import PurePursuit
 
-pytestmark = pytest.mark.skipif(not compiled.ENABLED, reason="numba not installed (the fast extra)")
+pytestmark = pytest.mark.skipif(not compiled.AVAILABLE, reason="numba not installed (the fast extra)")
+
+
+@pytest.fixture(autouse=True)
+def _kernels_on(monkeypatch):
+    monkeypatch.setattr(compiled, "ENABLED", True)       # as a host that enables them (runtime.inprocess.Fleet)
 
 ARC_SETS = (ArcSet.uniform(max_speed=0.25, max_reverse=0.2, max_turn_rate=2.0),     # the foraging robots'
             ArcSet.uniform(max_speed=0.5, max_reverse=0.0, n_speeds=70, n_turns=9))   # more speeds than a word
@@ -150,3 +155,13 @@ def test_peak_matches_numpy(monkeypatch):
         v, w, width = float(rng.uniform(-0.3, 0.6)), float(rng.uniform(-3, 3)), float(rng.choice([0.15, 0.2, 1.0]))
         fast, slow = both(monkeypatch, lambda: peak(arcs, v, w, width=width))
         assert same(fast, slow), trial
+
+
+def test_a_host_of_many_robots_turns_the_kernels_on_and_numpy_code_holds_them_off(monkeypatch):
+    from runtime.inprocess import kinematic
+    monkeypatch.setattr(compiled, "ENABLED", False)             # as in a daemon's process
+    with compiled.numpy_code():
+        kinematic({1: (0.0, 0.0)}, method="auction")
+        assert not compiled.ENABLED
+    kinematic({1: (0.0, 0.0)}, method="auction")
+    assert compiled.ENABLED

@@ -4,9 +4,16 @@ Each kernel does, element by element, the same floating-point operations in the 
 stands in for (:mod:`runtime.control.behaviours`, :mod:`runtime.control.arbiter`,
 :mod:`runtime.control.pure_pursuit`), so the results are the same
 bit for bit; what numpy would hand to BLAS (a matrix product, which may fuse multiplies and adds) or to its own
-vectorised transcendental functions (``exp``) stays in numpy and is passed in.  Without numba (or with
-``MRTA_NO_NUMBA=1`` in the environment) :data:`ENABLED` is False and the callers keep their numpy code:
-``tests/test_control_compiled.py`` holds the two paths to the same bits.
+vectorised transcendental functions (``exp``) stays in numpy and is passed in.  The callers take the kernels while
+:data:`ENABLED` is True, and their numpy code otherwise: ``tests/test_control_compiled.py`` holds the two paths to
+the same bits.
+
+:data:`ENABLED` is off until a host that steps many robots faster than real time in one process turns it on with
+:func:`enable` (the in-process host, ``runtime.inprocess.Fleet``, and the lock-step SITL, ``sitl.launcher``): there
+the kernels halve the executive's CPU.  A daemon on a robot (or a daemon process of a SITL run) keeps the numpy
+code: its 10-20 Hz cycle has time to spare, and the first kernel call would stall it for the import (0.6 s) or,
+on a new machine, the compile (about 2 s here, more on a robot's CPU).  Without numba, or with
+``MRTA_NO_NUMBA=1`` in the environment, :func:`enable` leaves it off.
 
 numba is imported at the first kernel call; the kernels are compiled then and cached on disk (``cache=True``:
 numba's ``__pycache__`` beside this file), so the compile (about 2 s) is paid once per machine, later processes
@@ -14,20 +21,42 @@ only the import and load (about 0.6 s).
 """
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import math
 import os
 
 import numpy as np
 
-ENABLED = not os.environ.get("MRTA_NO_NUMBA") and importlib.util.find_spec("numba") is not None
+AVAILABLE = not os.environ.get("MRTA_NO_NUMBA") and importlib.util.find_spec("numba") is not None
+ENABLED = False
 _KERNELS: list = []
+
+
+def enable() -> bool:
+    """Turn the kernels on where numba is available (see the module's docstring); True if they are on."""
+    global ENABLED
+    ENABLED = AVAILABLE
+    return ENABLED
+
+
+@contextlib.contextmanager
+def numpy_code():
+    """The callers' numpy code inside the block, whatever a host enables there (the benchmarks and tests that set
+    the two paths side by side)."""
+    global AVAILABLE, ENABLED
+    saved = AVAILABLE, ENABLED
+    AVAILABLE = ENABLED = False
+    try:
+        yield
+    finally:
+        AVAILABLE, ENABLED = saved
 
 
 def _jit(fn):
     """``fn`` as a kernel.  numba is imported and every kernel wrapped only at the first call of one (a process
     that never runs the executive, or runs it without numba, does not pay for the import: about 0.3 s)."""
-    if not ENABLED:
+    if not AVAILABLE:
         return fn
     _KERNELS.append(fn)
 

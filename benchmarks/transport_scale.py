@@ -198,7 +198,7 @@ class Problem:
         self.method, self.n = method, n
         self.starts = {r: (rng.uniform(-10, 10), rng.uniform(-10, 10), 0.0) for r in range(1, n + 1)}
         if method == "auction":
-            self.tasks = [Goto(rng.uniform(-10, 10), rng.uniform(-10, 10)) for _ in range(n)]
+            self.tasks = [Goto(rng.uniform(-10, 10), rng.uniform(-10, 10), hold=None) for _ in range(n)]
         else:
             self.tasks = [Transport(rng.uniform(-10, 10), rng.uniform(-10, 10), 40.0, 108.0, 100.0)
                           for _ in range(max(1, n // 5))]
@@ -507,7 +507,7 @@ def joining(trials: int = 3, timeout: float = 3.0) -> None:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--robots", type=int, nargs="*", default=[10, 50, 100])
-    p.add_argument("--transports", nargs="+", default=list(TRANSPORTS), choices=TRANSPORTS)
+    p.add_argument("--transports", nargs="*", default=list(TRANSPORTS), choices=TRANSPORTS)
     p.add_argument("--seconds", type=float, default=4.0, help="of traffic per row")
     p.add_argument("--rate", type=float, default=5.0, help="frames per robot per second")
     p.add_argument("--connect-limit", type=float, default=60.0, help="s to wait for full membership")

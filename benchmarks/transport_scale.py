@@ -15,8 +15,8 @@ all at ``--rate`` Hz: deliveries per second (and the share of the N (N-1) expect
 delivered frame and per robot-second, resident memory per robot (the process's growth over opening the links, /
 N).  Then with ``--auction N`` and ``--dr N``: the epsilon auction (N goals) and paper 000's Double Round (N/5
 transport objects) on in-process robot cores, first on the in-memory bus, then over each transport (Fleet(links=)),
-to convergence (every task taken, the result unchanged for 2 sim s): agent messages and frames published per robot,
-sim and wall seconds to converge, and whether the result equals the in-memory bus's (:class:`Problem`).  With
+to convergence (every task taken, the result unchanged for 2 sim s, DR 5): agent messages and frames published per
+robot, sim and wall seconds to converge, and whether the result equals the in-memory bus's (:class:`Problem`).  With
 ``--join``: a robot joining a fleet of three robot cores at run time, how soon it is in every roster and how soon
 every core reports it lost once it stops (:func:`joining`).  Prints markdown tables; asserts nothing.
 
@@ -250,8 +250,10 @@ class Problem:
         rr, cc = linear_sum_assignment(c)
         return 100 * (got / float(c[rr, cc].sum()) - 1)
 
-    def settler(self, ids, still: float = 2.0):
-        """A stop test: every task taken, the result unchanged for ``still`` sim seconds."""
+    def settler(self, ids):
+        """A stop test: every task taken, the result unchanged for ``still`` sim seconds: 2 for the auction, 5 for DR
+        (longer than one of its leaders' auctions: collecting bids, awards and the winners' confirmations, 3 s)."""
+        still = 2.0 if self.method == "auction" else 5.0
         last = {"a": None, "since": 0.0}
 
         def settled(f) -> bool:
@@ -278,7 +280,7 @@ def converge(method: str, kinds, sizes, speedup: float) -> list[dict]:
         want = pb.result(ref)
         rows.append({"method": method, "transport": "in-memory bus", "n": n, "sim_s": done.last["since"] - 0.5,
                      "wall_s": time.monotonic() - t0, "cpu_s": time.process_time() - cpu0,
-                     "frames_per_robot": math.nan, "msgs_per_robot": (ref.bus.stats.sent - sent0) / n,
+                     "frames_per_robot": math.nan, "msgs_per_robot": (ref.bus.stats.sent - sent0) / n, "lost_per_robot": 0.0,
                      "settled": done(ref), "same": True, "differ": 0, "tasks": len(ids), "summary": pb.summary(want, ids)})
         print(_auction_row(rows[-1]), flush=True)
         for kind in kinds:
@@ -294,6 +296,7 @@ def converge(method: str, kinds, sizes, speedup: float) -> list[dict]:
                     inner(batch, now)
                 f.bus.send = count
                 sent0 = {r: link.counters.peer_sent for r, link in net.links.items()}
+                lost0 = _lost(net)
                 t0, s0, cpu0 = time.monotonic(), f.now, time.process_time()
 
                 def pace(fl):
@@ -308,6 +311,7 @@ def converge(method: str, kinds, sizes, speedup: float) -> list[dict]:
                 rows.append({"method": method, "transport": kind, "n": n, "sim_s": done.last["since"] - s0,
                              "wall_s": time.monotonic() - t0, "cpu_s": time.process_time() - cpu0,
                              "frames_per_robot": statistics.mean(per), "msgs_per_robot": msgs["n"] / n,
+                             "lost_per_robot": (_lost(net) - lost0) / n,
                              "settled": done(f), "same": got == want, "summary": pb.summary(got, ids), "tasks": len(ids),
                              "differ": sum(got.get(t) != want.get(t) for t in ids)})
                 print(_auction_row(rows[-1]), flush=True)
@@ -316,15 +320,22 @@ def converge(method: str, kinds, sizes, speedup: float) -> list[dict]:
     return rows
 
 
+def _lost(net: Net) -> int:
+    """Frames the links lost on receipt: the kernel's and the queue's overflows, and frames refused as replays."""
+    return sum(k.counters.kernel_dropped + k.counters.queue_dropped + k.counters.bad_signature_dropped
+               + k.counters.replayed_dropped for k in net.links.values())
+
+
 AUCTION_HEAD = ("| method | transport | N | converged | sim s to the final result | wall s | CPU s | agent messages/robot | "
-                "frames sent/robot | = in-memory result | result |\n|---|---|---|---|---|---|---|---|---|---|---|")
+                "frames sent/robot | frames lost on receipt/robot | = in-memory result | result |\n"
+                "|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def _auction_row(r: dict) -> str:
     same = "True" if r["same"] else f"False ({r['differ']} of {r['tasks']} tasks differ)"
     frames = f"{r['frames_per_robot']:.0f}" if math.isfinite(r["frames_per_robot"]) else ""
     return (f"| {r['method']} | {r['transport']} | {r['n']} | {r['settled']} | {r['sim_s']:.1f} | {r['wall_s']:.1f} | "
-            f"{r['cpu_s']:.1f} | {r['msgs_per_robot']:.1f} | {frames} | {same} | {r['summary']} |")
+            f"{r['cpu_s']:.1f} | {r['msgs_per_robot']:.1f} | {frames} | {r['lost_per_robot']:.1f} | {same} | {r['summary']} |")
 
 
 # ---------------------------------------------------------------------------------------------- loss detection

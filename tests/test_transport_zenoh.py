@@ -629,20 +629,3 @@ def test_mtls_admits_only_certificates_of_the_fleet_ca_and_access_control_by_com
             link.close()
         router.close()
 
-
-def test_one_robots_broadcast_and_addressed_frames_keep_their_order_and_none_is_taken_for_a_replay(segments, links):
-    """A robot's frames to all and to one peer travel on two keys, so two subscribers: were their callbacks run in a
-    thread each (zenoh-python's default), the receiver would queue them out of order and the replay window (signing
-    timestamps only rise per stream) refuse the older: 932 of 2,000 alternating frames were refused so."""
-    seg = segments(1)
-    a, b = links(1, seg), links(2, seg)
-    wait_routes(a, [b])
-    before = b.counters.bad_signature_dropped
-    got = []
-    for i in range(600):
-        a.send_agent([M.Status(1, 0 if i % 2 else 2, 1000 + i, 1, True)], 0.0)
-        if i % 50 == 0:
-            got += b.poll(0.0)
-    got += pump([b], lambda g: sum(getattr(m, "auction", 0) >= 1000 for m in g[id(b)]) + len(got) >= 600)[id(b)]
-    assert [m.auction for m in got if m.auction >= 1000] == list(range(1000, 1600))
-    assert b.counters.bad_signature_dropped == before

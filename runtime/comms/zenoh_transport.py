@@ -136,9 +136,8 @@ class ZenohTransport:
         s, me, remote = self.session, self.robot_id, zenoh.Locality.REMOTE
         self._all = s.declare_publisher(f"{self.prefix}/all/{me}", congestion_control=self._cc)
         self._to: dict[int, object] = {}
-        self._subs = [s.declare_subscriber(key, zenoh.handlers.Callback(self._on_frame, indirect=False),
-                                           allowed_origin=remote)          # in the network thread: _on_frame
-                      for key in (f"{self.prefix}/all/*", f"{self.prefix}/to/{me}/*")]
+        self._subs = [s.declare_subscriber(f"{self.prefix}/all/*", self._on_frame, allowed_origin=remote),
+                      s.declare_subscriber(f"{self.prefix}/to/{me}/*", self._on_frame, allowed_origin=remote)]
         self._put = zenoh.SampleKind.PUT
         self._alive = s.liveliness().declare_subscriber(f"{self.prefix}/alive/*", self._on_token, history=True)
         self._token = s.liveliness().declare_token(f"{self.prefix}/alive/{me}")
@@ -151,10 +150,6 @@ class ZenohTransport:
 
     # ------------------------------------------------------------------ the session's thread
     def _on_frame(self, sample) -> None:
-        """Queue a frame, in Zenoh's network thread (``indirect=False``): a Python callback's default is a thread of
-        its own per subscriber, and the two subscribers' threads then interleave one sender's broadcast and addressed
-        frames out of order, which the link's replay window refuses (MAVLink signing takes only newer timestamps per
-        stream): 932 of 2,000 frames alternating the two were refused so.  This only appends to a deque."""
         if len(self._queue) >= self._cap:
             self._overflow += 1
             return

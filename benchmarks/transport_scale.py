@@ -13,14 +13,15 @@ Per transport and N: time until every robot counts every other alive (membership
 tokens over Zenoh), then ``--seconds`` of traffic, every robot sending one Bid (a 39-byte signed MAVLink 2 frame) to
 all at ``--rate`` Hz: deliveries per second (and the share of the N (N-1) expected), p50/p99 latency, CPU per
 delivered frame and per robot-second, resident memory per robot (the process's growth over opening the links, /
-N).  Then with ``--auction N``: the epsilon auction (BS) on in-process robot cores over each transport (Fleet(links=)),
-N tasks, to every task held once: frames published per robot, sim and wall seconds to converge, and whether the
-assignment equals the in-memory bus's.  With ``--join``: a robot joining a fleet of three robot cores at run time,
-how soon it is in every roster and how soon every core reports it lost once it stops (:func:`joining`).  Prints
-markdown tables; asserts nothing.
+N).  Then with ``--auction N`` and ``--dr N``: the epsilon auction (N goals) and paper 000's Double Round (N/5
+transport objects) on in-process robot cores, first on the in-memory bus, then over each transport (Fleet(links=)),
+to convergence (every task taken, the result unchanged for 2 sim s, DR 5): agent messages and frames published per
+robot, sim and wall seconds to converge, and whether the result equals the in-memory bus's (:class:`Problem`).  With
+``--join``: a robot joining a fleet of three robot cores at run time, how soon it is in every roster and how soon
+every core reports it lost once it stops (:func:`joining`).  Prints markdown tables; asserts nothing.
 
     PYTHONPATH=. python benchmarks/transport_scale.py --robots 10 50 100 --seconds 4
-    PYTHONPATH=. python benchmarks/transport_scale.py --robots 10 --auction 10 50
+    PYTHONPATH=. python benchmarks/transport_scale.py --robots --auction 50 100 --dr 50 100
     PYTHONPATH=. python benchmarks/transport_scale.py --robots --join
 """
 from __future__ import annotations
@@ -182,66 +183,110 @@ def _row(r: dict) -> str:
 
 # ---------------------------------------------------------------------------------------------- auctions
 
-def auction(kinds, sizes, speedup: float) -> list[dict]:
-    from runtime.allocation import registry
-    from runtime.inprocess import Fleet, Kinematic, robot_config
-    from runtime.robot.core import RobotCore
-    from runtime.robot.ports import BaseFacts
-    from runtime.tasks.goto import Goto
-    import random
+class Problem:
+    """N robots in a 20 m square and the tasks one method converges on (seeded by N): ``auction`` N goals, each held
+    by one robot (cost over the Hungarian optimum reported); ``dr`` N/5 transport objects of 40 wu (paper 000's Double
+    Round, default options), each led by a robot with a group.  ``result(fleet)`` is what must equal the in-memory
+    bus's: the auction's task -> holder (or the robot that did it), DR's task -> its group (robots committed to it)."""
 
-    rows = []
-    for n in sizes:
+    def __init__(self, method: str, n: int):
+        import random
+        from runtime.tasks.goto import Goto
+        from runtime.tasks.transport import Transport
+
         rng = random.Random(n)
-        starts = {r: (rng.uniform(-10, 10), rng.uniform(-10, 10), 0.0) for r in range(1, n + 1)}
-        tasks = [Goto(rng.uniform(-10, 10), rng.uniform(-10, 10)) for _ in range(n)]
+        self.method, self.n = method, n
+        self.starts = {r: (rng.uniform(-10, 10), rng.uniform(-10, 10), 0.0) for r in range(1, n + 1)}
+        if method == "auction":
+            self.tasks = [Goto(rng.uniform(-10, 10), rng.uniform(-10, 10), hold=None) for _ in range(n)]
+        else:
+            self.tasks = [Transport(rng.uniform(-10, 10), rng.uniform(-10, 10), 40.0, 108.0, 100.0)
+                          for _ in range(max(1, n // 5))]
 
-        def assigned(f) -> dict:
-            """task -> the robots holding it, or that did it."""
-            out = {t: tuple(v) for t, v in f.holders().items()}
-            for t, robots in f.done().items():
-                out.setdefault(t, tuple(robots))
-            return out
+    def fleet(self, links=None):
+        from runtime.allocation import registry
+        from runtime.inprocess import Fleet, Kinematic, robot_config
+        from runtime.robot.core import RobotCore
+        from runtime.robot.ports import BaseFacts
 
-        def settler(ids, still: float = 2.0):
-            """A stop test: every task assigned to one robot, unchanged for ``still`` sim seconds."""
-            last = {"a": None, "since": 0.0}
+        m = registry.method(self.method)
+        facts = BaseFacts(radius=0.17, max_speed=0.5, ranging=True)
+        cores = {r: RobotCore(robot_config(r, tuple(self.starts), m.options(), period=0.1), facts,
+                              method=m, base_config=None) for r in self.starts}
+        return Fleet(cores, Kinematic(self.starts, 0.5), period=0.1, links=links)
 
-            def settled(f) -> bool:
-                a = assigned(f)
-                if a != last["a"]:
-                    last["a"], last["since"] = a, f.now
-                return (set(a) == set(ids) and all(len(v) == 1 for v in a.values())
-                        and f.now - last["since"] >= still)
-            settled.last = last            # when the assignment last changed
-            return settled
+    def result(self, f) -> dict:
+        if self.method == "dr":            # task -> (its leader, the robots of its group)
+            lead = {c.task_id: r for r in f.live() for c in f.robots[r].agent.commitments if c.role == "leader"}
+            return {t: (lead.get(t), tuple(sorted(v))) for t, v in f.holders().items()}
+        out = {t: tuple(sorted(v)) for t, v in f.holders().items()}
+        for t, robots in f.done().items():
+            out.setdefault(t, tuple(robots))
+        return out
 
-        def fleet(links=None):
-            m = registry.method("auction")
-            facts = BaseFacts(radius=0.17, max_speed=0.5, ranging=True)
-            cores = {r: RobotCore(robot_config(r, tuple(starts), m.options(), period=0.1), facts,
-                                  method=m, base_config=None) for r in starts}
-            return Fleet(cores, Kinematic(starts, 0.5), period=0.1, links=links)
+    def summary(self, result: dict, ids) -> str:
+        """The auction: % over the Hungarian optimum; DR: robots in groups, and the group sizes."""
+        if self.method == "dr":
+            sizes = sorted((len(g) for _, g in result.values()), reverse=True)
+            return f"{sum(sizes)} robots in groups of {'/'.join(map(str, sizes))}"
+        gap = self.gap(result, ids)
+        return f"{gap:+.2f} % over the optimum" if math.isfinite(gap) else ""
 
-        ref = fleet()
-        ref.run(0.5)
-        ids = ref.hand_in(1, tasks)
-        ref.run(120.0, stop=settler(ids))
-        want = assigned(ref)
-        where = dict(zip(ids, tasks))
+    def whole(self, result: dict, ids) -> bool:
+        """Every task taken (the auction: by one robot each)."""
+        if self.method == "dr":
+            return set(result) == set(ids) and all(lead is not None for lead, _ in result.values())
+        return set(result) == set(ids) and all(len(v) == 1 for v in result.values())
 
-        def cost(holders) -> float:
-            return sum(math.dist(starts[v[0]][:2], (where[t].x, where[t].y)) for t, v in holders.items())
+    def gap(self, result: dict, ids) -> float:
+        """% over the optimum (the auction), else NaN."""
+        if self.method != "auction" or not result:
+            return math.nan
         from scipy.optimize import linear_sum_assignment
         import numpy as np
-        c = np.array([[math.dist(starts[r][:2], (g.x, g.y)) for g in tasks] for r in sorted(starts)])
+        where = dict(zip(ids, self.tasks))
+        got = sum(math.dist(self.starts[v[0]][:2], (where[t].x, where[t].y)) for t, v in result.items())
+        c = np.array([[math.dist(self.starts[r][:2], (g.x, g.y)) for g in self.tasks] for r in sorted(self.starts)])
         rr, cc = linear_sum_assignment(c)
-        optimum = float(c[rr, cc].sum())
-        print(f"N={n}: in-memory bus {100 * (cost(want) / optimum - 1):+.2f} % over the optimum", flush=True)
+        return 100 * (got / float(c[rr, cc].sum()) - 1)
+
+    def settler(self, ids):
+        """A stop test: every task taken, the result unchanged for ``still`` sim seconds: 2 for the auction, 5 for DR
+        (longer than one of its leaders' auctions: collecting bids, awards and the winners' confirmations, 3 s)."""
+        still = 2.0 if self.method == "auction" else 5.0
+        last = {"a": None, "since": 0.0}
+
+        def settled(f) -> bool:
+            a = self.result(f)
+            if a != last["a"]:
+                last["a"], last["since"] = a, f.now
+            return self.whole(a, ids) and f.now - last["since"] >= still
+        settled.last = last            # when the result last changed
+        return settled
+
+
+def converge(method: str, kinds, sizes, speedup: float) -> list[dict]:
+    """``method`` to convergence at each size over each transport, against the in-memory bus (the class docstring
+    of :class:`Problem`)."""
+    rows = []
+    for n in sizes:
+        pb = Problem(method, n)
+        ref = pb.fleet()
+        ref.run(0.5)
+        t0, cpu0, sent0 = time.monotonic(), time.process_time(), ref.bus.stats.sent
+        ids = ref.hand_in(1, pb.tasks)
+        done = pb.settler(ids)
+        ref.run(120.0, stop=done)
+        want = pb.result(ref)
+        rows.append({"method": method, "transport": "in-memory bus", "n": n, "sim_s": done.last["since"] - 0.5,
+                     "wall_s": time.monotonic() - t0, "cpu_s": time.process_time() - cpu0,
+                     "frames_per_robot": math.nan, "msgs_per_robot": (ref.bus.stats.sent - sent0) / n, "lost_per_robot": 0.0,
+                     "settled": done(ref), "same": True, "differ": 0, "tasks": len(ids), "summary": pb.summary(want, ids)})
+        print(_auction_row(rows[-1]), flush=True)
         for kind in kinds:
-            net = Net(kind, starts, f"auc{n}{kind.replace('-', '')}")
+            net = Net(kind, pb.starts, f"{method}{n}{kind.replace('-', '')}")
             try:
-                f = fleet(net.links)
+                f = pb.fleet(net.links)
                 membership(net, 60.0)
                 msgs = {"n": 0}
                 inner = f.bus.send
@@ -251,35 +296,46 @@ def auction(kinds, sizes, speedup: float) -> list[dict]:
                     inner(batch, now)
                 f.bus.send = count
                 sent0 = {r: link.counters.peer_sent for r, link in net.links.items()}
+                lost0 = _lost(net)
                 t0, s0, cpu0 = time.monotonic(), f.now, time.process_time()
 
                 def pace(fl):
                     ahead = (fl.now - s0) / speedup - (time.monotonic() - t0)
                     if ahead > 0:
                         time.sleep(ahead)
-                ids = f.hand_in(1, tasks)
-                done = settler(ids)
+                ids = f.hand_in(1, pb.tasks)
+                done = pb.settler(ids)
                 f.run(f.now + 120.0, stop=done, observe=pace)
-                got = assigned(f)
-                per = [net.links[r].counters.peer_sent - sent0[r] for r in starts]
-                rows.append({"transport": kind, "n": n, "sim_s": done.last["since"] - s0, "wall_s": time.monotonic() - t0,
-                             "cpu_s": time.process_time() - cpu0, "frames_per_robot": statistics.mean(per),
-                             "msgs_per_robot": msgs["n"] / n,
-                             "settled": done(f), "same": got == want,
-                             "gap": 100 * (cost(got) / optimum - 1) if got else math.nan})
+                got = pb.result(f)
+                per = [net.links[r].counters.peer_sent - sent0[r] for r in pb.starts]
+                rows.append({"method": method, "transport": kind, "n": n, "sim_s": done.last["since"] - s0,
+                             "wall_s": time.monotonic() - t0, "cpu_s": time.process_time() - cpu0,
+                             "frames_per_robot": statistics.mean(per), "msgs_per_robot": msgs["n"] / n,
+                             "lost_per_robot": (_lost(net) - lost0) / n,
+                             "settled": done(f), "same": got == want, "summary": pb.summary(got, ids), "tasks": len(ids),
+                             "differ": sum(got.get(t) != want.get(t) for t in ids)})
                 print(_auction_row(rows[-1]), flush=True)
             finally:
                 net.close()
     return rows
 
 
-AUCTION_HEAD = ("| transport | N | converged | sim s to the final assignment | wall s | CPU s | agent messages/robot | frames sent/robot | "
-                "= in-memory assignment | cost over optimum |\n|---|---|---|---|---|---|---|---|---|---|")
+def _lost(net: Net) -> int:
+    """Frames the links lost on receipt: the kernel's and the queue's overflows, and frames refused as replays."""
+    return sum(k.counters.kernel_dropped + k.counters.queue_dropped + k.counters.bad_signature_dropped
+               + k.counters.replayed_dropped for k in net.links.values())
+
+
+AUCTION_HEAD = ("| method | transport | N | converged | sim s to the final result | wall s | CPU s | agent messages/robot | "
+                "frames sent/robot | frames lost on receipt/robot | = in-memory result | result |\n"
+                "|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def _auction_row(r: dict) -> str:
-    return (f"| {r['transport']} | {r['n']} | {r['settled']} | {r['sim_s']:.1f} | {r['wall_s']:.1f} | "
-            f"{r['cpu_s']:.1f} | {r['msgs_per_robot']:.1f} | {r['frames_per_robot']:.0f} | {r['same']} | {r['gap']:+.2f} % |")
+    same = "True" if r["same"] else f"False ({r['differ']} of {r['tasks']} tasks differ)"
+    frames = f"{r['frames_per_robot']:.0f}" if math.isfinite(r["frames_per_robot"]) else ""
+    return (f"| {r['method']} | {r['transport']} | {r['n']} | {r['settled']} | {r['sim_s']:.1f} | {r['wall_s']:.1f} | "
+            f"{r['cpu_s']:.1f} | {r['msgs_per_robot']:.1f} | {frames} | {r['lost_per_robot']:.1f} | {same} | {r['summary']} |")
 
 
 # ---------------------------------------------------------------------------------------------- loss detection
@@ -474,12 +530,13 @@ def joining(trials: int = 3, timeout: float = 3.0) -> None:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--robots", type=int, nargs="*", default=[10, 50, 100])
-    p.add_argument("--transports", nargs="+", default=list(TRANSPORTS), choices=TRANSPORTS)
+    p.add_argument("--transports", nargs="*", default=list(TRANSPORTS), choices=TRANSPORTS)
     p.add_argument("--seconds", type=float, default=4.0, help="of traffic per row")
     p.add_argument("--rate", type=float, default=5.0, help="frames per robot per second")
     p.add_argument("--connect-limit", type=float, default=60.0, help="s to wait for full membership")
     p.add_argument("--auction", type=int, nargs="*", default=[], help="fleet sizes for the auction runs")
-    p.add_argument("--speedup", type=float, default=2.0, help="auction runs: sim seconds per wall second")
+    p.add_argument("--dr", type=int, nargs="*", default=[], help="fleet sizes for the Double Round runs")
+    p.add_argument("--speedup", type=float, default=2.0, help="auction and dr runs: sim seconds per wall second")
     p.add_argument("--detect", action="store_true", help="also time how soon a stopped peer is reported lost")
     p.add_argument("--join", action="store_true", help="also time how soon a robot joining a fleet of robot cores "
                    "is in every roster, and how soon every core reports it lost once it stops")
@@ -488,9 +545,10 @@ def main() -> None:
     if args.robots:
         print(HEAD)
         scale(args.transports, args.robots, args.seconds, args.rate, args.connect_limit)
-    if args.auction:
+    if args.auction or args.dr:
         print(AUCTION_HEAD)
-        auction(args.transports, args.auction, args.speedup)
+    for method, sizes in (("auction", args.auction), ("dr", args.dr)):
+        converge(method, args.transports, sizes, args.speedup)
     if args.detect:
         detect()
     if args.join:

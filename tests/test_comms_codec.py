@@ -44,6 +44,10 @@ MESSAGES = st.one_of(                            # values the protocol allows (t
     st.builds(lambda s, d, r, t, rs: M.RoundStart(s, d, r, t, tuple(dict.fromkeys((s, *rs)))), robot, dest, u32,
               st.lists(st.integers(1, 0xFFFFFFFF), min_size=1, max_size=40, unique=True).map(tuple),
               st.lists(robot, max_size=39, unique=True)),
+    st.builds(lambda s, d, r, t, rs, last, part: M.RoundStart(s, d, r, t, rs, min(part, last), last),   # one part
+              robot, dest, u32, st.lists(st.integers(1, 0xFFFFFFFF), max_size=40, unique=True).map(tuple),
+              st.lists(robot, max_size=40, unique=True).map(tuple), st.integers(1, M.MAX_PARTS - 1),
+              st.integers(0, M.MAX_PARTS - 1)),
     st.builds(M.RoundLeave, robot, dest, u32),
 )
 
@@ -122,6 +126,31 @@ def test_values_outside_the_wire_types_are_refused(mod, msg):
     tx = mod.MAVLink(None, srcSystem=1, srcComponent=1)
     with pytest.raises(ValueError, match=type(msg).__name__):
         codec.encode(msg, tx)
+
+
+def test_a_round_start_frame_without_its_part_fields_is_one_frame(mod):
+    """``part`` and ``last`` are MAVLink 2 extensions: a frame from a sender whose dialect lacks them (its payload
+    ends after ``robots``, trailing zeros cut as MAVLink 2 does) decodes as part 0 of last 0, a whole round."""
+    msg = M.RoundStart(3, 0, 3 << 16 | 1, (65537, 65538), (3, 4))
+    tx = mod.MAVLink(None, srcSystem=3, srcComponent=1)
+    frame = bytearray(codec.encode(msg, tx))
+    assert frame[1] <= 4 + 160 + 1 + 40                   # zeros cut: no byte of the extensions went out
+    assert codec.from_mavlink(mod.MAVLink(None, srcSystem=9, srcComponent=1).parse_buffer(bytes(frame))[0]) == msg
+
+
+@pytest.mark.parametrize("msg, why", [
+    (M.RoundStart(3, 0, 1, (65537,), (3,), 2, 1), "part 2 of last 1"),
+    (M.RoundStart(3, 0, 1, (65537,), (3,), 0, M.MAX_PARTS), "part 0 of last 7"),
+    (M.RoundStart(3, 0, 1, (65537, 65537), (4,), 0, 1), "tasks"),
+    (M.RoundStart(3, 0, 1, (65537,), (4, 4), 1, 1), "robots"),
+    (M.RoundStart(3, 0, 1, (), (3,)), "tasks"),                       # a whole round names a task
+    (M.RoundStart(3, 0, 1, (65537,), (4,)), "robots"),                # and its sender
+])
+def test_a_round_start_part_is_refused_for_what_a_part_alone_can_get_wrong(mod, msg, why):
+    frame = codec.encode(msg, mod.MAVLink(None, srcSystem=3, srcComponent=1))
+    with pytest.raises(codec.InvalidMessage, match=why):
+        codec.from_mavlink(mod.MAVLink(None, srcSystem=9, srcComponent=1).parse_buffer(frame)[0])
+    assert M.RoundStart(3, 0, 1, (), (4,), 1, 1).invalid() is None     # a later part may name no task, not the sender
 
 
 def test_non_agent_messages_are_not_decoded(mod):

@@ -6,6 +6,7 @@ import dataclasses
 import math
 
 import pytest
+from hypothesis import given, settings, strategies as st
 
 from runtime.allocation import registry
 from runtime.allocation.agent import AgentContext
@@ -162,3 +163,45 @@ def test_a_free_robot_starts_after_start_wait_when_the_lower_robot_is_heard_free
         a.on_message(RobotState(1, 0, IDLE, (), 0.0, 0.0, 0, 0), t)
     assert _starts(a, (0.5, 2.4)) == []                          # free since 0.5
     assert _starts(a, (2.5,)) == [(2.5, (1, 2))]
+
+
+# ------------------------------------------------------------------ a round announced in parts (more than 40)
+
+BIG = tuple(range(1, 51))                                       # 50 robots: two parts of 40 and 10
+
+
+def test_a_round_of_more_robots_than_one_frame_holds_is_joined_once_every_part_is_in_whatever_the_order():
+    tasks = [Task(65537 + i, "goto", Goto(float(i), 0.0)) for i in range(50)]
+    one, two = agent("auction", rid=1, peers=BIG), agent("auction", rid=45, peers=BIG)
+    for a in (one, two):
+        a.add_tasks(tasks, 0.0)
+    parts = sent(one.on_tick(0.0), RoundStart)                  # robot 1 waits for no lower robot
+    assert [(m.part, m.last, len(m.tasks), len(m.robots)) for m in parts] == [(0, 1, 40, 40), (1, 1, 10, 10)]
+    assert two.on_message(parts[1], 0.0) == [] and parts[1].round not in two.rounds     # part 0 lost: not yet
+    two.on_tick(0.5)
+    again = [m for m in sent([m for t in (0.5, 1.0) for m in one.on_tick(t)], RoundStart) if m.dest == 45]
+    assert [m.part for m in again] == [0, 1]                   # every part again, to a robot not heard in the round
+    two.on_message(again[0], 1.0)
+    r = two.rounds[parts[0].round]
+    assert r.tasks == tuple(t.id for t in tasks) and r.robots == BIG
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.integers(1, 3), st.integers(0, 3), st.integers(0, 8), st.integers(0, 8),
+                          st.integers(0, 45), st.integers(0, 45)), max_size=30))
+def test_round_start_parts_random_truncated_or_contradicting_never_raise_and_are_kept_bounded(frames):
+    """Parts as a lossy, hostile link hands them in (any part of any last, lists cut short, rounds not their
+    sender's): the agent never raises, joins a round only when its joined lists are valid and name it, and keeps
+    parts of at most MAX_PENDING rounds."""
+    from runtime.allocation.formation.family import MAX_PENDING
+    a = agent("auction", rid=2, peers=BIG)
+    a.add_tasks([Task(65537 + i, "goto", Goto(float(i), 0.0)) for i in range(90)], 0.0)
+    for i, (sender, count, part, last, n_tasks, n_robots) in enumerate(frames):
+        rid = (sender if count else 9) << 16 | count
+        m = RoundStart(sender, 0, rid, tuple(65537 + (part * 40 + k) % 90 for k in range(n_tasks)),
+                       tuple(1 + (part * 40 + k) % 50 for k in range(n_robots)), part, last)
+        if m.invalid() is None:
+            a.on_message(m, 0.01 * i)
+        assert len(a._parts) <= MAX_PENDING
+    for r in a.rounds.values():
+        assert 2 in r.robots and r.id >> 16 in r.robots and len(set(r.tasks)) == len(r.tasks)

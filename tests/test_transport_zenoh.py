@@ -516,3 +516,116 @@ def test_a_daemon_whose_router_does_not_answer_exits_2_naming_its_config(tmp_pat
     assert cli.main(["daemon", str(robot), "--duration", "1"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{robot}: comms.zenoh.connect: cannot open a Zenoh session" in err, err
+
+
+# ---------------------------------------------------------------------------------------- TLS and mTLS
+
+def _certs(where, clients=()):
+    """A throwaway CA, a router certificate for 127.0.0.1 and a client certificate per name in ``clients`` (its common
+    name), made with the openssl command (PEM files in ``where``); returns {name: (cert, key)} with "ca" and
+    "router"."""
+    import shutil
+    import subprocess
+
+    if shutil.which("openssl") is None:
+        pytest.skip("the openssl command is not installed: no certificates to test TLS with")
+
+    def run(*args):
+        subprocess.run(["openssl", *args], check=True, capture_output=True, cwd=where, timeout=30)
+
+    def key_and_csr(name, cn):
+        run("req", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:P-256", "-nodes", "-keyout", f"{name}.key",
+            "-out", f"{name}.csr", "-subj", f"/CN={cn}")
+
+    run("req", "-x509", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:P-256", "-nodes", "-keyout", "ca.key",
+        "-out", "ca.pem", "-days", "1", "-subj", "/CN=mrta test CA", "-addext", "basicConstraints=critical,CA:TRUE",
+        "-addext", "keyUsage=critical,keyCertSign")
+    out = {"ca": (str(where / "ca.pem"), str(where / "ca.key"))}
+    for name, usage, alt in [("router", "serverAuth", "IP:127.0.0.1"), *((c, "clientAuth", f"DNS:{c}") for c in clients)]:
+        key_and_csr(name, name)
+        (where / f"{name}.cnf").write_text(f"basicConstraints=CA:FALSE\nextendedKeyUsage={usage}\nsubjectAltName={alt}\n")
+        run("x509", "-req", "-in", f"{name}.csr", "-CA", "ca.pem", "-CAkey", "ca.key", "-CAcreateserial", "-out",
+            f"{name}.pem", "-days", "1", "-extfile", f"{name}.cnf")
+        out[name] = (str(where / f"{name}.pem"), str(where / f"{name}.key"))
+    return out
+
+
+def _json5(path, tls: dict, **more) -> str:
+    path.write_text(json.dumps({"transport": {"link": {"tls": tls}}, **more}))
+    return str(path)
+
+
+def _crosses(src: MavlinkLink, dst: MavlinkLink, task: int, limit: float = 3.0) -> bool:
+    """A signed Status from ``src`` reaches ``dst`` within ``limit`` wall seconds (sent again each 0.1 s)."""
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < limit:
+        src.send_agent([M.Status(src.robot_id, 0, task, task, True)], 0.0)
+        got = pump([dst], lambda g: any(m.task == task for m in g[id(dst)]), limit=0.1)
+        if any(getattr(m, "task", None) == task for m in got[id(dst)]):
+            return True
+    return False
+
+
+def test_a_robot_reaches_its_router_over_tls_from_its_config_and_a_client_without_the_ca_cannot_connect(tmp_path):
+    """The router listens on tls/127.0.0.1 with a certificate of a throwaway CA (Zenoh's own keys, mrta router
+    --config); robots name the CA in the Zenoh file of comms.zenoh.config: a signed frame crosses.  A client that
+    does not trust the CA is refused (one line naming comms.zenoh.connect)."""
+    from runtime.errors import InputError
+
+    certs = _certs(tmp_path)
+    ep = f"tls/127.0.0.1:{free_port()}"
+    router = open_router([ep], file=_json5(tmp_path / "router.json5", {
+        "listen_certificate": certs["router"][0], "listen_private_key": certs["router"][1]}))
+    robot = _json5(tmp_path / "robot.json5", {"root_ca_certificate": certs["ca"][0]})
+    fleet, made = f"t{next(_fleets)}", []
+    try:
+        comms = CommsConfig(transport="zenoh", zenoh=ZenohConfig(connect=(ep,), fleet=fleet, config=robot))
+        for rid in (1, 2):
+            made.append(MavlinkLink(rid, "127.0.0.1:0", [], None, signing_key=KEY,
+                                    transport=ZenohTransport.from_config(comms, rid)))
+        assert _crosses(made[0], made[1], 5)
+        with pytest.raises(InputError, match="^comms.zenoh.connect: cannot open a Zenoh session") as e:
+            ZenohTransport(3, fleet, connect=[ep], lease=3.0)                    # no CA: the handshake fails
+        assert "\n" not in str(e.value)
+    finally:
+        for link in made:
+            link.close()
+        router.close()
+
+
+def test_mtls_admits_only_certificates_of_the_fleet_ca_and_access_control_by_common_name(tmp_path):
+    """mTLS on the router (enable_mtls): a robot without a client certificate is refused; access control by the
+    certificate's common name (cert_common_names), default deny: robots 1 and 2 exchange frames, robot 3, whose
+    certificate is of the CA but named in no policy, neither publishes nor hears anything."""
+    from runtime.errors import InputError
+
+    certs = _certs(tmp_path, clients=("robot-1", "robot-2", "robot-3"))
+    ep, fleet = f"tls/127.0.0.1:{free_port()}", f"t{next(_fleets)}"
+    allow = {"id": "fleet keys", "permission": "allow", "flows": ["ingress", "egress"],
+             "messages": ["put", "declare_subscriber", "liveliness_token", "declare_liveliness_subscriber",
+                          "liveliness_query"], "key_exprs": [f"mrta/{fleet}/**"]}
+    router = open_router([ep], file=_json5(tmp_path / "router.json5", {
+        "listen_certificate": certs["router"][0], "listen_private_key": certs["router"][1],
+        "root_ca_certificate": certs["ca"][0], "enable_mtls": True}, access_control={
+        "enabled": True, "default_permission": "deny", "rules": [allow],
+        "subjects": [{"id": "robots", "cert_common_names": ["robot-1", "robot-2"]}],
+        "policies": [{"rules": ["fleet keys"], "subjects": ["robots"]}]}))
+    made = []
+    try:
+        for rid in (1, 2, 3):
+            cert, key = certs[f"robot-{rid}"]
+            file = _json5(tmp_path / f"robot{rid}.json5", {"root_ca_certificate": certs["ca"][0], "enable_mtls": True,
+                                                           "connect_certificate": cert, "connect_private_key": key})
+            made.append(MavlinkLink(rid, "127.0.0.1:0", [], None, signing_key=KEY,
+                                    transport=ZenohTransport(rid, fleet, connect=[ep], lease=3.0, file=file)))
+        one, two, three = made
+        assert _crosses(one, two, 5) and _crosses(two, one, 6)
+        assert not _crosses(three, one, 7, limit=1.0) and not _crosses(one, three, 8, limit=0.5)
+        with pytest.raises(InputError, match="cannot open a Zenoh session"):
+            ZenohTransport(4, fleet, connect=[ep], lease=3.0,
+                           file=_json5(tmp_path / "nocert.json5", {"root_ca_certificate": certs["ca"][0]}))
+    finally:
+        for link in made:
+            link.close()
+        router.close()
+

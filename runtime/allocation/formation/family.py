@@ -5,9 +5,10 @@ Each method's solver (:class:`~runtime.allocation.formation.bs.BSAgent`, ``RTMAA
 task per robot, started by one robot.  Tasks reach a fleet at any time, though, and robots finish them,
 get lost and are disarmed.  :class:`FormationAgent` runs the solver in **rounds**:
 
-* A round allocates the open tasks no robot holds (at most ``MAX_ROUND``, lowest ids first) among the
-  robots that are free (armed, localized, holding no task).  The lowest-id free robot starts it with a
-  ``RoundStart`` naming the tasks and the robots, then runs its solver's ``start``; a free robot named
+* A round allocates the open tasks no robot holds (at most ``MAX_ROUND``, or one per free robot if there are more,
+  lowest ids first) among the robots that are free (armed, localized, holding no task).  The lowest-id free robot
+  starts it with a ``RoundStart`` naming the tasks and the robots (in parts if a list is longer than one frame
+  holds; a robot acts on it once it has every part), then runs its solver's ``start``; a free robot named
   in it joins with a solver of its own, one that is not free answers ``RoundLeave`` and its peers in the
   round treat it as lost there.  A free robot whose table lacks one of the round's tasks (its record was lost
   on the way; the state digests bring it within a second or two) waits for it, quiet and starting no round of
@@ -66,17 +67,19 @@ from runtime.allocation.agent import AWARDED, DONE, RELEASED, AgentContext, Meth
 from runtime.allocation.formation.bs import BSAgent
 from runtime.allocation.formation.eps_auction import EpsAuctionAgent
 from runtime.allocation.formation.assignment import MAX_TASKS, NO_TASK
-from runtime.allocation.formation.messages import (AGENT_MESSAGES, MAX_ROUND, ROUND_MESSAGES, Announce,
-                                                   Award, Price, RoundLeave, RoundStart, Status, TaskInfo)
+from runtime.allocation.formation.messages import (AGENT_MESSAGES, MAX_PARTS, MAX_ROUND, ROUND_MESSAGES, Announce,
+                                                   Award, Price, RoundLeave, RoundStart, Status, TaskInfo,
+                                                   join_round, split_round)
 from runtime.allocation.formation.options import AuctionOptions, BSOptions, RTMAOptions
 from runtime.allocation.formation.rtma import RTMAAgent
-from runtime.messages import BROADCAST, ALLOCATING, EXECUTING, IDLE, RobotState
+from runtime.messages import BROADCAST, ALLOCATING, EXECUTING, IDLE, RobotState, why_invalid
 from runtime.log import get_logger
 from runtime.tasks import DONE as P_DONE, FAILED as P_FAILED, Commitment, Progress, Task
 
 HOLD_OFF = 3                # start waits a free robot holds off for a lower robot silent or allocating
 MAX_BACKOFF = 30.0
 SILENT_ROUNDS = 10          # bid timeouts an unconverged round may go without a message from a peer
+MAX_PENDING = 8             # rounds announced in parts whose other parts a robot waits for at once
 SAME_POSITION = 1e-3        # m: a task position on the wire (float32) and in the table agree within this
 
 
@@ -136,6 +139,7 @@ class FormationAgent:
         self._not_in_asked: dict[int, float] = {}     # round I am not in -> when it first asked me something
         self._invited: dict[int, tuple[RoundStart, float]] = {}   # round naming tasks my table lacks -> (it, when)
         self._joined: dict[int, float] = {}           # peer -> when it joined my roster at run time
+        self._parts: dict[int, tuple[float, dict[int, RoundStart]]] = {}   # round announced in parts -> (since, parts)
         self.log = get_logger(f"alloc.{getattr(self.options, 'method', 'formation')}", self.robot_id)
 
     # ------------------------------------------------------------------ what the daemon reads
@@ -339,6 +343,10 @@ class FormationAgent:
         return self._leave(r, now, tell=False) + self._settle(now)
 
     def _on_round_start(self, m: RoundStart, now: float) -> list:
+        if m.last:
+            m = self._whole(m, now)
+            if m is None:
+                return []
         if self.robot_id not in m.robots or m.round in self.rounds:
             return []
         if m.round >> 16 != m.sender or not set(m.robots) <= {self.robot_id, *self.peers}:
@@ -351,6 +359,32 @@ class FormationAgent:
             return []
         return self._join(m, now)
 
+    def _whole(self, m: RoundStart, now: float) -> RoundStart | None:
+        """The round part ``m`` belongs to once I have all its parts, else None (I keep the part).  A lost part comes
+        again with the starter's re-sends (:meth:`_restart_silent`: every part, to a robot not heard in the round);
+        parts of at most ``MAX_PENDING`` rounds are kept, none older than the silence that ends a round, and parts
+        that contradict each other (their ``last``) are replaced by the newest."""
+        if m.round in self.rounds or m.round >> 16 != m.sender:
+            return None
+        horizon = SILENT_ROUNDS * self.options.bid_timeout
+        self._parts = {k: v for k, v in self._parts.items() if now - v[0] < horizon}
+        since, parts = self._parts.get(m.round, (now, {}))
+        if any(p.last != m.last for p in parts.values()):
+            self.dropped["round start parts that contradict"] += 1
+            since, parts = now, {}
+        parts[m.part] = m
+        self._parts[m.round] = (since, parts)
+        while len(self._parts) > MAX_PENDING:
+            del self._parts[min(self._parts, key=lambda k: self._parts[k][0])]
+        if len(parts) <= m.last:
+            return None
+        del self._parts[m.round]
+        whole = join_round([parts[k] for k in range(m.last + 1)])
+        if why_invalid(whole):
+            self.dropped["round start outside the protocol"] += 1
+            return None
+        return whole
+
     def _restart_silent(self, now: float) -> list:
         """My rounds still negotiating: their ``RoundStart`` again, each bid timeout, to the robots named in them that
         have not spoken in them.  One lost ``RoundStart`` keeps a robot out (ten robots at 10 % loss: one of nine
@@ -362,8 +396,8 @@ class FormationAgent:
             if r.id >> 16 != self.robot_id or r.solver.converged or now - r.start_sent < self.options.bid_timeout:
                 continue
             r.start_sent = now
-            out += [RoundStart(self.robot_id, p, r.id, r.tasks, r.robots)
-                    for p in r.robots if p != self.robot_id and p not in r.heard]
+            out += [m for p in r.robots if p != self.robot_id and p not in r.heard
+                    for m in split_round(self.robot_id, p, r.id, r.tasks, r.robots)]
         return out
 
     def _answer_invitations(self, now: float) -> list:
@@ -405,9 +439,9 @@ class FormationAgent:
         """(open tasks no live robot holds, free robots I know of with me first), lowest ids first."""
         held = {t for p, v in self.view.items() if p not in self.lost for t in v.tasks}
         in_rounds = {t for r in self.rounds.values() for t in r.tasks}
-        tasks = [t for t in sorted(self.tasks) if t not in held and t not in in_rounds][:MAX_ROUND]
         robots = [self.robot_id] + [p for p in self.peers if p not in self.lost and self._peer_free(p)]
-        return tasks, sorted(robots)[:MAX_ROUND]
+        tasks = [t for t in sorted(self.tasks) if t not in held and t not in in_rounds]
+        return tasks[:max(MAX_ROUND, min(len(robots), MAX_PARTS * MAX_ROUND))], sorted(robots)
 
     def _held_off(self, lower: list[int], now: float) -> bool:
         """A lower robot may have a round going that names me though its ``RoundStart`` never reached me (a loss
@@ -466,7 +500,7 @@ class FormationAgent:
             self._backoff = _Backoff(key, wait=1.0)
         self._backoff.until = now + self._backoff.wait
         self.log.info("starting round %s: tasks %s, robots %s", _rid(r.id), list(tasks), list(robots))
-        out = [RoundStart(self.robot_id, BROADCAST, r.id, r.tasks, r.robots)]
+        out = split_round(self.robot_id, BROADCAST, r.id, r.tasks, r.robots)
         positions = {i: self.tasks[t].position for i, t in enumerate(r.tasks)}
         out += self._from(r, r.solver.start(positions, now), now)
         out += self._from(r, r.solver.on_tick(now), now)

@@ -133,17 +133,26 @@ class Status(Message):
 @dataclass(frozen=True)
 class RoundStart(Message):
     """``sender`` starts round ``round`` over the fleet tasks ``tasks`` (a task's index in the round's other
-    messages is its position here) among ``robots`` (itself included)."""
+    messages is its position here) among ``robots`` (itself included).
+
+    A round that names more tasks or robots than one frame holds (``MAX_ROUND`` of each) is announced in parts
+    ``0..last``: part k carries the k-th ``MAX_ROUND`` of each list, and the round is the parts' lists joined in
+    order (:func:`split_round`, :func:`join_round`).  One frame is part 0 of last 0, what a frame without the two
+    fields decodes to.  A part alone is checked for what it can say; the joined round for the rest."""
     sender: int
     dest: int
     round: int
     tasks: tuple[int, ...]
     robots: tuple[int, ...]
+    part: int = 0
+    last: int = 0
 
     def check(self) -> str | None:
-        if not self.tasks or len(set(self.tasks)) != len(self.tasks):
+        if not 0 <= self.part <= self.last < MAX_PARTS:
+            return f"part {self.part} of last {self.last}: expected 0 <= part <= last <= {MAX_PARTS - 1}"
+        if len(set(self.tasks)) != len(self.tasks) or (not self.tasks and not self.last):
             return f"tasks {list(self.tasks)}: expected distinct fleet task ids"
-        if self.sender not in self.robots or len(set(self.robots)) != len(self.robots):
+        if len(set(self.robots)) != len(self.robots) or (not self.last and self.sender not in self.robots):
             return f"robots {list(self.robots)}: expected distinct ids, the sender's among them"
         return next(filter(None, map(_bad_robot, self.robots)), None)
 
@@ -162,7 +171,23 @@ def _bad_robot(robot: int) -> str | None:
 
 AGENT_MESSAGES = (TaskInfo, Announce, Bid, Award, Price, Status)
 ROUND_MESSAGES = (RoundStart, RoundLeave)
-MAX_ROUND = 40          # tasks and robots a RoundStart can name (its MAVLink arrays)
+MAX_ROUND = 40          # tasks and robots one RoundStart frame can name (its MAVLink arrays)
+MAX_PARTS = 7           # frames a round's RoundStart may take: 7 x 40 ids name every robot id (1..250)
+
+
+def split_round(sender: int, dest: int, rid: int, tasks: tuple[int, ...], robots: tuple[int, ...]) -> list[RoundStart]:
+    """Round ``rid`` as the ``RoundStart`` frames that announce it (one unless a list is longer than ``MAX_ROUND``)."""
+    n = max(1, -(-max(len(tasks), len(robots)) // MAX_ROUND))
+    return [RoundStart(sender, dest, rid, tuple(tasks[k * MAX_ROUND:(k + 1) * MAX_ROUND]),
+                       tuple(robots[k * MAX_ROUND:(k + 1) * MAX_ROUND]), k, n - 1) for k in range(n)]
+
+
+def join_round(parts: list[RoundStart]) -> RoundStart:
+    """The round that parts ``0..last`` of one round announce, as one ``RoundStart`` (part 0 of last 0); check it with
+    ``invalid()`` (a list may repeat an id across parts, or leave out the sender)."""
+    first = parts[0]
+    return RoundStart(first.sender, first.dest, first.round, tuple(t for p in parts for t in p.tasks),
+                      tuple(r for p in parts for r in p.robots))
 
 
 def wire_float(value: float) -> float:

@@ -6976,27 +6976,30 @@ class MAVLink_mrta_round_start_message(MAVLink_message):
     """
     The sender starts allocation round `round` over `tasks` among
     `robots` (the free robots it knows of, itself included); task
-    indices in the round's other messages are positions in `tasks`.
+    indices in the round's other messages are positions in `tasks`. A
+    round of more than 40 tasks or robots takes parts 0..last, the
+    lists joined in part order; a robot acts on it once it has every
+    part.
     """
 
     id = MAVLINK_MSG_ID_MRTA_ROUND_START
     msgname = "MRTA_ROUND_START"
-    fieldnames = ["target_system", "round", "tasks", "robots"]
-    ordered_fieldnames = ["round", "tasks", "target_system", "robots"]
-    fieldtypes = ["uint8_t", "uint32_t", "uint32_t", "uint8_t"]
+    fieldnames = ["target_system", "round", "tasks", "robots", "part", "last"]
+    ordered_fieldnames = ["round", "tasks", "target_system", "robots", "part", "last"]
+    fieldtypes = ["uint8_t", "uint32_t", "uint32_t", "uint8_t", "uint8_t", "uint8_t"]
     fielddisplays_by_name: Dict[str, str] = {}
     fieldenums_by_name: Dict[str, str] = {}
     fieldunits_by_name: Dict[str, str] = {}
-    native_format = bytearray(b"<IIBB")
-    orders = [2, 0, 1, 3]
-    lengths = [1, 40, 1, 40]
-    array_lengths = [0, 40, 0, 40]
+    native_format = bytearray(b"<IIBBBB")
+    orders = [2, 0, 1, 3, 4, 5]
+    lengths = [1, 40, 1, 40, 1, 1]
+    array_lengths = [0, 40, 0, 40, 0, 0]
     crc_extra = 217
-    unpacker = struct.Struct("<I40IB40B")
+    unpacker = struct.Struct("<I40IB40BBB")
     instance_field = None
     instance_offset = -1
 
-    def __init__(self, target_system: int, round: int, tasks: Sequence[int], robots: Sequence[int]):
+    def __init__(self, target_system: int, round: int, tasks: Sequence[int], robots: Sequence[int], part: int = 0, last: int = 0):
         MAVLink_message.__init__(self, MAVLink_mrta_round_start_message.id, MAVLink_mrta_round_start_message.msgname)
         self._fieldnames = MAVLink_mrta_round_start_message.fieldnames
         self._instance_field = MAVLink_mrta_round_start_message.instance_field
@@ -7005,9 +7008,11 @@ class MAVLink_mrta_round_start_message(MAVLink_message):
         self.round = round
         self.tasks = tasks
         self.robots = robots
+        self.part = part
+        self.last = last
 
     def pack(self, mav: "MAVLink", force_mavlink1: bool = False) -> bytes:
-        return self._pack(mav, self.crc_extra, self.unpacker.pack(self.round, self.tasks[0], self.tasks[1], self.tasks[2], self.tasks[3], self.tasks[4], self.tasks[5], self.tasks[6], self.tasks[7], self.tasks[8], self.tasks[9], self.tasks[10], self.tasks[11], self.tasks[12], self.tasks[13], self.tasks[14], self.tasks[15], self.tasks[16], self.tasks[17], self.tasks[18], self.tasks[19], self.tasks[20], self.tasks[21], self.tasks[22], self.tasks[23], self.tasks[24], self.tasks[25], self.tasks[26], self.tasks[27], self.tasks[28], self.tasks[29], self.tasks[30], self.tasks[31], self.tasks[32], self.tasks[33], self.tasks[34], self.tasks[35], self.tasks[36], self.tasks[37], self.tasks[38], self.tasks[39], self.target_system, self.robots[0], self.robots[1], self.robots[2], self.robots[3], self.robots[4], self.robots[5], self.robots[6], self.robots[7], self.robots[8], self.robots[9], self.robots[10], self.robots[11], self.robots[12], self.robots[13], self.robots[14], self.robots[15], self.robots[16], self.robots[17], self.robots[18], self.robots[19], self.robots[20], self.robots[21], self.robots[22], self.robots[23], self.robots[24], self.robots[25], self.robots[26], self.robots[27], self.robots[28], self.robots[29], self.robots[30], self.robots[31], self.robots[32], self.robots[33], self.robots[34], self.robots[35], self.robots[36], self.robots[37], self.robots[38], self.robots[39]), force_mavlink1=force_mavlink1)
+        return self._pack(mav, self.crc_extra, self.unpacker.pack(self.round, self.tasks[0], self.tasks[1], self.tasks[2], self.tasks[3], self.tasks[4], self.tasks[5], self.tasks[6], self.tasks[7], self.tasks[8], self.tasks[9], self.tasks[10], self.tasks[11], self.tasks[12], self.tasks[13], self.tasks[14], self.tasks[15], self.tasks[16], self.tasks[17], self.tasks[18], self.tasks[19], self.tasks[20], self.tasks[21], self.tasks[22], self.tasks[23], self.tasks[24], self.tasks[25], self.tasks[26], self.tasks[27], self.tasks[28], self.tasks[29], self.tasks[30], self.tasks[31], self.tasks[32], self.tasks[33], self.tasks[34], self.tasks[35], self.tasks[36], self.tasks[37], self.tasks[38], self.tasks[39], self.target_system, self.robots[0], self.robots[1], self.robots[2], self.robots[3], self.robots[4], self.robots[5], self.robots[6], self.robots[7], self.robots[8], self.robots[9], self.robots[10], self.robots[11], self.robots[12], self.robots[13], self.robots[14], self.robots[15], self.robots[16], self.robots[17], self.robots[18], self.robots[19], self.robots[20], self.robots[21], self.robots[22], self.robots[23], self.robots[24], self.robots[25], self.robots[26], self.robots[27], self.robots[28], self.robots[29], self.robots[30], self.robots[31], self.robots[32], self.robots[33], self.robots[34], self.robots[35], self.robots[36], self.robots[37], self.robots[38], self.robots[39], self.part, self.last), force_mavlink1=force_mavlink1)
 
 
 # Define name on the class for backwards compatibility (it is now msgname).
@@ -19475,33 +19480,43 @@ class MAVLink(object):
         """
         self.send(self.mrta_status_encode(target_system, round, auction, task, converged), force_mavlink1=force_mavlink1)
 
-    def mrta_round_start_encode(self, target_system: int, round: int, tasks: Sequence[int], robots: Sequence[int]) -> MAVLink_mrta_round_start_message:
+    def mrta_round_start_encode(self, target_system: int, round: int, tasks: Sequence[int], robots: Sequence[int], part: int = 0, last: int = 0) -> MAVLink_mrta_round_start_message:
         """
         The sender starts allocation round `round` over `tasks` among `robots`
         (the free robots it knows of, itself included); task indices
-        in the round's other messages are positions in `tasks`.
+        in the round's other messages are positions in `tasks`. A
+        round of more than 40 tasks or robots takes parts 0..last, the
+        lists joined in part order; a robot acts on it once it has
+        every part.
 
         target_system             : Destination robot id, 0 = every peer. (type:uint8_t)
         round                     : Round id: initiator id * 65536 + its count. (type:uint32_t)
         tasks                     : Fleet task ids of the round, in index order; 0 after the last. (type:uint32_t)
         robots                    : Robot ids taking part; 0 after the last. (type:uint8_t)
+        part                      : This frame's part of a round announced in several (more than 40 tasks or robots): part k carries the k-th 40 of each list. (type:uint8_t)
+        last                      : The round's last part (0: one frame, also what a frame without these fields means). (type:uint8_t)
 
         """
-        return MAVLink_mrta_round_start_message(target_system, round, tasks, robots)
+        return MAVLink_mrta_round_start_message(target_system, round, tasks, robots, part, last)
 
-    def mrta_round_start_send(self, target_system: int, round: int, tasks: Sequence[int], robots: Sequence[int], force_mavlink1: bool = False) -> None:
+    def mrta_round_start_send(self, target_system: int, round: int, tasks: Sequence[int], robots: Sequence[int], part: int = 0, last: int = 0, force_mavlink1: bool = False) -> None:
         """
         The sender starts allocation round `round` over `tasks` among `robots`
         (the free robots it knows of, itself included); task indices
-        in the round's other messages are positions in `tasks`.
+        in the round's other messages are positions in `tasks`. A
+        round of more than 40 tasks or robots takes parts 0..last, the
+        lists joined in part order; a robot acts on it once it has
+        every part.
 
         target_system             : Destination robot id, 0 = every peer. (type:uint8_t)
         round                     : Round id: initiator id * 65536 + its count. (type:uint32_t)
         tasks                     : Fleet task ids of the round, in index order; 0 after the last. (type:uint32_t)
         robots                    : Robot ids taking part; 0 after the last. (type:uint8_t)
+        part                      : This frame's part of a round announced in several (more than 40 tasks or robots): part k carries the k-th 40 of each list. (type:uint8_t)
+        last                      : The round's last part (0: one frame, also what a frame without these fields means). (type:uint8_t)
 
         """
-        self.send(self.mrta_round_start_encode(target_system, round, tasks, robots), force_mavlink1=force_mavlink1)
+        self.send(self.mrta_round_start_encode(target_system, round, tasks, robots, part, last), force_mavlink1=force_mavlink1)
 
     def mrta_round_leave_encode(self, target_system: int, round: int) -> MAVLink_mrta_round_leave_message:
         """

@@ -53,12 +53,16 @@ Link ids (the signature's ``link_id`` byte; pymavlink keeps one replay window pe
 component): a frame's link id says where it was sent, so a signed frame cannot be replayed to another kind of
 destination.
 
-* ``PEER_LINK`` (0): a robot to its peers (agent messages, peer HEARTBEATs);
+* ``PEER_LINK`` (0): a robot to its peers (agent messages to every robot, peer HEARTBEATs);
+* ``PEER_DIRECT_LINK`` (4): a robot to one peer (agent messages with a ``dest``).  A stream of its own: a
+  publish/subscribe transport delivers a robot's broadcast and addressed frames through two subscriptions, whose
+  order between them is not kept (zenoh-python runs each subscriber's callback in a thread of its own), and one
+  replay window for both refused the older as a replay (848 of 2,000 alternating frames through one router);
 * ``GCS_LINK`` (1): a robot to ground stations (telemetry, HEARTBEAT, RobotState, STATUSTEXT, answers);
 * ``OPERATOR_LINK`` (2): the SITL operator's ground station (:class:`runtime.comms.gcs.GroundStation`);
 * ``MISSION_LINK`` (3): ``mrta mission``.  Stock ground stations choose their own (pymavlink counts from 0).
 
-A robot takes a frame from a robot system id (1..250) only if it is signed on ``PEER_LINK``: a frame a robot
+A robot takes a frame from a robot system id (1..250) only if it is signed on a peer link id: a frame a robot
 sent to a ground station and replayed to its peers is dropped and counted (``replayed_dropped``); so is a
 peer frame replayed to :class:`~runtime.comms.gcs.GroundStation`, which takes robot frames on ``GCS_LINK``
 only.  Frames from ground-station system ids (above 250) are taken on any link id: each ground station
@@ -96,7 +100,8 @@ MAX_DATAGRAMS_PER_POLL = 1024          # bounds one poll's work under a flood
 MAX_ROBOT_ID = 250                     # system ids above are ground stations (QGC, MAVProxy use 255)
 MAX_GCS_INBOX = 256                    # ground-station requests kept between two daemon cycles
 GCS_TIMEOUT = 10.0                     # s a ground station that talked to us keeps getting telemetry
-PEER_LINK, GCS_LINK, OPERATOR_LINK, MISSION_LINK = 0, 1, 2, 3       # signing link ids (module docstring)
+PEER_LINK, GCS_LINK, OPERATOR_LINK, MISSION_LINK, PEER_DIRECT_LINK = 0, 1, 2, 3, 4   # signing link ids (docstring)
+PEER_LINKS = frozenset((PEER_LINK, PEER_DIRECT_LINK))
 KERNEL_DROPS_PERIOD = 1.0              # s between reads of the kernel's drop count when no datagram brings it
 KEY_REFUSAL_TEXT = "SETUP_SIGNING refused: key is set on the robot"      # one STATUSTEXT (<= 50 characters)
 KEY_REFUSAL_PERIOD = 10.0              # s between two refusal STATUSTEXTs to one address
@@ -450,14 +455,15 @@ class MavlinkLink:
     def send_agent(self, msgs: Iterable, now: float) -> None:
         """Encode each agent message once and send it to every peer (the wire sender is our id)."""
         for msg in msgs:
-            self._stamp(PEER_LINK)
+            dest = getattr(msg, "dest", 0)
+            self._stamp(PEER_DIRECT_LINK if dest else PEER_LINK)
             try:
                 frame = codec.encode(msg, self.mav)
             except (ValueError, TypeError) as e:
                 self.counters.encode_errors += 1
                 self.log.error("not sent: %s", e)
                 continue
-            self._to_peers(frame, now, getattr(msg, "dest", 0))
+            self._to_peers(frame, now, dest)
 
     def _to_peers(self, frame: bytes, now: float, dest: int = 0) -> None:
         """Send ``frame`` to the peers (``dest``: the robot it is addressed to, 0 every robot) over the transport.
@@ -636,7 +642,7 @@ class MavlinkLink:
             if why is not None:
                 return why, None
         src = m.get_srcSystem()
-        if self.signing and m.get_signed() and 1 <= src <= MAX_ROBOT_ID and m.get_link_id() != PEER_LINK:
+        if self.signing and m.get_signed() and 1 <= src <= MAX_ROBOT_ID and m.get_link_id() not in PEER_LINKS:
             return "replayed_dropped", None       # a robot's frame to a ground station, replayed to us
         if kind == "HEARTBEAT":
             why = self._on_heartbeat(m, now)

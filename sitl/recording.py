@@ -64,12 +64,10 @@ class FleetRecording:
         """After a control cycle: the bodies' true poses, the operator's new events, the world when tasks
         changed."""
         rec, f = self.rec, self.f
-        for rid in f.robots:
-            if rid in f.withdrawn:
-                continue
-            pose = f.true_pose(rid)
+        poses = [(rid, f.true_pose(rid)) for rid in f.robots if rid not in f.withdrawn]
+        for rid, pose in poses:
             rec.pose(rid, t, pose, truth=True)
-            rec.transform(rid, t, pose)
+        rec.transforms(t, poses)
         events = op.trace.events
         for ev in events[self._events:]:
             rec.event(t, OPERATOR, "operator", ev.what, ev.task, ev.robots, {"detail": ev.detail}, t=ev.t)

@@ -709,8 +709,6 @@ def test_log_replay_sends_the_recorded_frames_to_a_ground_station_at_their_pace(
             rec.frame(rid, 0.05 * k, "tx", data, ("127.0.0.1", 14550))
             rec.frame(rid, 0.05 * k, "rx", b"\xfd\x00junk", ("127.0.0.1", 14601))
             sent.append((rid, k))
-        if k % 3 == 0:
-            rec.check()          # a cycle's end: each robot's frames so far in one message
     rec.close()
     port = free_port(udp=True)
     conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255)
@@ -748,24 +746,26 @@ def test_bad_replay_options_are_one_line_and_exit_2(argv, says, capsys, tmp_path
 
 
 def test_raw_frames_batched_per_cycle_read_back_frame_for_frame(tmp_path):
-    """The frames a link tapped in a cycle are one message a robot (mrta.MavlinkFrames); read back, each frame has
-    its own time, direction, address and bytes, in time order across robots; an entry that does not parse is
-    skipped and counted; a file of the earlier one-frame-a-message kind reads too."""
+    """The frames a link tapped over half a second (FRAME_BATCH) are one message a robot (mrta.MavlinkFrames);
+    read back, each frame has its own time, direction, address and bytes, in time order across robots; an entry
+    that does not parse is skipped and counted; a file of the earlier one-frame-a-message kind reads too."""
     from runtime.recording import replay
+    from runtime.recording.recorder import FRAME_BATCH
 
     rec = Recorder(tmp_path / "r.mcap", mavlink=True)
     want = []
-    for k in range(6):
+    for k in range(12):                     # cycles of 0.1 s: frames held at 0.0 s go out at 0.5 s, the next at 1.1
+        rec.stamp(0.1 * k)
         for rid in (1, 2):
             for d, addr in (("tx", ("127.0.0.1", 14550)), ("rx", None)):
                 data = bytes([0xFD, k, rid]) + d.encode()
-                rec.frame(rid, 0.05 * k + 0.001 * rid, d, data, addr)
-                want.append((round((0.05 * k + 0.001 * rid) * 1e9), rid, data))
-        if k % 2:
-            rec.check()
+                rec.frame(rid, 0.1 * k + 0.001 * rid, d, data, addr)
+                want.append((round((0.1 * k + 0.001 * rid) * 1e9), rid, data))
+        rec.check()
     rec.close()
     msgs = [m for m in read_messages(tmp_path / "r.mcap").messages if m.kind == "mavlink"]
-    assert len(msgs) == 6 and {m.schema for m in msgs} == {"mrta.MavlinkFrames"}    # 3 cycles x 2 robots
+    assert FRAME_BATCH == 0.5 and [(m.robot, len(m.data["frames"])) for m in msgs] == [(1, 12), (2, 12)] * 2
+    assert {m.schema for m in msgs} == {"mrta.MavlinkFrames"} and msgs[0].ns == round(0.5e9)
     assert msgs[0].data["frames"][1] == {"ns": round(0.001e9), "direction": "rx", "address": "",
                                          "frame": "fd00017278"}
     got, skipped = replay.frames(tmp_path / "r.mcap", rx=True)

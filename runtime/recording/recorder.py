@@ -26,6 +26,7 @@ from runtime.log import get_logger
 WORLD = "world"                     # the fixed frame every pose is in
 CHUNK = 256 * 1024                  # bytes of messages per MCAP chunk: what a killed recorder loses at most
 SCAN_BINS = 360                     # a laser scan's equal angular steps (1 degree: an RPLIDAR A1's resolution)
+FRAME_BATCH = 0.5                   # s of the recording's clock a robot's raw MAVLink frames are held, then one message
 LIVE_BACKLOG = 16384                # messages the live server holds per client before it drops the oldest
 TOPICS = {                          # topic (robot topics: {id} is the robot id) -> schema name
     "/robot_{id}/pose": "foxglove.PoseInFrame",        # the robot's own estimate, every control cycle
@@ -39,8 +40,8 @@ TOPICS = {                          # topic (robot topics: {id} is the robot id)
     "/world": "foxglove.SceneUpdate",                  # arena, obstacles and task places coloured by state
     "/allocation": "mrta.AllocationEvent",             # messages sent and received, commitments, progress, tasks
     "/log": "foxglove.Log",                            # every log record and the STATUSTEXT lines
-    "/robot_{id}/mavlink": "mrta.MavlinkFrames",       # raw MAVLink frames of the robot's link (optional), a
-    #                                                    cycle's frames in one message
+    "/robot_{id}/mavlink": "mrta.MavlinkFrames",       # raw MAVLink frames of the robot's link (optional), up
+    #                                                    to FRAME_BATCH s of them in one message
     "/robot_{id}/stats": "mrta.RobotStats",            # the daemon's status snapshot (counters), every second
 }
 
@@ -66,7 +67,7 @@ SCHEMAS = {
                         "cycles, messages sent and received, drops by reason, the link's counters",
                         "additionalProperties": True},
     "mrta.MavlinkFrames": {"type": "object", "title": "mrta.MavlinkFrames", "description": "the raw MAVLink "
-                           "datagrams of the robot's link since the last message (one control cycle's), in order",
+                           "datagrams of the robot's link since the last message (up to half a second's), in order",
                            "properties": {
         "robot": {"type": "integer"},
         "frames": {"type": "array", "items": {"type": "object", "properties": {
@@ -173,8 +174,9 @@ class Recorder:
         self._by_robot: dict[tuple[int, str], object] = {}
         self._metadata: list[tuple[str, dict]] = []
         self._frame_heads: dict[tuple, str] = {}
-        self._frames: dict[int, list] = {}    # robot id -> raw frames (ns, direction, address, datagram) not yet
-        #                                       written: one message a robot and cycle (check, close)
+        self._taps: dict[int, FrameTap] = {}  # robot id -> its link's tap, holding its raw frames not yet written
+        self._frames_due: int | None = None   # when (ns) the held frames are written (check), None: none held
+        self._now_seen = math.nan             # the last ``now`` stamped (the clock's ns of it is _last_ns)
         self._ts_ns, self._ts_last = -1, None
         self._pb_ts_ns, self._pb_ts = -1, b""
         self._parts_cache: dict[tuple, tuple] = {}
@@ -224,9 +226,9 @@ class Recorder:
 
     def check(self) -> None:
         """The file's bound and health, once a cycle: rotate or stop at the limit; a refused write ends the file
-        recording with one warning line.  The raw MAVLink frames since the last call go out, one message a
-        robot; then a live relay sends what it holds."""
-        if self._frames:
+        recording with one warning line.  Raw MAVLink frames held FRAME_BATCH s go out, one message a robot;
+        then a live relay sends what it holds."""
+        if self._frames_due is not None and self._last_ns >= self._frames_due:
             self._write_frames()
         if self.relay is not None:
             self.relay.flush()
@@ -240,6 +242,7 @@ class Recorder:
             self.log.warning("recording stopped: %s (the robot runs on)", self.stopped)
         elif self.flush_period is not None and time.monotonic() >= self._next_flush:
             self._next_flush = time.monotonic() + self.flush_period
+            self._write_frames()
             self._writer.flush()
         if self._file is not None and self.limit is not None and self._file.bytes >= self.limit:
             self._close_file()
@@ -279,8 +282,7 @@ class Recorder:
             self._writer.write_metadata(name, data)
 
     def close(self) -> None:
-        if self._frames:
-            self._write_frames()
+        self._write_frames()
         self._close_file()
         self._file = None
         if self.relay is not None:
@@ -297,9 +299,13 @@ class Recorder:
     def stamp(self, now: float) -> int:
         """``now`` (s) as the recording's time in ns, never before the last one: the simulated clock, or the
         system clock on a robot."""
-        if not self.wall and not math.isfinite(now):
+        if self.wall:
+            ns = time.time_ns()
+        elif now == self._now_seen or not math.isfinite(now):     # the same step's time again: its ns
             return self._last_ns
-        ns = time.time_ns() if self.wall else int(round(now * 1e9))
+        else:
+            self._now_seen = now
+            ns = int(round(now * 1e9))
         if ns > self._last_ns:
             self._last_ns = ns
         return self._last_ns
@@ -486,24 +492,33 @@ class Recorder:
         self._log(self.channel("/log", TOPICS["/log"]),
                   m.Log(timestamp=self._ts(ns), level=level, message=text, name=name, file=file, line=line), ns)
 
+    def frame_tap(self, rid: int) -> "FrameTap":
+        """Robot ``rid``'s link tap: ``tap(direction, datagram, address, now)`` holds each raw frame for
+        :meth:`check` to write with the robot's others as one ``mrta.MavlinkFrames``."""
+        tap = self._taps.get(rid)
+        if tap is None:
+            tap = self._taps[rid] = FrameTap(self, rid)
+        return tap
+
     def frame(self, rid: int, now: float, direction: str, data: bytes, address=None) -> None:
         """One raw MAVLink datagram of robot ``rid``'s link (``direction`` "tx" or "rx"; ``address`` (host, port)),
-        held until :meth:`check` writes the robot's frames of the cycle as one ``mrta.MavlinkFrames``: this runs
-        for every datagram, a message per datagram cost a third of the recording."""
+        as its tap takes it."""
         if self.mavlink:
-            pending = self._frames.get(rid)
-            if pending is None:
-                pending = self._frames[rid] = []
-            pending.append((self.stamp(now), direction, address, data))
+            self.frame_tap(rid)(direction, data, address, now)
 
     def _write_frames(self) -> None:
-        """The held raw frames, one message a robot, at the recording's latest time.  The JSON is written out by
-        hand, each frame's head once per direction and address."""
+        """The held raw frames, one message a robot, at the recording's latest time; each frame with its own time.
+        The JSON is written out by hand, each frame's head once per direction and address."""
+        self._frames_due = None
         heads = self._frame_heads
         ns = self._last_ns
-        for rid, pending in self._frames.items():
+        for rid, tap in self._taps.items():
+            if not tap.held:
+                continue
+            pending, tap.held = tap.held, []
             items = []
             for t, direction, address, data in pending:
+                t = int(round(t * 1e9))
                 key = (direction, None if address is None else (address[0], address[1]))
                 head = heads.get(key)
                 if head is None:
@@ -512,7 +527,6 @@ class Recorder:
                                          f'"address":{json.dumps(addr)},"frame":"')
                 items.append(f'{{"ns":{t}{head}{data.hex()}"}}')
             self._log(self._robot(rid, "mavlink"), f'{{"robot":{int(rid)},"frames":[{",".join(items)}]}}', ns)
-        self._frames.clear()
 
     def scene(self, now: float, world, tasks=()) -> None:
         """The world (a WorldConfig, or None: no map) as scene entities: the arena's floor and walls, the
@@ -573,6 +587,24 @@ class Recorder:
                      for ob in world.obstacles if getattr(ob, "size", None) is not None]
         return [m.SceneEntity(timestamp=ts, frame_id=WORLD, id="arena", cubes=arena),
                 m.SceneEntity(timestamp=ts, frame_id=WORLD, id="obstacles", cubes=obstacles)]
+
+class FrameTap:
+    """A link's ``tap`` (``tap(direction, datagram, address, now)``, every datagram it sends or takes): holds the
+    frame with its time (``now``, the host's clock; the system's on a wall-clock recording) until the recorder
+    writes the robot's held frames as one message.  One call and one append a datagram: a message each cost a
+    third of the recording."""
+
+    __slots__ = ("rec", "rid", "held", "wall")
+
+    def __init__(self, rec: Recorder, rid: int):
+        self.rec, self.rid, self.held, self.wall = rec, rid, [], rec.wall
+
+    def __call__(self, direction: str, data: bytes, address, now: float) -> None:
+        rec = self.rec
+        if rec._frames_due is None:
+            rec._frames_due = rec._last_ns + int(FRAME_BATCH * 1e9)
+        self.held.append((time.time() if self.wall else now, direction, address, data))
+
 
 def recoverable(exc: BaseException) -> bool:
     """An error the recording may end on while the robot runs on: an Exception, or a panic in the Rust library

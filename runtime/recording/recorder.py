@@ -392,12 +392,14 @@ class Recorder:
 
     # ------------------------------------------------------------------ what is recorded
     def _parts(self, key, pose) -> tuple:
-        """(x, y, yaw), and the protobuf of its position and orientation (:func:`_pose_pb`), encoded once while
-        ``key``'s pose stays the same (a robot standing still; the truth and its frame transform in a cycle)."""
+        """(x, y, yaw), the protobuf of its position and orientation (:func:`_pose_pb`) and a PoseInFrame's fields
+        after the timestamp, encoded once while ``key``'s pose stays the same (a robot standing still; the truth
+        and its frame transform in a cycle)."""
         xyy = (float(pose[0]), float(pose[1]), float(pose[2]))
         last = self._parts_cache.get(key)
         if last is None or last[0] != xyy:
-            last = self._parts_cache[key] = (xyy, *_pose_pb(*xyy))
+            vec, quat = _pose_pb(*xyy)
+            last = self._parts_cache[key] = (xyy, vec, quat, _WORLD_PB + _POSE_HEAD + vec + _QUAT_IN_POSE + quat)
         return last
 
     def _pb_stamp(self, ns: int) -> bytes:
@@ -410,9 +412,8 @@ class Recorder:
         """The robot's pose ``(x, y, yaw)`` (its estimate, or with ``truth`` the simulation's) as a
         ``foxglove.PoseInFrame`` in the world frame."""
         ns = self.stamp(now)
-        _, vec, quat = self._parts((rid, truth), pose)
-        self._log(self._robot(rid, "truth" if truth else "pose"),
-                  self._pb_stamp(ns) + _WORLD_PB + _POSE_HEAD + vec + _QUAT_IN_POSE + quat, ns)
+        self._log(self._robot(rid, "truth" if truth else "pose"), self._pb_stamp(ns) + self._parts((rid, truth),
+                                                                                                  pose)[3], ns)
 
     def transforms(self, now: float, poses) -> None:
         """The world -> robot_N frame of each ``(rid, pose)`` (the truth in SITL), one ``foxglove.FrameTransforms``
@@ -421,7 +422,7 @@ class Recorder:
         head = self._pb_stamp(ns) + _WORLD_PB
         tfs = []
         for rid, pose in poses:
-            _, vec, quat = self._parts((rid, True), pose)
+            _, vec, quat, _ = self._parts((rid, True), pose)
             tfs.append(_field(1, head + _field(3, f"robot_{rid}".encode()) + _TRANSLATION + vec + _ROTATION + quat))
         self._log(self.channel("/tf", TOPICS["/tf"]), b"".join(tfs), ns)
 

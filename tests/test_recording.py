@@ -745,7 +745,7 @@ def test_bad_replay_options_are_one_line_and_exit_2(argv, says, capsys, tmp_path
     assert len(err) == 1 and says in err[0]
 
 
-def test_raw_frames_batched_per_cycle_read_back_frame_for_frame(tmp_path):
+def test_raw_frames_batched_by_half_seconds_read_back_frame_for_frame(tmp_path):
     """The frames a link tapped over half a second (FRAME_BATCH) are one message a robot (mrta.MavlinkFrames);
     read back, each frame has its own time, direction, address and bytes, in time order across robots; an entry
     that does not parse is skipped and counted; a file of the earlier one-frame-a-message kind reads too."""

@@ -13,8 +13,8 @@ from that tree's root).
 Each timed call costs about 1.5 us of timer calls (two ``thread_time`` reads, measured with ``--calibrate``), half
 of it counted in the part and half in its caller: the parts add up to more than the recording costs untimed.
 
-``--once plain|record``: one lock-step run, nothing timed, without or with recording (the libraries imported
-either way), for an instruction count the machine's load does not move: ``valgrind --tool=cachegrind
+``--once plain|record``: one lock-step run, nothing timed, without or with recording (the libraries and the
+recording's modules imported either way), for an instruction count the machine's load does not move: ``valgrind --tool=cachegrind
 --cache-sim=no python benchmarks/recording_split.py --once record``.
 
 Usage: python benchmarks/recording_split.py [--fleet create2_4] [--repeats 3] [--calibrate] [--once plain|record]
@@ -105,8 +105,13 @@ def main(argv=None) -> int:
     from sitl import launcher
     from tests.sitl_util import shipped_fleet
 
-    if args.once:
-        import foxglove.messages  # noqa: F401  (imported with or without recording: only the run differs)
+    if args.once:          # the recording's modules imported with or without it: only the run differs
+        import foxglove.mcap  # noqa: F401
+        import foxglove.messages  # noqa: F401
+
+        import runtime.recording.feed  # noqa: F401
+        import runtime.recording.recorder  # noqa: F401
+        import sitl.recording  # noqa: F401
 
         with tempfile.TemporaryDirectory(prefix="mrta-rec-once-") as tmp:
             f = launcher.build(shipped_fleet(Path(tmp), f"{args.fleet}.yaml", ports_from=33000), Path(tmp) / "run")

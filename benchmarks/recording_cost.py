@@ -41,7 +41,7 @@ class Inside:
     closing the file."""
 
     HOOKS = (("runtime.recording.feed", "CoreFeed", "cycle"), ("runtime.recording.feed", "CoreFeed", "frames"),
-             ("runtime.recording.feed", "LogTap", "emit"), ("runtime.recording.recorder", "Recorder", "frame"),
+             ("runtime.recording.feed", "LogTap", "emit"), ("runtime.recording.recorder", "FrameTap", "__call__"),
              ("sitl.recording", "FleetRecording", "__init__"), ("sitl.recording", "FleetRecording", "step"),
              ("sitl.recording", "FleetRecording", "close"))
 

@@ -57,7 +57,8 @@ class Operator:
         self._placeholders = 0
         self._next_table = 0.0
         self._asker = 0
-        self._last_pose: dict[int, tuple[float, float]] = {}
+        self.poses: dict[int, tuple[float, float, float]] = {}    # each robot's true pose at posed_at (record)
+        self.posed_at: float | None = None
         self.now = 0.0
 
     # ------------------------------------------------------------------ the loop
@@ -177,12 +178,13 @@ class Operator:
         for rid in self.fleet.robots:
             if rid in self.fleet.withdrawn:
                 continue
-            x, y, yaw = self.fleet.true_pose(rid)
+            pose = x, y, yaw = self.fleet.true_pose(rid)
             self.trace.robots[rid].add(now, x, y, yaw)
-            last = self._last_pose.get(rid)
+            last = self.poses.get(rid)
             if last is not None:
                 self.driven[rid] += math.hypot(x - last[0], y - last[1])
-            self._last_pose[rid] = (x, y)
+            self.poses[rid] = pose
+        self.posed_at = now
 
     def close(self) -> None:
         self.gcs.close()

@@ -53,23 +53,22 @@ class FleetRecording:
 
     def attach(self, daemons: dict) -> None:
         """A feed on each daemon's core (its cycles and messages) and a tap on its link (raw MAVLink frames)."""
-        from runtime.recording.feed import CoreFeed, link_tap
+        from runtime.recording.feed import CoreFeed
 
         for rid, d in daemons.items():
             d.feed = CoreFeed(self.rec, d.core, stats=d.snapshot, watch=self._watch_message)
             if self.rec.mavlink and hasattr(d.link, "tap"):
-                d.link.tap = link_tap(self.rec, rid)
+                d.link.tap = self.rec.frame_tap(rid)
 
     def step(self, t: float, op) -> None:
         """After a control cycle: the bodies' true poses, the operator's new events, the world when tasks
         changed."""
         rec, f = self.rec, self.f
-        for rid in f.robots:
-            if rid in f.withdrawn:
-                continue
-            pose = f.true_pose(rid)
+        known = op.poses if getattr(op, "posed_at", None) == t else {}      # the trace's poses of this step
+        poses = [(rid, known.get(rid) or f.true_pose(rid)) for rid in f.robots if rid not in f.withdrawn]
+        for rid, pose in poses:
             rec.pose(rid, t, pose, truth=True)
-            rec.transform(rid, t, pose)
+        rec.transforms(t, poses)
         events = op.trace.events
         for ev in events[self._events:]:
             rec.event(t, OPERATOR, "operator", ev.what, ev.task, ev.robots, {"detail": ev.detail}, t=ev.t)

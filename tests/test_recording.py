@@ -745,6 +745,47 @@ def test_bad_replay_options_are_one_line_and_exit_2(argv, says, capsys, tmp_path
     assert len(err) == 1 and says in err[0]
 
 
+def test_raw_frames_batched_by_half_seconds_read_back_frame_for_frame(tmp_path):
+    """The frames a link tapped over half a second (FRAME_BATCH) are one message a robot (mrta.MavlinkFrames);
+    read back, each frame has its own time, direction, address and bytes, in time order across robots; an entry
+    that does not parse is skipped and counted; a file of the earlier one-frame-a-message kind reads too."""
+    from runtime.recording import replay
+    from runtime.recording.recorder import FRAME_BATCH
+
+    rec = Recorder(tmp_path / "r.mcap", mavlink=True)
+    want = []
+    for k in range(12):                     # cycles of 0.1 s: frames held at 0.0 s go out at 0.5 s, the next at 1.1
+        rec.stamp(0.1 * k)
+        for rid in (1, 2):
+            for d, addr in (("tx", ("127.0.0.1", 14550)), ("rx", None)):
+                data = bytes([0xFD, k, rid]) + d.encode()
+                rec.frame(rid, 0.1 * k + 0.001 * rid, d, data, addr)
+                want.append((round((0.1 * k + 0.001 * rid) * 1e9), rid, data))
+        rec.check()
+    rec.close()
+    msgs = [m for m in read_messages(tmp_path / "r.mcap").messages if m.kind == "mavlink"]
+    assert FRAME_BATCH == 0.5 and [(m.robot, len(m.data["frames"])) for m in msgs] == [(1, 12), (2, 12)] * 2
+    assert {m.schema for m in msgs} == {"mrta.MavlinkFrames"} and msgs[0].ns == round(0.5e9)
+    assert msgs[0].data["frames"][1] == {"ns": round(0.001e9), "direction": "rx", "address": "",
+                                         "frame": "fd00017278"}
+    got, skipped = replay.frames(tmp_path / "r.mcap", rx=True)
+    assert skipped == 0 and got == sorted(want, key=lambda w: w[0])
+    assert replay.frames(tmp_path / "r.mcap", robots=[1])[0] == [w for w in sorted(want) if w[1] == 1 and
+                                                                  w[2].endswith(b"tx")]
+    # the earlier format, and entries that do not parse
+    import foxglove
+
+    ctx = foxglove.Context()
+    writer = foxglove.open_mcap(tmp_path / "old.mcap", context=ctx)
+    ch = foxglove.Channel("/robot_3/mavlink", context=ctx, message_encoding="json",
+                          schema=foxglove.Schema(name="mrta.MavlinkFrame", encoding="jsonschema", data=b"{}"))
+    ch.log(b'{"robot":3,"direction":"tx","address":"","frame":"fe00"}', log_time=5)
+    ch.log(b'{"robot":3,"frames":[{"ns":7,"direction":"tx","frame":"zz"},3,{"ns":9,"direction":"tx","frame":"fe"}]}',
+           log_time=9)
+    writer.close()
+    assert replay.frames(tmp_path / "old.mcap") == ([(5, 3, b"\xfe\x00"), (9, 3, b"\xfe")], 2)
+
+
 def test_replaying_a_recording_without_frames_names_the_file(tmp_path, capsys):
     from runtime import cli
 
@@ -775,3 +816,50 @@ def test_a_laser_revolution_is_one_laser_scan_at_one_degree_steps(tmp_path):
     at = {round(math.degrees(scan.start_angle) + i): d for i, d in enumerate(scan.ranges)}     # -180 .. 179
     assert at[0] == pytest.approx(2.0) and at[90] == pytest.approx(1.0) and at[-180] == pytest.approx(2.18)
     assert at[44] == pytest.approx(2.044) and math.isnan(at[45]) and at[-2] == pytest.approx(2.358)
+
+
+_CLASSES: dict = {}
+
+
+def _protobuf_class(schema):
+    """The protobuf message class of a foxglove schema (its FileDescriptorSet), built once."""
+    if schema.name not in _CLASSES:
+        from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+        pool = descriptor_pool.DescriptorPool()
+        for fd in descriptor_pb2.FileDescriptorSet.FromString(schema.data).file:
+            pool.Add(fd)
+        _CLASSES[schema.name] = message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name))
+    return _CLASSES[schema.name]
+
+
+@settings(max_examples=40, deadline=None)
+@given(x=st.floats(-1e6, 1e6), y=st.floats(-1e6, 1e6), yaw=st.floats(-10.0, 10.0),
+       ns=st.integers(0, (2 ** 32 - 1) * 10 ** 9), rids=st.lists(st.integers(1, 300), min_size=1, max_size=4))
+def test_poses_encoded_here_decode_as_the_sdks_own_messages(x, y, yaw, ns, rids):
+    """foxglove.PoseInFrame and FrameTransforms are encoded by the recorder (a pose every cycle: the SDK's message
+    objects cost too much); the bytes decode to the fields the SDK's own messages carry."""
+    import math
+
+    import foxglove.messages as m
+
+    from runtime.recording import recorder as R
+
+    def decode(schema, data):
+        return _protobuf_class(schema.get_schema()).FromString(data)
+
+    vec, quat = R._pose_pb(x, y, yaw)
+    ts = R._field(1, R._timestamp_pb(ns))
+    mine = decode(m.PoseInFrame, ts + R._WORLD_PB + R._POSE_HEAD + vec + R._QUAT_IN_POSE + quat)
+    stamp = m.Timestamp(sec=ns // 10 ** 9, nsec=ns % 10 ** 9)
+    v = m.Vector3(x=x, y=y, z=0.0)
+    q = m.Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
+    sdk = decode(m.PoseInFrame, m.PoseInFrame(timestamp=stamp, frame_id="world",
+                                              pose=m.Pose(position=v, orientation=q)).encode())
+    assert mine == sdk
+    tfs = b"".join(R._field(1, ts + R._WORLD_PB + R._field(3, f"robot_{r}".encode()) + R._TRANSLATION + vec
+                            + R._ROTATION + quat) for r in rids)
+    sdk = m.FrameTransforms(transforms=[m.FrameTransform(timestamp=stamp, parent_frame_id="world",
+                                                         child_frame_id=f"robot_{r}", translation=v, rotation=q)
+                                        for r in rids])
+    assert decode(m.FrameTransforms, tfs) == decode(m.FrameTransforms, sdk.encode())

@@ -87,15 +87,17 @@ class CoreFeed:
             rec.path(rid, now, path or ())
         if core.sensors is not None:
             self._sensors(now, core.sensors)
-        self._frames(now, out, inbox)
+        if out.frames or (self.received and inbox is not None):
+            self._frames(now, out, inbox)
         for p in out.progress:
             rec.event(now, rid, "progress", p.event, p.task, (rid,), {"detail": p.detail}, t=p.t)
         self._commitments(now)
         self._fleet_table(now)
         lost = core.stats.peers_lost
-        for peer in lost[self._lost:]:
-            rec.event(now, rid, "peer_lost", "", None, (peer,))
-        self._lost = len(lost)
+        if len(lost) != self._lost:
+            for peer in lost[self._lost:]:
+                rec.event(now, rid, "peer_lost", "", None, (peer,))
+            self._lost = len(lost)
         if self.stats is not None and (self._next_stats is None or now >= self._next_stats):
             self._next_stats = now + self.stats_period
             rec.stats(rid, now, self.stats())
@@ -206,13 +208,6 @@ class LogTap(logging.Handler):
             self.handleError(record)
 
 
-def link_tap(rec, rid: int):
-    """A link's ``tap``: its raw MAVLink datagrams onto ``/robot_{rid}/mavlink``."""
-    def tap(direction: str, data: bytes, addr, now: float) -> None:
-        rec.frame(rid, now, direction, data, addr)
-    return tap
-
-
 class Recording:
     """One daemon's recording (``mrta daemon --record/--live``): the recorder, the feed on the core, the log tap
     and (``mavlink``) the link's tap.  :meth:`close` finishes the file."""
@@ -232,7 +227,7 @@ class Recording:
                                "allocation": daemon.cfg.allocation.method, "clock": "system" if wall else "sim"})
         daemon.feed = CoreFeed(rec, daemon.core, received=True, stats=daemon.snapshot, scene=True)
         if mavlink:
-            daemon.link.tap = link_tap(rec, daemon.id)
+            daemon.link.tap = rec.frame_tap(daemon.id)
         return cls(rec, LogTap(rec).attach())
 
     def close(self) -> None:

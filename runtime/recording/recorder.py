@@ -26,11 +26,12 @@ from runtime.log import get_logger
 WORLD = "world"                     # the fixed frame every pose is in
 CHUNK = 256 * 1024                  # bytes of messages per MCAP chunk: what a killed recorder loses at most
 SCAN_BINS = 360                     # a laser scan's equal angular steps (1 degree: an RPLIDAR A1's resolution)
+FRAME_BATCH = 0.5                   # s of the recording's clock a robot's raw MAVLink frames are held, then one message
 LIVE_BACKLOG = 16384                # messages the live server holds per client before it drops the oldest
 TOPICS = {                          # topic (robot topics: {id} is the robot id) -> schema name
     "/robot_{id}/pose": "foxglove.PoseInFrame",        # the robot's own estimate, every control cycle
     "/robot_{id}/truth": "foxglove.PoseInFrame",       # SITL: where the body really is, every control cycle
-    "/tf": "foxglove.FrameTransform",                  # world -> robot_{id}: each robot in the 3D panel
+    "/tf": "foxglove.FrameTransforms",                 # world -> robot_{id} of every robot, once a cycle
     "/robot_{id}/path": "foxglove.PosesInFrame",       # the path the robot follows, when it changes
     "/robot_{id}/command": "mrta.WheelCommand",        # (v, w) to the base, every control cycle
     "/robot_{id}/ranges": "foxglove.PointCloud",       # range readings (sonar, laser) in the robot's frame
@@ -39,7 +40,8 @@ TOPICS = {                          # topic (robot topics: {id} is the robot id)
     "/world": "foxglove.SceneUpdate",                  # arena, obstacles and task places coloured by state
     "/allocation": "mrta.AllocationEvent",             # messages sent and received, commitments, progress, tasks
     "/log": "foxglove.Log",                            # every log record and the STATUSTEXT lines
-    "/robot_{id}/mavlink": "mrta.MavlinkFrame",        # raw MAVLink frames of the robot's link (optional)
+    "/robot_{id}/mavlink": "mrta.MavlinkFrames",       # raw MAVLink frames of the robot's link (optional), up
+    #                                                    to FRAME_BATCH s of them in one message
     "/robot_{id}/stats": "mrta.RobotStats",            # the daemon's status snapshot (counters), every second
 }
 
@@ -64,10 +66,17 @@ SCHEMAS = {
     "mrta.RobotStats": {"type": "object", "title": "mrta.RobotStats", "description": "the daemon's status snapshot: "
                         "cycles, messages sent and received, drops by reason, the link's counters",
                         "additionalProperties": True},
-    "mrta.MavlinkFrame": {"type": "object", "title": "mrta.MavlinkFrame", "properties": {
-        "robot": {"type": "integer"}, "direction": {"type": "string", "description": "tx | rx"},
-        "address": {"type": "string"}, "frame": {"type": "string", "description": "the datagram, hex"}}},
+    "mrta.MavlinkFrames": {"type": "object", "title": "mrta.MavlinkFrames", "description": "the raw MAVLink "
+                           "datagrams of the robot's link since the last message (up to half a second's), in order",
+                           "properties": {
+        "robot": {"type": "integer"},
+        "frames": {"type": "array", "items": {"type": "object", "properties": {
+            "ns": {"type": "integer", "description": "when the link sent or took it: the recording's clock, ns"},
+            "direction": {"type": "string", "description": "tx | rx"},
+            "address": {"type": "string", "description": "HOST:PORT it went to or came from ('' if none)"},
+            "frame": {"type": "string", "description": "the datagram, hex"}}}}}},
 }
+ENCODED = ("foxglove.PoseInFrame", "foxglove.FrameTransforms")    # written as protobuf bytes encoded here
 TASK_COLOURS = {"open": (1.0, 0.6, 0.1), "held": (0.2, 0.45, 1.0), "done": (0.2, 0.75, 0.3),
                 "withdrawn": (0.5, 0.5, 0.5), "cleared": (0.5, 0.5, 0.5)}
 
@@ -165,7 +174,11 @@ class Recorder:
         self._by_robot: dict[tuple[int, str], object] = {}
         self._metadata: list[tuple[str, dict]] = []
         self._frame_heads: dict[tuple, str] = {}
+        self._taps: dict[int, FrameTap] = {}  # robot id -> its link's tap, holding its raw frames not yet written
+        self._frames_due: int | None = None   # when (ns) the held frames are written (check), None: none held
+        self._now_seen = math.nan             # the last ``now`` stamped (the clock's ns of it is _last_ns)
         self._ts_ns, self._ts_last = -1, None
+        self._pb_ts_ns, self._pb_ts = -1, b""
         self._parts_cache: dict[tuple, tuple] = {}
         self.server = None
         self.relay = None                    # a RelaySender: every message also to a SITL launcher (--live-relay)
@@ -213,7 +226,10 @@ class Recorder:
 
     def check(self) -> None:
         """The file's bound and health, once a cycle: rotate or stop at the limit; a refused write ends the file
-        recording with one warning line.  A live relay sends what it holds."""
+        recording with one warning line.  Raw MAVLink frames held FRAME_BATCH s go out, one message a robot;
+        then a live relay sends what it holds."""
+        if self._frames_due is not None and self._last_ns >= self._frames_due:
+            self._write_frames()
         if self.relay is not None:
             self.relay.flush()
         f = self._file
@@ -226,6 +242,7 @@ class Recorder:
             self.log.warning("recording stopped: %s (the robot runs on)", self.stopped)
         elif self.flush_period is not None and time.monotonic() >= self._next_flush:
             self._next_flush = time.monotonic() + self.flush_period
+            self._write_frames()
             self._writer.flush()
         if self._file is not None and self.limit is not None and self._file.bytes >= self.limit:
             self._close_file()
@@ -265,6 +282,7 @@ class Recorder:
             self._writer.write_metadata(name, data)
 
     def close(self) -> None:
+        self._write_frames()
         self._close_file()
         self._file = None
         if self.relay is not None:
@@ -281,9 +299,13 @@ class Recorder:
     def stamp(self, now: float) -> int:
         """``now`` (s) as the recording's time in ns, never before the last one: the simulated clock, or the
         system clock on a robot."""
-        if not self.wall and not math.isfinite(now):
+        if self.wall:
+            ns = time.time_ns()
+        elif now == self._now_seen or not math.isfinite(now):     # the same step's time again: its ns
             return self._last_ns
-        ns = time.time_ns() if self.wall else int(round(now * 1e9))
+        else:
+            self._now_seen = now
+            ns = int(round(now * 1e9))
         if ns > self._last_ns:
             self._last_ns = ns
         return self._last_ns
@@ -303,7 +325,10 @@ class Recorder:
         ch = self._channels.get(topic)
         if ch is None:
             fx = self.fx
-            if schema.startswith("foxglove."):
+            if schema in ENCODED:             # the schema's own (protobuf) channel, logged bytes (:func:`_pose_pb`)
+                ch = fx.Channel(topic, context=self.ctx, message_encoding="protobuf",
+                                schema=getattr(self.m, schema.split(".", 1)[1]).get_schema())
+            elif schema.startswith("foxglove."):
                 cls = getattr(fx.channels, schema.split(".", 1)[1] + "Channel")
                 ch = cls(topic, context=self.ctx)
             else:
@@ -321,10 +346,19 @@ class Recorder:
         return ch
 
     def _log(self, ch, msg, ns: int) -> None:
-        """``msg`` (a foxglove message, or JSON text) on ``ch`` at ``ns``, and to the live relay if there is one."""
-        ch.log(msg, log_time=ns)
+        """``msg`` (a foxglove message, or JSON text) on ``ch`` at ``ns``, and to the live relay if there is one.
+        JSON text and encoded bytes go to the channel's base (what ``Channel.log`` does after its type checks)."""
+        kind = type(msg)
+        if kind is str:
+            msg, kind = msg.encode(), bytes
+        if kind is bytes:
+            ch.base.log(msg, ns)
+        else:
+            ch.log(msg, log_time=ns)
+            if self.relay is not None:
+                msg = msg.encode()               # foxglove's: protobuf
         if self.relay is not None:
-            self.relay.send(self._relay_ids[id(ch)], msg.encode(), ns)    # str: UTF-8; foxglove's: protobuf
+            self.relay.send(self._relay_ids[id(ch)], msg, ns)
 
     def relayed_channel(self, topic: str, encoding: str, schema, robot: int):
         """A channel for what a daemon relays (:class:`~runtime.recording.relay.RelayServer`): served live, left
@@ -357,31 +391,40 @@ class Recorder:
         return m.Pose(position=m.Vector3(x=float(x), y=float(y), z=float(z)), orientation=self._quat(yaw))
 
     # ------------------------------------------------------------------ what is recorded
-    def _parts(self, key, pose):
-        """(position, orientation, Pose) of ``pose`` (x, y, yaw), built once while ``key``'s pose stays the same
-        (a robot standing still; the truth and its frame transform in the same cycle): every cycle logs them."""
+    def _parts(self, key, pose) -> tuple:
+        """(x, y, yaw), the protobuf of its position and orientation (:func:`_pose_pb`) and a PoseInFrame's fields
+        after the timestamp, encoded once while ``key``'s pose stays the same (a robot standing still; the truth
+        and its frame transform in a cycle)."""
         xyy = (float(pose[0]), float(pose[1]), float(pose[2]))
         last = self._parts_cache.get(key)
         if last is None or last[0] != xyy:
-            m = self.m
-            vec, quat = m.Vector3(x=xyy[0], y=xyy[1], z=0.0), self._quat(xyy[2])
-            last = self._parts_cache[key] = (xyy, vec, quat, m.Pose(position=vec, orientation=quat))
+            vec, quat = _pose_pb(*xyy)
+            last = self._parts_cache[key] = (xyy, vec, quat, _WORLD_PB + _POSE_HEAD + vec + _QUAT_IN_POSE + quat)
         return last
 
-    def pose(self, rid: int, now: float, pose, truth: bool = False) -> None:
-        """The robot's pose ``(x, y, yaw)`` (its estimate, or with ``truth`` the simulation's), and the world ->
-        robot transform (from the truth when there is one)."""
-        ns = self.stamp(now)
-        p = self._parts((rid, truth), pose)[3]
-        self._log(self._robot(rid, "truth" if truth else "pose"),
-                  self.m.PoseInFrame(timestamp=self._ts(ns), frame_id=WORLD, pose=p), ns)
+    def _pb_stamp(self, ns: int) -> bytes:
+        """The timestamp field (1) of a message at ``ns``, encoded once a cycle."""
+        if ns != self._pb_ts_ns:
+            self._pb_ts_ns, self._pb_ts = ns, _field(1, _timestamp_pb(ns))
+        return self._pb_ts
 
-    def transform(self, rid: int, now: float, pose) -> None:
+    def pose(self, rid: int, now: float, pose, truth: bool = False) -> None:
+        """The robot's pose ``(x, y, yaw)`` (its estimate, or with ``truth`` the simulation's) as a
+        ``foxglove.PoseInFrame`` in the world frame."""
         ns = self.stamp(now)
-        _, vec, quat, _ = self._parts((rid, True), pose)
-        self._log(self.channel("/tf", TOPICS["/tf"]),
-                  self.m.FrameTransform(timestamp=self._ts(ns), parent_frame_id=WORLD, child_frame_id=f"robot_{rid}",
-                                        translation=vec, rotation=quat), ns)
+        self._log(self._robot(rid, "truth" if truth else "pose"), self._pb_stamp(ns) + self._parts((rid, truth),
+                                                                                                  pose)[3], ns)
+
+    def transforms(self, now: float, poses) -> None:
+        """The world -> robot_N frame of each ``(rid, pose)`` (the truth in SITL), one ``foxglove.FrameTransforms``
+        for them all."""
+        ns = self.stamp(now)
+        head = self._pb_stamp(ns) + _WORLD_PB
+        tfs = []
+        for rid, pose in poses:
+            _, vec, quat, _ = self._parts((rid, True), pose)
+            tfs.append(_field(1, head + _field(3, f"robot_{rid}".encode()) + _TRANSLATION + vec + _ROTATION + quat))
+        self._log(self.channel("/tf", TOPICS["/tf"]), b"".join(tfs), ns)
 
     def path(self, rid: int, now: float, points) -> None:
         ns = self.stamp(now)
@@ -450,18 +493,41 @@ class Recorder:
         self._log(self.channel("/log", TOPICS["/log"]),
                   m.Log(timestamp=self._ts(ns), level=level, message=text, name=name, file=file, line=line), ns)
 
+    def frame_tap(self, rid: int) -> "FrameTap":
+        """Robot ``rid``'s link tap: ``tap(direction, datagram, address, now)`` holds each raw frame for
+        :meth:`check` to write with the robot's others as one ``mrta.MavlinkFrames``."""
+        tap = self._taps.get(rid)
+        if tap is None:
+            tap = self._taps[rid] = FrameTap(self, rid)
+        return tap
+
     def frame(self, rid: int, now: float, direction: str, data: bytes, address=None) -> None:
-        """One raw MAVLink datagram of robot ``rid``'s link (``direction`` "tx" or "rx"; ``address`` (host, port)).
-        The JSON is written out by hand: this runs for every datagram."""
+        """One raw MAVLink datagram of robot ``rid``'s link (``direction`` "tx" or "rx"; ``address`` (host, port)),
+        as its tap takes it."""
         if self.mavlink:
-            key = (rid, direction, None if address is None else (address[0], address[1]))
-            head = self._frame_heads.get(key)
-            if head is None:              # the JSON up to the frame, once per robot, direction and address
-                addr = "" if address is None else f"{address[0]}:{int(address[1])}"
-                head = self._frame_heads[key] = (
-                    f'{{"robot":{int(rid)},"direction":"{"rx" if direction == "rx" else "tx"}",'
-                    f'"address":{json.dumps(addr)},"frame":"')
-            self._log(self._robot(rid, "mavlink"), f'{head}{data.hex()}"}}', self.stamp(now))
+            self.frame_tap(rid)(direction, data, address, now)
+
+    def _write_frames(self) -> None:
+        """The held raw frames, one message a robot, at the recording's latest time; each frame with its own time.
+        The JSON is written out by hand, each frame's head once per direction and address."""
+        self._frames_due = None
+        heads = self._frame_heads
+        ns = self._last_ns
+        for rid, tap in self._taps.items():
+            if not tap.held:
+                continue
+            pending, tap.held = tap.held, []
+            items = []
+            for t, direction, address, data in pending:
+                t = int(round(t * 1e9))
+                key = (direction, None if address is None else (address[0], address[1]))
+                head = heads.get(key)
+                if head is None:
+                    addr = "" if address is None else f"{address[0]}:{int(address[1])}"
+                    head = heads[key] = (f',"direction":"{"rx" if direction == "rx" else "tx"}",'
+                                         f'"address":{json.dumps(addr)},"frame":"')
+                items.append(f'{{"ns":{t}{head}{data.hex()}"}}')
+            self._log(self._robot(rid, "mavlink"), f'{{"robot":{int(rid)},"frames":[{",".join(items)}]}}', ns)
 
     def scene(self, now: float, world, tasks=()) -> None:
         """The world (a WorldConfig, or None: no map) as scene entities: the arena's floor and walls, the
@@ -523,6 +589,24 @@ class Recorder:
         return [m.SceneEntity(timestamp=ts, frame_id=WORLD, id="arena", cubes=arena),
                 m.SceneEntity(timestamp=ts, frame_id=WORLD, id="obstacles", cubes=obstacles)]
 
+class FrameTap:
+    """A link's ``tap`` (``tap(direction, datagram, address, now)``, every datagram it sends or takes): holds the
+    frame with its time (``now``, the host's clock; the system's on a wall-clock recording) until the recorder
+    writes the robot's held frames as one message.  One call and one append a datagram: a message each cost a
+    third of the recording."""
+
+    __slots__ = ("rec", "rid", "held", "wall")
+
+    def __init__(self, rec: Recorder, rid: int):
+        self.rec, self.rid, self.held, self.wall = rec, rid, [], rec.wall
+
+    def __call__(self, direction: str, data: bytes, address, now: float) -> None:
+        rec = self.rec
+        if rec._frames_due is None:
+            rec._frames_due = rec._last_ns + int(FRAME_BATCH * 1e9)
+        self.held.append((time.time() if self.wall else now, direction, address, data))
+
+
 def recoverable(exc: BaseException) -> bool:
     """An error the recording may end on while the robot runs on: an Exception, or a panic in the Rust library
     (pyo3's PanicException is a BaseException); never a signal's or the interpreter's own."""
@@ -532,6 +616,42 @@ def recoverable(exc: BaseException) -> bool:
 def _not_relayed(channel) -> bool:
     """The file's channel filter: what a launcher relays from its daemons is in their own files."""
     return "relayed" not in (channel.metadata or {})
+
+
+# Foxglove's PoseInFrame and FrameTransforms encoded here (protobuf, the schemas' own field numbers): building the
+# SDK's message objects for every pose of every cycle was a third of the recording's cost.  A test checks the bytes
+# decode to what the SDK's own messages say.
+_F64 = struct.Struct("<BdBd").pack
+_WORLD_PB = b"\x12\x05" + WORLD.encode()       # frame_id / parent_frame_id (field 2)
+_POSE_HEAD = b"\x1a\x28\x0a\x12"               # PoseInFrame.pose (3, 40 bytes), Pose.position (1, 18 bytes)
+_QUAT_IN_POSE = b"\x12\x12"                     # Pose.orientation (2, 18 bytes)
+_TRANSLATION, _ROTATION = b"\x22\x12", b"\x2a\x12"   # FrameTransform.translation (4), .rotation (5)
+
+
+def _pose_pb(x: float, y: float, yaw: float) -> tuple[bytes, bytes]:
+    """A pose's Vector3 (x, y; z = 0) and Quaternion (about z) message bodies, 18 bytes each (-0.0 as 0.0: the
+    same value the SDK's encoder leaves out)."""
+    return _F64(0x09, x + 0.0, 0x11, y + 0.0), _F64(0x19, math.sin(yaw / 2.0) + 0.0, 0x21, math.cos(yaw / 2.0))
+
+
+def _varint(n: int) -> bytes:
+    out = bytearray()
+    while n > 0x7F:
+        out.append(0x80 | (n & 0x7F))
+        n >>= 7
+    out.append(n)
+    return bytes(out)
+
+
+def _field(number: int, body: bytes) -> bytes:
+    """A length-delimited protobuf field."""
+    return _varint(number << 3 | 2) + _varint(len(body)) + body
+
+
+def _timestamp_pb(ns: int) -> bytes:
+    """A google.protobuf.Timestamp of ``ns`` >= 0 (seconds 1, nanos 2; zeros left out, as the SDK does)."""
+    sec, nsec = divmod(ns, 1_000_000_000)
+    return (b"\x08" + _varint(sec) if sec else b"") + (b"\x10" + _varint(nsec) if nsec else b"")
 
 
 def _fact(v) -> str:

@@ -2,10 +2,12 @@
 recorded pace, to a UDP address, so a ground station (QGroundControl, MAVProxy, ``mrta gcs``) watches a past run as
 if the robots were there.
 
-The frames are the ``/robot_N/mavlink`` channels (``mrta.MavlinkFrame``: on in SITL, ``--record-mavlink`` on a
-robot): by default what the robots sent (``tx``), every robot in the file; ``--robot N`` picks robots, ``--rx``
-adds what they received.  Each datagram goes out as it was recorded (signed frames stay signed), at its log time
-from the first frame divided by ``--speed``.  A frame whose hex does not parse is skipped and counted.
+The frames are the ``/robot_N/mavlink`` channels (``mrta.MavlinkFrames``, a robot's frames of one control cycle
+in one message, each with its own time; on in SITL, ``--record-mavlink`` on a robot; files written before the
+batching have one ``mrta.MavlinkFrame`` a message, read too): by default what the robots sent (``tx``), every robot
+in the file; ``--robot N`` picks robots, ``--rx`` adds what they received.  Each datagram goes out as it was
+recorded (signed frames stay signed), at its time from the first frame divided by ``--speed``, in time order.  A
+frame that does not parse (its hex, its fields) is skipped and counted.
 """
 from __future__ import annotations
 
@@ -32,8 +34,8 @@ def add_parser(sub) -> None:
 
 
 def frames(path, robots=None, rx: bool = False) -> tuple[list[tuple[int, int, bytes]], int]:
-    """The recording's raw MAVLink frames to replay as (log time ns, robot, datagram), in file order, and how many
-    were skipped (a frame that does not parse)."""
+    """The recording's raw MAVLink frames to replay as (time ns, robot, datagram), in time order (file order
+    among equal times), and how many were skipped (a frame that does not parse)."""
     from runtime.recording.read import read_messages
 
     rec = read_messages(path)
@@ -41,13 +43,15 @@ def frames(path, robots=None, rx: bool = False) -> tuple[list[tuple[int, int, by
     for m in rec.messages:
         if m.kind != "mavlink" or m.robot is None or (robots and m.robot not in robots):
             continue
-        d = m.data
-        try:
-            if d.get("direction") != "tx" and not rx:
-                continue
-            out.append((m.ns, m.robot, bytes.fromhex(d["frame"])))
-        except (AttributeError, KeyError, TypeError, ValueError):
-            skipped += 1
+        batch = m.data.get("frames") if isinstance(m.data, dict) else None
+        for d in ([m.data] if batch is None else batch if isinstance(batch, list) else [None]):
+            try:
+                if d.get("direction") != "tx" and not rx:
+                    continue
+                out.append((int(d.get("ns", m.ns)), m.robot, bytes.fromhex(d["frame"])))
+            except (AttributeError, KeyError, TypeError, ValueError):
+                skipped += 1
+    out.sort(key=lambda item: item[0])
     if not out:
         which = "" if not robots else f" of robot {', '.join(map(str, robots))}"
         raise InputError(f"{path}: expected raw MAVLink frames{which} (/robot_N/mavlink: SITL runs record them, "

@@ -25,7 +25,7 @@ from sitl import fleet_config as FC
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"
-TIME_BOUND = 3.0        # s per example (the slowest seen is ~0.3 s; the machine is shared)
+TIME_BOUND = 30.0       # s per example: a hang guard (the slowest seen is ~0.3 s), not a timing assert
 FUZZ = settings(max_examples=200, deadline=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 

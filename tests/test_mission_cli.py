@@ -167,7 +167,7 @@ def test_no_vehicle_exits_1(capsys):
     assert (rc, out) == (1, "") and err.count("\n") == 1 and err.startswith(f"mrta: {target}: no HEARTBEAT")
     rc, out, err = mrta(capsys, "download", target, "--system", "3", "--timeout", "0.5")
     assert (rc, out) == (1, "") and err.count("\n") == 1 and "mission download unfinished" in err
-    assert time.monotonic() - t0 < 3.0
+    assert time.monotonic() - t0 < 30.0      # a hang guard (30 times the two timeouts), not a timing assert
 
 
 def test_refused_upload_exits_1_and_the_vehicle_keeps_its_mission(capsys):
@@ -190,7 +190,7 @@ def test_without_the_robots_report_the_upload_says_it_does_not_know(capsys):
     with UdpVehicle(report=False) as veh:
         t0 = time.monotonic()
         rc, out, err = mrta(capsys, "upload", veh.target, WPL)
-    assert (rc, err) == (0, "") and time.monotonic() - t0 < 5.0
+    assert (rc, err) == (0, "") and time.monotonic() - t0 < 30.0    # a hang guard, not a timing assert
     assert out.strip() == (f"uploaded 6 items to system 3 at {veh.target}: accepted; the robot did not report "
                            "how many were new tasks")
 

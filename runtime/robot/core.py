@@ -145,7 +145,6 @@ Zenoh yes, UDP no; a host whose bus reaches every robot, as the in-memory bus do
         self.node = FleetNode(self.id, self.agent, armed=cfg.robot.armed, peers=list(peers), state_period=state_period)
         self.liveness = PeerLiveness(peers, cfg.comms.heartbeat_timeout)    # lost: no heartbeat and no message
         self.joins = transport_joins(cfg.comms.transport) if joins is None else bool(joins)
-        self.roster = set(peers)                 # the configured peers and the robots that joined since
         self.executive = Executive(ExecContext(self.planner, Tunables(c.cruise_speed, c.lookahead, c.max_turn_rate,
                                                                       c.goal_tolerance), self.log, radius,
                                                seed=self.id if seed is None else seed, robot_id=self.id))
@@ -287,15 +286,19 @@ Zenoh yes, UDP no; a host whose bus reaches every robot, as the in-memory bus do
             out += node.tick(now)
         return out
 
+    @property
+    def roster(self) -> set[int]:
+        """The configured peers and the robots that joined since: the fleet node's (it takes messages from them)."""
+        return set(self.node.peers)
+
     def _admit(self, sender, now: float) -> list:
         """A message from a robot outside the roster: over a transport that lets robots join (``joins``), it joins
         now, before its message is taken (the fleet node and the agent are told, its silence is tracked from here on
         as a configured peer's).  The link took the message, so it is signed when the fleet signs; a robot is seen
         only once it sends one, never from a liveliness token alone (the router is not trusted)."""
-        if (not self.joins or sender in self.roster or sender == self.id or not isinstance(sender, int)
-                or isinstance(sender, bool) or not 1 <= sender <= MAX_ROBOT):
+        if (not self.joins or not isinstance(sender, int) or isinstance(sender, bool) or sender == self.id
+                or sender in self.node.peers or not 1 <= sender <= MAX_ROBOT):
             return []
-        self.roster.add(sender)
         self.liveness.admit(sender)
         self.stats.peers_joined.append(sender)
         self.log.info("peer %d joined the fleet (its first message): taken into the roster", sender)

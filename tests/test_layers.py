@@ -7,6 +7,7 @@ import is still a dependency.  The graph is built from the source with ``ast``; 
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -31,7 +32,13 @@ def _resolve(name: str, mods: dict) -> str | None:
 
 
 def graph() -> dict[str, set[str]]:
-    """module -> the project modules it imports (``from pkg import mod`` counts as importing ``pkg.mod``)."""
+    """module -> the project modules it imports (``from pkg import mod`` counts as importing ``pkg.mod``); parsed once
+    per session (about 2 s, most of it the generated dialect), read by every test here."""
+    return {m: set(ts) for m, ts in _graph().items()}
+
+
+@functools.lru_cache(maxsize=None)
+def _graph() -> dict[str, set[str]]:
     mods = modules()
     edges: dict[str, set[str]] = {m: set() for m in mods}
     for m, path in mods.items():

@@ -152,6 +152,7 @@ class SimPioneer3DX(GroundTruth):
         self._contacts: list | None = None
         self.rays_cast = 0
         self.sonar = raycast.Beams(self, _RAYS, SONAR_Z, SONAR_MAX_RANGE)   # the ring, mounted on this body
+        self._fired: dict[tuple, raycast.Beams] = {}    # the ring's rays of each set of sonars fired together
 
     # -------------------------------------------------------------- commands
     def set_wheel_speeds(self, left_mps: float, right_mps: float) -> None:
@@ -226,8 +227,11 @@ class SimPioneer3DX(GroundTruth):
     def sonar_ranges(self, sonars) -> dict[int, float]:
         """Range (m) each sonar in ``sonars`` measures now: the nearest hit of its rays within 5 m, from the
         transducer; 5 m when nothing echoes."""
-        beams = self.sonar.select(sonars)
-        out = {int(n): SONAR_MAX_RANGE for n in sonars}
+        key = tuple(sonars)
+        beams = self._fired.get(key)
+        if beams is None:                     # ARCOS fires a few fixed pairs in turn: each selected once
+            beams = self._fired[key] = self.sonar.select(sonars)
+        out = {int(n): SONAR_MAX_RANGE for n in key}
         if not len(beams.rays):
             return out
         (dist,), n_cast = raycast.cast_many([beams])

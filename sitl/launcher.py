@@ -349,11 +349,11 @@ def write_manifest(f: Fleet, speedup: float, seed: int, key_path: Path | None) -
 
 # ---------------------------------------------------------------------- results
 
-def finish(f: Fleet, op, ended: str) -> dict:
+def finish(f: Fleet, op, ended: str, picture: bool = True) -> dict:
     """The scenario's summary, the verdict, the run's events, and the trace and its picture in the run directory.
-    ``ended``: why the run stopped ("goal", "timeout", "stopped", "refused", "unreachable")."""
+    ``ended``: why the run stopped ("goal", "timeout", "stopped", "refused", "unreachable"); ``picture``: False
+    leaves run.png out (``res["picture"]`` None), for callers that read only the result (0.3-1 s of CPU a run)."""
     from sitl.operator import RunView
-    from sitl.run_plot import plot_run
 
     view = RunView(op)
     res = f.scenario.summary(view)
@@ -363,7 +363,10 @@ def finish(f: Fleet, op, ended: str) -> dict:
     res["events"] = list(f.events)
     try:
         op.trace.write(f.run_dir / "trace.json")
-        res["picture"] = str(plot_run(op.trace, f.run_dir / "run.png"))
+        res["picture"] = None
+        if picture:
+            from sitl.run_plot import plot_run
+            res["picture"] = str(plot_run(op.trace, f.run_dir / "run.png"))
     except Exception as exc:          # a picture must never cost the run its summary
         log.warning("run picture not drawn: %s", exc)
         res["picture"] = None
@@ -532,11 +535,11 @@ def open_recording(f: Fleet, record, live: tuple[str, int] | None):
 
 
 def run_lockstep(f: Fleet, timeout: float | None = None, progress=None, on_step=None, record=False,
-                 live: tuple[str, int] | None = None) -> dict:
+                 live: tuple[str, int] | None = None, picture: bool = True) -> dict:
     """Daemons in this process on a simulated clock: deterministic for a given seed.
     ``on_step(fleet)`` is called after every control cycle (tests attach observers there).  ``record``: the run's
     MCAP (True: RUN_DIR/run.mcap, as `mrta sitl run` asks; a path; False: none, the default for tests and
-    experiments); ``live``: serve it over the Foxglove WebSocket protocol."""
+    experiments); ``live``: serve it over the Foxglove WebSocket protocol; ``picture``: as :func:`finish`'s."""
     compiled.enable()           # many robots faster than real time in one process: the executive's compiled kernels
     run = Lockstep(f, record, live)
     timeout = timeout or f.fleet.timeout
@@ -551,7 +554,7 @@ def run_lockstep(f: Fleet, timeout: float | None = None, progress=None, on_step=
             if progress and f.world.t >= next_progress:
                 progress(f, run.op)
                 next_progress += 5.0
-        res = finish(f, run.op, ended or "timeout")
+        res = finish(f, run.op, ended or "timeout", picture)
     finally:
         run.close()
     if run.recording is not None and run.recording.path is not None:

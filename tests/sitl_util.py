@@ -92,7 +92,7 @@ def lockstep_run(fleet_path: Path, run_dir: Path, read=lambda f: None, on_step=N
 
     f = launcher.build(fleet_path, run_dir)
     try:
-        res = launcher.run_lockstep(f, on_step=on_step)
+        res = launcher.run_lockstep(f, on_step=on_step, picture=False)
         return res, read(f)
     finally:
         f.close()

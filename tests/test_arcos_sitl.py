@@ -148,7 +148,7 @@ def _drive_at_unmapped_box(tmp_path: Path, sonar: bool, laser: bool = False) -> 
             seen["closest_echo"] = min(seen["closest_echo"], min(r for _, r in ranges))
         seen["x"] = max(seen["x"], body.pose()[0])
     try:
-        launcher.run_lockstep(f, timeout=30, on_step=watch)
+        launcher.run_lockstep(f, timeout=30, on_step=watch, picture=False)
     finally:
         f.close()
     return seen
@@ -177,7 +177,7 @@ def test_pioneer_4_reaches_its_formation(tmp_path):
     f = launcher.build(shipped_fleet(tmp_path, "pioneer_4.yaml"), tmp_path / "run")
     try:
         ports = {rid: r.base_dev.path for rid, r in f.robots.items()}
-        res = launcher.run_lockstep(f, timeout=120)
+        res = launcher.run_lockstep(f, timeout=120, picture=False)
     finally:
         f.close()
     assert ports[1].startswith("/dev/") and ports[2].startswith("/dev/")

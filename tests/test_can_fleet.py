@@ -30,7 +30,7 @@ def _run(tmp_path, name="run", **kw):
         for r in fleet.robots.values():
             faults.update(r.daemon.base.sensors.faults)
     try:
-        res = launcher.run_lockstep(f, timeout=60, on_step=watch)
+        res = launcher.run_lockstep(f, timeout=60, on_step=watch, picture=False)
         poses = {rid: f.true_pose(rid) for rid in f.robots}
     finally:
         f.close()

@@ -79,7 +79,7 @@ def _run(tmp_path, watch: Watch, timeout: float = 150.0) -> tuple[dict, dict, fl
             run.step()
             watch(f, run)
             goal = f.scenario.goal(RunView(run.op))
-        res = launcher.finish(f, run.op, "goal" if goal else "timeout")
+        res = launcher.finish(f, run.op, "goal" if goal else "timeout", picture=False)
         live = {rid: d for rid, d in run.daemons.items() if rid not in run.stopped}
     finally:
         run.close()

@@ -62,7 +62,7 @@ def test_the_borrower_surveys_without_touching_stops_when_its_sensor_dies_and_ge
     f = launcher.build(shipped_fleet(tmp_path, LASER_FLEET.name), tmp_path / "run")
     assert [k for k, _ in f.robots[2].sensor_devs] == ["rplidar"]
     try:
-        res = launcher.run_lockstep(f, timeout=400)
+        res = launcher.run_lockstep(f, timeout=400, picture=False)
         laser = f.robots[2].daemon.sensor_parts[0]
     finally:
         f.close()

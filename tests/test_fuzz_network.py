@@ -140,7 +140,7 @@ def test_a_signed_fleet_under_live_fuzz_meets_its_goal_and_counts_every_datagram
 
     t0 = time.monotonic()
     try:
-        res = launcher.run_lockstep(f, timeout=60, on_step=on_step)
+        res = launcher.run_lockstep(f, timeout=60, on_step=on_step, picture=False)
     finally:
         fuzz.close()
         f.close()
@@ -206,7 +206,7 @@ def test_an_unsigned_fleet_keeps_its_verdict_under_a_flood_of_forged_status_with
         state["sent"] += BATCH
 
     try:
-        res = launcher.run_lockstep(f, timeout=60, on_step=on_step)
+        res = launcher.run_lockstep(f, timeout=60, on_step=on_step, picture=False)
     finally:
         sock.close()
         f.close()

@@ -34,7 +34,7 @@ def test_lockstep_fleet_reaches_formation_and_is_repeatable(tmp_path):
     for k in range(2):
         f = launcher.build(_fleet_copy(tmp_path), tmp_path / f"run{k}", seed=7)
         try:
-            results.append(launcher.run_lockstep(f, timeout=90))
+            results.append(launcher.run_lockstep(f, timeout=90, picture=False))
         finally:
             f.close()
     res = results[0]
@@ -78,7 +78,7 @@ def test_fleet_plans_around_boxes(tmp_path):
     path.write_text(yaml.safe_dump(data))
     f = launcher.build(path, tmp_path / "run")
     try:
-        res = launcher.run_lockstep(f, timeout=120)
+        res = launcher.run_lockstep(f, timeout=120, picture=False)
     finally:
         f.close()
     assert res["valid"], res

@@ -212,7 +212,7 @@ def _lockstep(tmp_path, fleet: Path, until: float, read=lambda run, res: None, o
             if observe is not None:
                 observe(f)
             goal = f.scenario.goal(RunView(run.op))
-        res = launcher.finish(f, run.op, "goal" if goal else "timeout")
+        res = launcher.finish(f, run.op, "goal" if goal else "timeout", picture=False)
         return goal, f.scenario.shortfall(RunView(run.op)), res, read(run, res)
     finally:
         run.close()

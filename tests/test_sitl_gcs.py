@@ -32,7 +32,7 @@ def test_stock_pymavlink_client_sees_rovers_moving(tmp_path):
             elif m.get_type() == "GLOBAL_POSITION_INT":
                 positions.setdefault(sysid, []).append((m.lat, m.lon))
     try:
-        res = launcher.run_lockstep(f, timeout=60, on_step=drain)
+        res = launcher.run_lockstep(f, timeout=60, on_step=drain, picture=False)
     finally:
         f.close()
         client.close()

@@ -240,14 +240,18 @@ def _build(fleet, held, run_dir, manifest, seed, signing, method, speedup, peer_
         base_cfg = robot_cfg.base
         body = world.add_body(r.id, r.start, body_kind(base_cfg))
         base_dev = make_device(base_cfg, body, r.id)
-        # every robot has the world's GPS (whatever its template says); its other sensors: entries their twins
+        # every robot has the world's GPS emulator; its other sensors: entries their twins
         gps_dev = NmeaGpsDevice(body, world_cfg.datum, noise_sigma=fleet.gps_noise, seed=seed * 1000 + r.id,
                                 robot_id=r.id)
         entries = [e for e in robot_cfg.sensors if e.type != "nmea_gps"]
         sensor_devs = [(e.type, make_sensor_device(e, body, r.id)) for e in entries]
+        # the daemon is given the GPS only when its template has one (paper 000's foraging robots have none:
+        # odometry only); the emulator runs either way, for the manifest and for --devices-only clients
         template.pop("gps", None)
         template["sensors"] = [{**C.to_dict(e), **dev.endpoint()} for e, (_, dev) in zip(entries, sensor_devs)] + \
-            [{"type": "nmea_gps", **gps_dev.endpoint()}]
+            ([{"type": "nmea_gps", **gps_dev.endpoint()}] if robot_cfg.has_gps else [])
+        if not robot_cfg.has_gps:
+            template["gps"] = {"enabled": False}
         overrides = {
             "robot": {"id": r.id, "name": f"{template.get('robot', {}).get('name', 'robot')}-{r.id}"},
             "base": base_dev.endpoint(),

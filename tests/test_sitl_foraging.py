@@ -283,6 +283,22 @@ def test_the_fleets_peer_loss_or_the_runs_becomes_every_robots(tmp_path):
         FC.load_fleet(bad)
 
 
+def test_the_foraging_robots_run_on_odometry_alone_as_their_template_says(tmp_path):
+    """pioneer3dx_forage.yaml says ``gps: enabled: false`` (paper 000's robots had none): the SITL still emulates the
+    world's GPS for the manifest, but the daemons are not given it; a template with a GPS keeps it."""
+    from sitl import launcher
+    from tests.sitl_util import shipped_fleet
+
+    for name, gps in ((FLEET.name, False), ("create2_4.yaml", True)):
+        f = launcher.build(shipped_fleet(tmp_path, name), tmp_path / name)
+        try:
+            cfgs = [C.load_robot(r.config_path) for r in f.robots.values()]
+            assert {c.has_gps for c in cfgs} == {gps}, name
+            assert all(r.gps_dev.path for r in f.robots.values())
+        finally:
+            f.close()
+
+
 @pytest.mark.slow
 def test_with_a_tenth_of_the_datagrams_between_robots_lost_the_shipped_fleet_keeps_every_invariant(tmp_path):
     """Issue 16's lossy-network properties in SITL, lock-step: the shipped foraging fleet (leader killed at 25 s)

@@ -19,15 +19,15 @@ def test_every_skipped_tick_of_a_dr_foraging_run_would_have_done_nothing(monkeyp
 
     monkeypatch.setattr(FleetNode, "check_idle", True)
     monkeypatch.setattr(FleetNode, "_checked_tick", counting)
-    fr = ForagingRun(ForagingConfig(robots=10, method="dr", time_limit=30.0, seed=2))
+    fr = ForagingRun(ForagingConfig(robots=10, method="dr", time_limit=40.0, seed=2))
     try:
         result = fr.run()
     finally:
         fr.close()
-    ticks = 10 * 300
+    ticks = 10 * 400
     assert len(judged) > ticks // 4, f"only {len(judged)} of about {ticks} ticks were judged idle"
     assert len(set(judged)) > 5          # members across the fleet, not one robot
-    assert result.moved > 0
+    assert result.moved > 0              # loads taken and reported: the outboxes were busy too
 
 
 class _Liar:

@@ -101,7 +101,18 @@ class Message:
     """The base of every message dataclass (no fields of its own)."""
 
     def invalid(self) -> str | None:
-        """Why this message cannot be acted on (one line), or None."""
+        """Why this message cannot be acted on (one line), or None.  Found once per message object (its fields are
+        frozen; a broadcast on the in-memory bus is one object that every robot checks)."""
+        try:
+            return self.__dict__["_invalid"]
+        except KeyError:
+            pass
+        why = self._invalid()
+        if type(self).__setattr__ is not object.__setattr__:     # frozen dataclass: the fields cannot change
+            object.__setattr__(self, "_invalid", why)
+        return why
+
+    def _invalid(self) -> str | None:
         for name, kind in declared(type(self)):
             v = getattr(self, name)
             if not kind.ok(v):

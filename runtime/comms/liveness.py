@@ -46,13 +46,15 @@ class Silence:
         return now - self.heard.get(peer, -math.inf) > self.timeout
 
     def due(self, now: float) -> list[int]:
-        out = sorted(p for p in self.heard if p not in self.lost and self.silent(p, now))
-        self.lost.update(out)
+        lost, timeout = self.lost, self.timeout        # silent() inlined: every robot asks every cycle
+        out = sorted(p for p, t in self.heard.items() if p not in lost and now - t > timeout)
+        lost.update(out)
         return out
 
     def alive(self, now: float) -> list[int]:
         """Peers heard within ``timeout`` (the link's ``peers_alive``)."""
-        return sorted(p for p in self.heard if p not in self.lost and not self.silent(p, now))
+        lost, timeout = self.lost, self.timeout
+        return sorted(p for p, t in self.heard.items() if p not in lost and not now - t > timeout)
 
 
 class PeerLiveness:

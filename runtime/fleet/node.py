@@ -83,6 +83,8 @@ class FleetNode:
         self._pending: dict[int, _Pending] = {}     # task id -> a record held until its origin confirms it
         self._lost: set[int] = set()                 # peers declared lost and not heard since
         self._started: float | None = None
+        self._changed = True                        # an input since the last tick (the tick's state may differ)
+        self._quiet = getattr(agent, "quiet", None)  # agents that say when a tick would do nothing
         self.log = get_logger("fleet", self.robot_id)
         if not self.armed:
             agent.set_available(False, 0.0)
@@ -90,12 +92,14 @@ class FleetNode:
     # ------------------------------------------------------------------ the operator
     def add_items(self, items, now: float) -> list:
         """An accepted upload: ``(command, frame, params, x, y)`` per item, fleet frame.  Returns messages."""
+        self._changed = True
         tasks, out = self.table.add(items)
         out += self.agent.add_tasks(tasks, now)
         self.log.info("operator handed in %d task(s): %s", len(tasks), [t.id for t in tasks])
         return out
 
     def clear(self, now: float) -> list:
+        self._changed = True
         withdrawn, out = self.table.clear()
         if withdrawn:
             out += self.agent.withdraw_tasks(withdrawn, now)
@@ -103,6 +107,7 @@ class FleetNode:
         return out
 
     def set_armed(self, armed: bool, now: float) -> list:
+        self._changed = True
         if armed == self.armed:
             return []
         self.armed = bool(armed)
@@ -113,6 +118,7 @@ class FleetNode:
     def set_paused(self, paused: bool, now: float, says: str) -> list:
         """The operator stops the robot taking tasks (its tasks go back to the fleet) or lets it take them again;
         ``says``: the STATUSTEXT line."""
+        self._changed = True
         if paused == self.paused:
             return []
         self.paused = bool(paused)
@@ -121,6 +127,7 @@ class FleetNode:
 
     # ------------------------------------------------------------------ peers
     def on_message(self, msg, now: float) -> list:
+        self._changed = True
         why = self._refuse(msg)
         if why is not None:
             self.dropped[why] += 1
@@ -228,6 +235,7 @@ class FleetNode:
         means; an agent without ``on_peer_joined`` keeps its roster).  It is sent my state at once: a robot that
         just started learns the fleet from the first state of each robot (and its table from their digests), not a
         state period later."""
+        self._changed = True
         if self.peers is not None:
             self.peers |= {int(robot_id)}
         self._lost.discard(robot_id)
@@ -235,6 +243,7 @@ class FleetNode:
         return ([] if join is None else join(robot_id, now)) + [self.robot_state(int(robot_id))]
 
     def on_peer_lost(self, robot_id: int, now: float) -> list:
+        self._changed = True
         self._lost.add(robot_id)
         self.holding.pop(robot_id, None)
         self.positions.pop(robot_id, None)
@@ -258,6 +267,7 @@ class FleetNode:
         return {tid: e.done_by for tid, e in self.table.entries.items() if e.done_by}
 
     def on_progress(self, p: Progress, now: float) -> list:
+        self._changed = True
         if p.event == "arrived":
             seq = self.table.seq(p.task)
             self.notices.append(Notice(f"task {_tid(p.task)} reached", 6, seq))
@@ -267,12 +277,23 @@ class FleetNode:
     def begin(self, pose: tuple[float, float] | None) -> None:
         """The pose estimate of this cycle (None: not localized yet), before any input is handled."""
         self.pose = pose
+        if self.localized != (pose is not None):
+            self._changed = True
         self.localized = pose is not None
         setter = getattr(self.agent, "set_localized", None)
         if setter is not None:
             setter(self.localized)
 
     def tick(self, now: float) -> list:
+        """The agent's timers, held records and my state: nothing is done when nothing is due (:meth:`idle`)."""
+        if self.idle(now):
+            if self.check_idle:
+                return self._checked_tick(now)
+            return []
+        return self._tick(now)
+
+    def _tick(self, now: float) -> list:
+        self._changed = False
         if self._started is None:
             self._started = now
         out = self.agent.on_tick(now) + self._pending_tick(now)
@@ -288,6 +309,29 @@ class FleetNode:
                 self.notices.append(Notice(f"task {_tid(ev.task)} {ev.what} by {who}"
                                            + (f": {ev.detail}" if ev.detail else ""), 4))
         return out + self._state_now(now)
+
+    check_idle = False          # tests: an idle tick is run anyway, and must send nothing and change nothing
+
+    def idle(self, now: float) -> bool:
+        """The tick at ``now`` would send nothing and change nothing: my state not due again and the same as I
+        sent last (it is when no input came since the last tick), no held record, and an agent that says its own
+        tick is quiet.  Agents without ``quiet`` tick every time."""
+        if (self._quiet is None or self._started is None or now >= self._next_state or self._pending
+                or not self._quiet(now)):
+            return False
+        if self._changed:
+            held = self.held()
+            if (self._state(held), held, self.table.digest) != self._last_state:
+                return False
+            self._changed = False
+        return True
+
+    def _checked_tick(self, now: float) -> list:
+        before = _fingerprint(self)
+        out = self._tick(now)
+        if out or _fingerprint(self) != before:
+            raise AssertionError(f"robot {self.robot_id}: a tick at {now!r} judged idle did something: {out}")
+        return out
 
     @property
     def state(self) -> int:
@@ -324,6 +368,32 @@ class FleetNode:
     def pop_notices(self) -> list[Notice]:
         out, self.notices = self.notices, []
         return out
+
+
+def _fingerprint(node: FleetNode) -> str:
+    """The node's and its agent's state, as text (the agent's clock and logger aside): what an idle tick must
+    leave as it found it."""
+    return repr(_plain((node.agent, node._last_state, node._next_state, node._started, node.events, node.notices,
+                        node.table.digest), set()))
+
+
+def _plain(v, seen: set):
+    """``v`` as nested tuples of plain values, objects by their attributes (each object once: leaders point back
+    at their agent)."""
+    if isinstance(v, (str, bytes, int, float, bool, type(None))):
+        return v
+    if id(v) in seen:
+        return "<seen>"
+    seen.add(id(v))
+    if isinstance(v, dict):
+        return tuple((repr(k), _plain(x, seen)) for k, x in v.items())
+    if isinstance(v, (list, tuple, set, frozenset)) or type(v).__name__ == "deque":
+        items = sorted(v, key=repr) if isinstance(v, (set, frozenset)) else v
+        return (type(v).__name__,) + tuple(_plain(x, seen) for x in items)
+    if hasattr(v, "__dict__"):
+        return (type(v).__name__,) + tuple((k, _plain(x, seen)) for k, x in vars(v).items()
+                                           if k not in ("now", "log", "estimator"))
+    return repr(v)
 
 
 def _tid(task_id: int) -> str:

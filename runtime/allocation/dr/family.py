@@ -304,6 +304,47 @@ class DrAgent:
         out += self.learning.tick(now)
         return self._route(out, now)
 
+    def quiet(self, now: float) -> bool:
+        """True when :meth:`on_tick` at ``now`` would send nothing and change nothing (its ``now`` aside, which
+        only a leader's view reads): every branch of the tick is tested with the tick's own comparisons, and any
+        branch this cannot settle cheaply (a leader's, a free robot's search for a task) counts as busy.  The
+        fleet node skips quiet ticks (:meth:`runtime.fleet.node.FleetNode.tick`)."""
+        if self.lead is not None or self.events:
+            return False
+        o, ms = self.o, self.membership
+        if ms is not None and (now - ms.leader_heard > o.leader_timeout or now >= ms.next_alive):
+            return False                                           # _member_tick
+        if self.offers and now >= self.offers.until:
+            return False                                           # _offers_tick
+        r = self.request                                           # _request_tick
+        if r is not None:
+            if now - r.since > o.time_leadership:
+                return False
+        elif not self.offers and (self._free() or o.carrier_leads and self._carrier_only()):
+            return False
+        for task, box in self.outboxes.items():                    # _reports
+            info = self.world.tasks.get(task)
+            if info is None or box.head is None and box.queue:
+                return False
+            if box.head is not None and now - box.sent >= o.report_resend:
+                to = self.world.leader_of(info, now)
+                if self.lead is not None and self.lead.task == task:
+                    to = self.robot_id
+                elif ms is not None and ms.task == task:
+                    to = ms.leader
+                if to is not None:
+                    return False
+            if box.idle and task not in (ms and ms.task, self.carrying):
+                return False
+        if self.carrying is not None and not self._loaded(self.carrying):
+            return False                                           # _after_unload
+        if ms is not None and not self._loaded(ms.task):
+            info = self.world.tasks.get(ms.task)
+            if info is not None and info.left_heard is not None and info.left_heard <= EPS:
+                return False
+        lr = self.learning                                         # learning.tick
+        return not lr.own or now - lr.repeated < o.sample_period
+
     # ------------------------------------------------------------------ dispatch
     def _dispatch(self, m, now: float) -> list:
         task = getattr(m, "task", None)

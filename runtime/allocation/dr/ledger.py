@@ -22,7 +22,7 @@ loss, duplication, reordering and a change of leader:
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from runtime.allocation.dr.messages import DrDeliver, DrLedger, DrLoad
 
@@ -204,7 +204,7 @@ class Outbox:
         if head is None or to is None or now - self.sent < resend:
             return []
         self.sent = now
-        return [type(head)(**{**head.__dict__, "dest": to})]
+        return [replace(head, dest=to)]
 
     def on_ledger(self, e: DrLedger) -> float | None:
         """The leader's entry for me: acknowledges the report in flight.  Returns the grant of a load it

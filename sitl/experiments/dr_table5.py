@@ -110,14 +110,16 @@ def run(args: argparse.Namespace) -> int:
         return C.estimate(args, NAME, tuple(CELLS.values()), setup)
     ex = C.execute(args, NAME, tuple(CELLS.values()), setup, f" --objects {args.objects}")
     runs, written = ex.runs, ex.written
+    fewer = not setup.max_objects or setup.max_objects < PAPER_OBJECTS
     setup_text = (f"DR, NM_I, soft deadline. {setup.describe()}. The paper moves {PAPER_OBJECTS} objects per run; "
-                  f"we stop at {setup.max_objects or '-'} (done per run: {C.pm([r['objects_done'] for r in runs])}), "
-                  f"so our totals are smaller by about that ratio: compare the utility per task done and the gains. "
+                  f"we stop at {setup.max_objects or '-'} (done per run: {C.pm([r['objects_done'] for r in runs])})"
+                  + (", so our totals are smaller by about that ratio: compare the utility per task done and the gains. "
+                     if fewer else ". ") +
                   f"With errors: eq. 5 with {C.ERROR_SPEED:.4f} m/s (0.8 du/tu). Each run starts from the off-line "
                   f"model ({ex.source}); on-line, every robot adds every finished task's sample (window 120). "
                   f"{args.seeds} seeds per cell. {ex.describe(args.jobs)}")
-    why = ("Why ours differ: fewer objects per run (so on-line learning has fewer samples to learn from: one per "
-           "task done); RoboCoT's bodies and avoidance are not ours, so the off-line model (fitted on our calibration) "
+    why = ("Why ours differ: " + ("fewer objects per run (so on-line learning has fewer samples to learn from: one "
+                                  "per task done); " if fewer else "") + "RoboCoT's bodies and avoidance are not ours, so the off-line model (fitted on our calibration) "
            "and the interference met differ from the paper's; U_max distribution and run count not given."
            + C.deadline_note(setup))
     sections = [("Setup", setup_text),

@@ -9,9 +9,11 @@ The roster the agent is built with is the config's ``comms.peers``.  Over a tran
 run time (:mod:`runtime.comms.transport`, ``joins``: Zenoh) the robot core hands it each robot that joins, once,
 with :meth:`Agent.on_peer_joined`, before that robot's first message (the mirror of :meth:`Agent.on_peer_lost`):
 the family decides what a join means (a new round includes it, the next call for bids counts its bids).  A peer
-lost and heard again is not a join: each family takes it back by its messages, as before.  ``on_peer_joined`` is
-the one optional member: an agent without it keeps the roster it was built with (messages from a joiner are then
-dropped by the family as from a robot outside the fleet).  It never opens a socket, sleeps or reads the wall clock:
+lost and heard again is not a join: each family takes it back by its messages, as before.  Two members are
+optional.  ``on_peer_joined``: an agent without it keeps the roster it was built with (messages from a joiner are
+then dropped by the family as from a robot outside the fleet).  ``quiet(now)``: True only when ``on_tick(now)``
+would send nothing and change nothing; the fleet node then skips the tick (:meth:`runtime.fleet.node.FleetNode.idle`,
+held to it by ``FleetNode.check_idle`` in tests/test_fleet_idle.py); an agent without it is ticked every period.  It never opens a socket, sleeps or reads the wall clock:
 every input carries ``now``.  The same agent runs in the daemon, in tests on the in-memory bus, and in
 fast experiment loops.
 
@@ -63,6 +65,7 @@ class Agent(Protocol):
     def on_tick(self, now: float) -> list: ...
     def on_peer_lost(self, robot_id: int, now: float) -> list: ...
     def on_peer_joined(self, robot_id: int, now: float) -> list: ...       # optional (the module docstring)
+    def quiet(self, now: float) -> bool: ...                                # optional (the module docstring)
     def on_progress(self, progress: Progress, now: float) -> list: ...
     def set_available(self, available: bool, now: float) -> list: ...
 

@@ -111,6 +111,7 @@ class StockGcs:
         self.mav = self.conn.mav
         self.got: list = []
         self.pending: list = []
+        self.resends = 0            # requests sent again because nothing answered (stock_upload)
     def heartbeat(self) -> None:
         self.mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_GCS, mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
 

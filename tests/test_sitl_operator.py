@@ -29,22 +29,39 @@ def _items(mav, system, points, command=WAYPOINT):
             for seq, (x, y) in enumerate(points)]
 
 
-def stock_upload(gcs: StockGcs, items, step=None, timeout=10.0, answer=None):
+def stock_upload(gcs: StockGcs, items, step=None, timeout=10.0, answer=None, resend=1.5):
     """A ground station's upload as pymavlink does it by hand (MAVProxy's wp module): MISSION_COUNT, then each
     MISSION_REQUEST(_INT) answered with its item, until MISSION_ACK.  ``answer(seq) -> message or None``
-    overrides what is sent for a request.  Returns the MISSION_ACK (or None on timeout)."""
-    gcs.mav.mission_count_send(gcs.system, 1, len(items), 0)
-    t0 = time.monotonic()
+    overrides what is sent for a request.  Until the robot answers at all, MISSION_COUNT is sent again every
+    ``resend`` wall seconds, as QGroundControl's PlanManager does on its ack timeout (``gcs.resends`` counts them).
+    Returns the MISSION_ACK (or None on timeout)."""
+    count = lambda: gcs.mav.mission_count_send(gcs.system, 1, len(items), 0)
+    count()
+    t0 = last = time.monotonic()
+    answered = False
     while time.monotonic() - t0 < timeout:
         for m in gcs.drain():
             if m.get_type() in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
+                answered = True
                 reply = items[m.seq] if answer is None else answer(m.seq)
                 if reply is not None:
                     gcs.mav.send(reply)
             elif m.get_type() == "MISSION_ACK":
                 return m
+        if not answered and time.monotonic() - last > resend:
+            count()
+            gcs.resends += 1
+            last = time.monotonic()
         step() if step is not None else time.sleep(0.002)
     return None
+
+
+def _why_no_answer(run, rid: int) -> str:
+    """What robot ``rid``'s link and mission server counted (nonzero only): for a failed exchange's message."""
+    from dataclasses import asdict
+    d = run.daemons[rid]
+    link = {k: v for k, v in asdict(d.link.counters).items() if v}
+    return f"robot {rid} at t={run.f.world.t:.1f} s: link {link}, mission {dict(d.core.ground.mission.stats)}"
 
 
 def _table(run):
@@ -364,7 +381,8 @@ def test_any_robot_gives_the_fleet_mission_and_an_empty_upload_withdraws_what_is
         while f.world.t < 60 and run.daemons[4].core.node.table.state(first) != 1:
             run.step()
         ack = stock_upload(g, [], run.step)
-        assert ack is not None and ack.type == MAV.MAV_MISSION_ACCEPTED
+        assert ack is not None and ack.type == MAV.MAV_MISSION_ACCEPTED, \
+            f"{_why_no_answer(run, 4)}; MISSION_COUNT sent {1 + g.resends} times"
         for _ in range(10):
             run.step()
         for d in run.daemons.values():

@@ -102,11 +102,13 @@ class StockGcs:
     """pymavlink's own connection to one robot's MAVLink port (udpout, as MAVProxy's --master=udpout does):
     requests go out from its socket and the robot answers to where they came from."""
 
-    def __init__(self, port: int, system: int, key: bytes | None = None):
+    def __init__(self, port: int, system: int, key: bytes | None = None, link_id: int = 0):
         self.conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=255, source_component=190,
                                                dialect="common")
         if key is not None:                       # a signed fleet: the ground station has the fleet key too
-            self.conn.setup_signing(key, sign_outgoing=True)
+            # on link id 0, as a station's first connection gets from pymavlink: pymavlink's own count goes up with
+            # every connection this process made before (test order), and at 2 it is the SITL operator's stream
+            self.conn.setup_signing(key, sign_outgoing=True, link_id=link_id)
         self.system = system
         self.mav = self.conn.mav
         self.got: list = []

@@ -514,3 +514,47 @@ def test_a_decoy_task_record_is_disowned_by_its_origin_or_held_and_never_driven_
     assert orphan not in f.robots[1].node._pending and orphan not in f.robots[1].node.table.entries
     assert f.robots[1].node.dropped["a task its origin never confirmed"] == 1
     assert seen and ATTACKER_POINT not in seen
+
+
+def test_two_ground_stations_on_one_signing_stream_are_named_once_when_the_older_is_dropped(caplog):
+    """Two stations signing as 255/190 on the same link id share one replay window: the one with the older
+    timestamps has its frames dropped as replays, and the robot says so once, naming both addresses."""
+    from runtime.comms.gcs import ground_mav
+    rx = MavlinkLink(1, "127.0.0.1:0", [], signing_key=KEY)
+    try:
+        stamp = signing_timestamp(time.time())
+        newer, older = ground_mav(KEY, link_id=2)[1], ground_mav(KEY, link_id=2)[1]
+        newer.signing.timestamp, older.signing.timestamp = stamp + 1000, stamp
+        other_link = ground_mav(KEY, link_id=7)[1]
+        other_link.signing.timestamp = stamp
+
+        def frame(mav):
+            return mav.command_long_encode(1, 1, 512, 0, 148, 0, 0, 0, 0, 0, 0).pack(mav)
+
+        with caplog.at_level("WARNING"):
+            rx.feed(frame(newer), 0.0, ("127.0.0.1", 5001))
+            for _ in range(3):
+                rx.feed(frame(older), 0.0, ("127.0.0.1", 5002))
+            rx.feed(frame(other_link), 0.0, ("127.0.0.1", 5003))
+        assert rx.counters.gcs_requests == 2 and rx.counters.bad_signature_dropped == 3
+        said = [r.getMessage() for r in caplog.records if "replay window" in r.getMessage()]
+        assert said == ["ground station at 127.0.0.1:5002 signs as system 255 component 190 on link id 2, as the one "
+                        "at 127.0.0.1:5001 does: one replay window for both, so the older timestamps are dropped as "
+                        "replays; give one of them another link id or system id"]
+    finally:
+        rx.close()
+
+
+def test_a_station_with_another_key_is_no_stream_clash(caplog):
+    from runtime.comms.gcs import ground_mav
+    rx = MavlinkLink(1, "127.0.0.1:0", [], signing_key=KEY)
+    try:
+        ours, theirs = ground_mav(KEY, link_id=2)[1], ground_mav(OTHER_KEY, link_id=2)[1]
+        with caplog.at_level("WARNING"):
+            rx.feed(ours.command_long_encode(1, 1, 512, 0, 148, 0, 0, 0, 0, 0, 0).pack(ours), 0.0, ("127.0.0.1", 5001))
+            rx.feed(theirs.command_long_encode(1, 1, 512, 0, 148, 0, 0, 0, 0, 0, 0).pack(theirs), 0.0,
+                    ("127.0.0.1", 5002))
+        assert rx.counters.bad_signature_dropped == 1
+        assert not [r for r in caplog.records if "replay window" in r.getMessage()]
+    finally:
+        rx.close()

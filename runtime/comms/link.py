@@ -60,13 +60,17 @@ destination.
   replay window for both refused the older as a replay (848 of 2,000 alternating frames through one router);
 * ``GCS_LINK`` (1): a robot to ground stations (telemetry, HEARTBEAT, RobotState, STATUSTEXT, answers);
 * ``OPERATOR_LINK`` (2): the SITL operator's ground station (:class:`runtime.comms.gcs.GroundStation`);
-* ``MISSION_LINK`` (3): ``mrta mission``.  Stock ground stations choose their own (pymavlink counts from 0).
+* ``MISSION_LINK`` (3): ``mrta mission``.  Stock ground stations choose their own (pymavlink counts from 0, a
+  link per connection in the process).
 
 A robot takes a frame from a robot system id (1..250) only if it is signed on a peer link id: a frame a robot
 sent to a ground station and replayed to its peers is dropped and counted (``replayed_dropped``); so is a
 peer frame replayed to :class:`~runtime.comms.gcs.GroundStation`, which takes robot frames on ``GCS_LINK``
-only.  Frames from ground-station system ids (above 250) are taken on any link id: each ground station
-program signs with its own, so two of them never share a replay window.
+only.  Frames from ground-station system ids (above 250) are taken on any link id.  Two ground stations that
+sign with the same system id, component id and link id share one replay window: the one whose timestamps are
+older has every frame dropped as a replay (``bad_signature_dropped``).  That happens to a stock station on 255/190
+beside the SITL operator when pymavlink gave it link id 2 (its third connection in the process); the robot logs
+one warning per such address, naming both stations (at most ``MAX_GCS_STREAMS`` of them).
 
 Counters (:class:`LinkCounters`): every datagram read ends in exactly one outcome, ``received`` (it gave at
 least one frame that was taken: an agent message for us, a HEARTBEAT, a ground-station request) or one drop
@@ -78,6 +82,7 @@ may carry several.
 """
 from __future__ import annotations
 
+import hashlib
 import ipaddress
 import math
 import os
@@ -106,6 +111,7 @@ KERNEL_DROPS_PERIOD = 1.0              # s between reads of the kernel's drop co
 KEY_REFUSAL_TEXT = "SETUP_SIGNING refused: key is set on the robot"      # one STATUSTEXT (<= 50 characters)
 KEY_REFUSAL_PERIOD = 10.0              # s between two refusal STATUSTEXTs to one address
 MAX_KEY_REFUSAL_SENDERS = 64           # addresses told within one period; beyond, refusals go unanswered
+MAX_GCS_STREAMS = 64                   # ground-station signing streams whose address is kept (to name a clash)
 MAV_SEVERITY_WARNING = 4
 _IFLAG_SIGNED = 0x01
 
@@ -411,6 +417,8 @@ class MavlinkLink:
         self.gcs_inbox: list[tuple[object, tuple]] = []       # (pymavlink message, source address)
         self._gcs_seen: dict[tuple, float] = {}               # ground-station addresses -> last heard
         self._key_refusals: dict[tuple, float] = {}           # addresses told KEY_REFUSAL_TEXT -> when
+        self._gcs_streams: dict[tuple, tuple] = {}            # (link id, system, component) -> the address it came from
+        self._clashes: set[tuple] = set()                     # (stream, address) pairs already warned of
 
     # ------------------------------------------------------------------ addresses
     @property
@@ -628,7 +636,10 @@ class MavlinkLink:
         c = self.counters
         kind = m.get_type()
         if kind == "BAD_DATA":
-            return refusal(m), None
+            why = refusal(m)
+            if why == "bad_signature_dropped" and addr is not None:
+                self._stream_clash(bytes(getattr(m, "data", b"")), addr)
+            return why, None
         if kind.startswith("UNKNOWN"):
             return "unknown", None
         if kind == "SETUP_SIGNING":
@@ -644,6 +655,10 @@ class MavlinkLink:
         src = m.get_srcSystem()
         if self.signing and m.get_signed() and 1 <= src <= MAX_ROBOT_ID and m.get_link_id() not in PEER_LINKS:
             return "replayed_dropped", None       # a robot's frame to a ground station, replayed to us
+        if self.signing and m.get_signed() and src > MAX_ROBOT_ID and addr is not None:
+            streams, key = self._gcs_streams, (m.get_link_id(), src, m.get_srcComponent())
+            if key in streams or len(streams) < MAX_GCS_STREAMS:
+                streams[key] = addr
         if kind == "HEARTBEAT":
             why = self._on_heartbeat(m, now)
             if why is None and m.type == self._gcs_type and addr is not None:
@@ -667,6 +682,27 @@ class MavlinkLink:
             return "not_for_us", None
         c.agent_received += 1
         return None, agent
+
+    def _stream_clash(self, frame: bytes, addr) -> None:
+        """A ground station's frame refused for its signature though signed with our key (so for its timestamp):
+        if another address signed on the same link id, system and component (one replay window for both), say so
+        once for this address."""
+        key = self.mav.signing.secret_key
+        if key is None or len(frame) < 25 or frame[0] != 0xFD or frame[1] + 25 != len(frame):
+            return                                # not one whole signed MAVLink 2 frame
+        if frame[5] <= MAX_ROBOT_ID:
+            return
+        if hashlib.sha256(bytes(key) + frame[:-6]).digest()[:6] != frame[-6:]:
+            return                                # another key: not a clash
+        key = (frame[-13], frame[5], frame[6])
+        other = self._gcs_streams.get(key)
+        if other is None or other == addr or (key, addr) in self._clashes or len(self._clashes) >= MAX_GCS_STREAMS:
+            return
+        self._clashes.add((key, addr))
+        self.log.warning("ground station at %s:%s signs as system %d component %d on link id %d, as the one at "
+                         "%s:%s does: one replay window for both, so the older timestamps are dropped as replays; "
+                         "give one of them another link id or system id", *addr[:2], key[1], key[2], key[0],
+                         *other[:2])
 
     def _unsigned_refusal(self, m, addr) -> str | None:
         """Why an unsigned frame other than a HEARTBEAT (let through by ``_allow_unsigned`` only from an

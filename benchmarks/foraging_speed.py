@@ -4,8 +4,10 @@ foraging world, agents and executors included, beside the same scenario in pybul
 Target: the 3600 s run in under 30 s of wall time on one core (120x real time).  Printed in one run:
 
 * the run's wall and CPU time and the real-time factor, with the cost split (physics, sonar, executive,
-  agents, harness bookkeeping) that the harness measures, and the time spent inside pybullet's own calls and
-  inside the daemons' allocation stack (:class:`CallClock`): what the run would take were everything else free;
+  agents, harness bookkeeping) that the harness measures;
+* the same run again with the time spent inside pybullet's own calls and inside the daemons' allocation stack
+  timed (:class:`CallClock`, which costs a wrapper around each call, hence a run of its own; ``--no-calls``
+  skips it): what the run would take were everything else free;
 * the same run with the compiled kernels (:mod:`runtime.control.compiled`, numba) off, that is the numpy code
   they stand in for (``--numpy-seconds``, default the same length; 0 skips it), and whether its result is the
   same: what the kernels buy, in one run;
@@ -136,20 +138,26 @@ class CallClock:
             setattr(self.owner, name, call)
 
 
-def measure(cfg: ForagingConfig, world=None) -> tuple[dict, float, float, object]:
-    """(timing split, wall s, CPU s, result) of one run; the timing split also holds ``engine``, the part of
-    ``physics`` spent inside pybullet's own calls (its step, the motor targets and joint states the worlds set and
-    read), and ``node``, the part of ``agents`` spent inside the daemon's own allocation stack (each robot's
-    :class:`FleetNode` and its agent: messages, ticks, lost peers, progress)."""
+def measure(cfg: ForagingConfig, world=None, calls: bool = False) -> tuple[dict, float, float, object]:
+    """(timing split, wall s, CPU s, result) of one run.  With ``calls`` the timing split also holds ``engine``,
+    the part of ``physics`` spent inside pybullet's own calls (its step, the motor targets and joint states the
+    worlds set and read), and ``node``, the part of ``agents`` spent inside the daemon's own allocation stack (each
+    robot's :class:`FleetNode` and its agent: messages, ticks, lost peers, progress).  Timing those calls costs (a
+    Python wrapper around each), so the real-time factor comes from a run without, and these from a second run."""
     fr = ForagingRun(cfg, world)
     try:
-        with CallClock(p, ENGINE_CALLS) as engine, CallClock(FleetNode, NODE_CALLS) as node:
+        with CallClock(p, ENGINE_CALLS if calls else ()) as engine, \
+                CallClock(FleetNode, NODE_CALLS if calls else ()) as node:
             w0, c0 = time.perf_counter(), time.process_time()
             res = fr.run()
             wall, cpu = time.perf_counter() - w0, time.process_time() - c0
     finally:
         fr.close()
     return {**res.timing, "engine": engine.seconds, "node": node.seconds}, wall, cpu, res
+
+
+def same_result(a, b) -> bool:
+    return (len(a.finished), a.moved, a.messages.sent) == (len(b.finished), b.moved, b.messages.sent)
 
 
 def split(timing: dict) -> str:
@@ -166,6 +174,8 @@ def main() -> None:
                          "numba: default --seconds; 0 skips it)")
     ap.add_argument("--default-seconds", type=float, default=60.0,
                     help="simulated s of the run at pybullet's defaults (default 60; it is slow)")
+    ap.add_argument("--no-calls", dest="calls", action="store_false",
+                    help="skip the second run that times the calls inside pybullet and the allocation stack")
     ap.add_argument("--robots", type=int, default=10)
     ap.add_argument("--method", default="standin", help="standin (tests/foraging_standin.py) or a registered method")
     ap.add_argument("--seed", type=int, default=1)
@@ -187,17 +197,20 @@ def main() -> None:
     rest = sum(v for k, v in timing.items() if k not in ("total", "executive", "engine", "node"))
     print(f"  without the executive the rest (world, agents, harness) takes {rest:.1f} s: "
           f"{args.seconds / max(rest, 1e-9):.0f}x real time at best with these parts as they are")
-    floor = timing["engine"] + timing["node"]
-    print(f"  inside pybullet (its step, the motor targets and joint states) {timing['engine']:.1f} s, inside the "
-          f"daemon's allocation stack (FleetNode and agent) {timing['node']:.1f} s: with the executive, the sonar and "
-          f"every other line free the run would still take {floor:.1f} s ({args.seconds / max(floor, 1e-9):.0f}x)")
+    if args.calls:
+        t_in, w_in, c_in, r_in = measure(cfg, calls=True)
+        floor = t_in["engine"] + t_in["node"]
+        print(f"  the same run again with its calls timed: CPU {c_in:.1f} s ({100 * (c_in / cpu - 1):+.0f} % for the "
+              f"timing), {'the same result' if same_result(r_in, res) else 'A DIFFERENT RESULT'}; inside pybullet (its "
+              f"step, the motor targets and joint states) {t_in['engine']:.1f} s, inside the daemon's allocation stack "
+              f"(FleetNode and agent) {t_in['node']:.1f} s: with the executive, the sonar and every other line free the "
+              f"run would still take {floor:.1f} s ({args.seconds / max(floor, 1e-9):.0f}x)")
     numpy_seconds = args.seconds if args.numpy_seconds is None else args.numpy_seconds
     if numpy_seconds > 0 and compiled.AVAILABLE:
         with compiled.numpy_code():                   # every kernel's caller takes its numpy code again
             t_np, w_np, c_np, r_np = measure(ForagingConfig(**{**cfg.__dict__, "time_limit": numpy_seconds}))
         same = "" if numpy_seconds != args.seconds else (
-            ", the same result" if (len(r_np.finished), r_np.moved, r_np.messages.sent) ==
-            (len(res.finished), res.moved, res.messages.sent) else ", A DIFFERENT RESULT")
+            ", the same result" if same_result(r_np, res) else ", A DIFFERENT RESULT")
         print(f"numpy code (kernels off), {numpy_seconds:g} s simulated: wall {w_np:.1f} s, CPU {c_np:.1f} s, "
               f"{numpy_seconds / w_np:.0f}x real time, {numpy_seconds / c_np:.0f}x in CPU; objects done "
               f"{len(r_np.finished)}, {r_np.moved:.0f} wu moved, {r_np.messages.sent} messages sent{same}; compiled "

@@ -6,6 +6,7 @@ import json
 import math
 import random
 
+import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
@@ -159,3 +160,23 @@ def test_truncated_and_bit_flipped_files_load_or_raise_input_error(tmp_path_fact
     for pos, bit in flips:
         data[pos % len(data)] ^= 1 << bit
     _load_or_input_error(tmp_path_factory.mktemp("f"), bytes(data[:cut % (len(data) + 1)]))
+
+
+def test_models_with_the_same_samples_share_one_fit_and_predict_as_a_fresh_fit():
+    """A fleet's robots load one model file: the SVR is fitted once; what it predicts is what a fit of its own
+    gives, and a model with other samples (or hyperparameters) gets a fit of its own."""
+    from runtime.allocation.dr import interference as I
+    samples = [(n, d, 0.05 * n - 0.002 * d * n) for n in (1, 2, 3, 4) for d in (1.0, 3.0, 6.0)]
+    a, b = I.InterferenceModel(samples, C=2.0, gamma=0.5), I.InterferenceModel(list(samples), C=2.0, gamma=0.5)
+    assert a._svr is b._svr
+    other = I.InterferenceModel(samples, C=3.0, gamma=0.5)
+    assert other._svr is not a._svr
+    fresh_svr, fresh_scale = a._fit_svr()
+    assert fresh_svr is not a._svr
+    lo, span, mean, sd = fresh_scale
+    for n, d in ((1.5, 2.0), (3.0, 5.5), (4.0, 0.0)):
+        x = (np.array([[n, d]]) - lo) / span
+        assert a.predict(n, d) == pytest.approx(float(fresh_svr.predict(x)[0]) * sd + mean, rel=0, abs=1e-12)
+    for k in range(I.MAX_FITS + 3):                      # the cache stays bounded
+        I.InterferenceModel(samples, C=1.0 + k, gamma=0.5)
+    assert len(I._FITS) <= I.MAX_FITS

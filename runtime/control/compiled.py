@@ -107,7 +107,10 @@ def first_hits(a, lim, g, speeds, first, nw, steps):
     vmin, vmax = speeds[0], speeds[nv - 1]
     for i in range(nw):
         hit[:] = False
+        nhit = 0
         for t in range(steps):
+            if nhit == nv:                  # every speed of this turn rate hit already: later steps change nothing
+                break
             r = i * steps + t
             gr = g[r]
             for q in range(n):
@@ -133,6 +136,7 @@ def first_hits(a, lim, g, speeds, first, nw, steps):
                 while s < nv and speeds[s] <= x1:
                     if not hit[s]:
                         hit[s] = True
+                        nhit += 1
                         out[s * nw + i] = first[steps - t]
                     s += 1
     return out

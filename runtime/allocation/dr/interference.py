@@ -41,6 +41,7 @@ GRID_C = (0.1, 1.0, 10.0, 100.0)           # C = 1000 makes a 120-sample refit ~
 GRID_GAMMA = (0.1, 0.3, 1.0, 3.0, 10.0, 30.0)
 FOLDS = 5
 MAX_SAMPLES = 100_000
+MAX_FITS = 32             # fitted SVRs kept by (samples, C, gamma, epsilon): a fleet's robots load one model file
 
 Sample = tuple[float, float, float]
 
@@ -57,6 +58,9 @@ def _check_sample(s, where: str) -> Sample:
     if n <= 0 or d < 0:
         raise InputError(f"{where}: expected n > 0 robots and d >= 0 m, got n={n:g}, d={d:g}")
     return n, d, i
+
+
+_FITS: dict[tuple, tuple] = {}        # (samples, C, gamma, epsilon) -> (fitted SVR, scale), oldest first
 
 
 class InterferenceModel:
@@ -118,13 +122,26 @@ class InterferenceModel:
         if not self.samples:
             self._svr = None
             return
+        key = (tuple(self.samples), self.C, self.gamma, self.epsilon)
+        fitted = _FITS.get(key)
+        if fitted is None:
+            fitted = self._fit_svr()
+            if len(_FITS) >= MAX_FITS:
+                del _FITS[next(iter(_FITS))]
+            _FITS[key] = fitted
+        self._svr, self._scale = fitted
+
+    def _fit_svr(self):
+        """(SVR fitted on the samples, scale).  libsvm's fit is deterministic and nothing changes an SVR after it,
+        so models holding the same samples and hyperparameters share one (10 robots loading one file: 1 fit, not
+        10; 0.1 s each)."""
         from sklearn.svm import SVR
 
         x, y, scale = self._arrays()
         lo, span, mean, sd = scale
-        self._scale = scale
-        self._svr = SVR(kernel="rbf", C=self.C, gamma=self.gamma, epsilon=self.epsilon)
-        self._svr.fit((x - lo) / span, (y - mean) / sd)
+        svr = SVR(kernel="rbf", C=self.C, gamma=self.gamma, epsilon=self.epsilon)
+        svr.fit((x - lo) / span, (y - mean) / sd)
+        return svr, scale
 
     # ------------------------------------------------------------------ use
     def predict(self, n: float, d: float) -> float:

@@ -165,3 +165,17 @@ def test_a_host_of_many_robots_turns_the_kernels_on_and_numpy_code_holds_them_of
         assert not compiled.ENABLED
     kinematic({1: (0.0, 0.0)}, method="auction")
     assert compiled.ENABLED
+
+
+def test_the_sitl_sonar_ring_matches_numpy_for_packed_and_scattered_robots(monkeypatch):
+    """The foraging world's closed-form sonar (sitl/sensing/sonar_ring.py): robots scattered over the arena, packed
+    so their discs touch and overlap, alone, and against the walls."""
+    from sitl.sensing import sonar_ring as S
+    rng = np.random.default_rng(11)
+    for trial in range(600):
+        n = int(rng.integers(1, 12))
+        spread = (6.0, 0.6, 6.4)[trial % 3]
+        poses = np.column_stack((rng.uniform(-spread, spread, (n, 2)), rng.uniform(-4, 4, n)))
+        fast, slow = both(monkeypatch, lambda: S.ring_ranges(poses, 0.25, 6.5))
+        assert same(fast, slow), (trial, poses)
+        assert fast.shape == (n, S.N_SONARS) and (fast <= S.MAX_RANGE).all()

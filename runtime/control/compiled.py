@@ -25,6 +25,7 @@ import contextlib
 import importlib.util
 import math
 import os
+import sys
 
 import numpy as np
 
@@ -53,24 +54,30 @@ def numpy_code():
         AVAILABLE, ENABLED = saved
 
 
-def _jit(fn):
-    """``fn`` as a kernel.  numba is imported and every kernel wrapped only at the first call of one (a process
-    that never runs the executive, or runs it without numba, does not pay for the import: about 0.3 s)."""
+def kernel(fn):
+    """``fn`` as a kernel: its module's name for it becomes the compiled function.  numba is imported and every
+    kernel not yet compiled is wrapped only at the first call of one (a process that never runs the executive, or
+    runs it without numba, does not pay for the import: about 0.3 s).  Kernels of other modules (the SITL's sonar
+    ring) use it too; callers look a kernel up in its module at each call."""
     if not AVAILABLE:
         return fn
     _KERNELS.append(fn)
 
     def first_call(*args):
         _compile_all()
-        return globals()[fn.__name__](*args)
+        return vars(sys.modules[fn.__module__])[fn.__name__](*args)
     first_call.__name__, first_call.__doc__ = fn.__name__, fn.__doc__
     return first_call
 
 
+_jit = kernel
+
+
 def _compile_all() -> None:
     from numba import njit
-    for fn in _KERNELS:         # all at once: a kernel that calls another resolves it from this module's globals
-        globals()[fn.__name__] = njit(cache=True, nogil=True, error_model="numpy")(fn)
+    while _KERNELS:             # all at once: a kernel that calls another resolves it from its module's globals
+        fn = _KERNELS.pop(0)
+        vars(sys.modules[fn.__module__])[fn.__name__] = njit(cache=True, nogil=True, error_model="numpy")(fn)
 
 
 @_jit

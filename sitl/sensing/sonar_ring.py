@@ -26,6 +26,7 @@ import math
 
 import numpy as np
 
+from runtime.control import compiled
 from runtime.drivers.arcos_protocol import P3DX_SH
 
 BEAM = math.radians(25.0)
@@ -58,6 +59,10 @@ def ring_ranges(poses: np.ndarray, radius: float, half_size: float, beam: float 
     n = len(poses)
     half = beam / 2
     ox, oy, h = transducers(poses)
+    if compiled.ENABLED:            # numpy's arctan2 is its own (vectorised, not the C library's): it stays here
+        bearing = np.arctan2(poses[None, None, :, 1] - oy[..., None], poses[None, None, :, 0] - ox[..., None])
+        return _ring_kernel(np.ascontiguousarray(poses, dtype=float), ox, oy, h, bearing, float(radius),
+                            float(half_size), half, float(max_range), float(min_range), _WALL_NORMALS)
     # walls: perpendicular distance and the angle from the beam to the wall's normal
     p = np.stack([half_size - ox, half_size + ox, half_size - oy, half_size + oy], axis=-1)      # (N, 16, 4)
     off = np.maximum(np.abs(_wrap(_WALL_NORMALS - h[..., None])) - half, 0.0)
@@ -77,6 +82,44 @@ def ring_ranges(poses: np.ndarray, radius: float, half_size: float, beam: float 
         r[np.arange(n), :, np.arange(n)] = np.inf                       # a robot's own body
         best = np.minimum(best, r.min(axis=-1))
     return np.where(best < min_range, max_range, np.minimum(best, max_range))
+
+
+@compiled.kernel
+def _ring_kernel(poses, ox, oy, h, bearing, radius, half_size, half, max_range, min_range, normals):
+    """:func:`ring_ranges` from the transducers' poses and the bearings to every robot (numpy's), transducer by
+    transducer: the same floating-point operations in the same order (numpy's ``np.maximum(a, b)`` is ``a if a >= b
+    else b``, ``%`` is Python's, ``hypot`` the C library's), so the same bits (tests/test_control_compiled.py)."""
+    n, m = ox.shape
+    out = np.empty((n, m))
+    two_pi, quarter = 2 * math.pi, math.pi / 2
+    for i in range(n):
+        for j in range(m):
+            x, y, hj = ox[i, j], oy[i, j], h[i, j]
+            best = np.inf
+            for w in range(4):
+                p = half_size - x if w == 0 else half_size + x if w == 1 else half_size - y if w == 2 \
+                    else half_size + y
+                off = abs((normals[w] - hj + math.pi) % two_pi - math.pi) - half
+                off = off if off >= 0.0 else 0.0
+                cos_off = math.cos(off)
+                if cos_off > 1e-9:
+                    v = (p if p >= 0.0 else 0.0) / (cos_off if cos_off >= 1e-9 else 1e-9)
+                    best = v if v <= best else best
+            for k in range(n):
+                if k == i:
+                    continue                                       # a robot's own body
+                dist = np.hypot(poses[k, 0] - x, poses[k, 1] - y)
+                off = abs((bearing[i, j, k] - hj + math.pi) % two_pi - math.pi) - half
+                off = off if off >= 0.0 else 0.0
+                perp = dist * math.sin(off)
+                along = dist * math.cos(off)
+                if perp <= radius and along > 0 and off < quarter:
+                    inside = radius * radius - perp * perp
+                    r = dist - radius if off == 0.0 else along - math.sqrt(inside if inside >= 0.0 else 0.0)
+                    r = r if r >= 0.0 else 0.0
+                    best = r if r <= best else best
+            out[i, j] = max_range if best < min_range else (best if best <= max_range else max_range)
+    return out
 
 
 def readings(ranges: np.ndarray, max_range: float = MAX_RANGE) -> tuple[tuple[float, float], ...]:

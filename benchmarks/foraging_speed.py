@@ -200,8 +200,8 @@ def main() -> None:
     if args.calls:
         t_in, w_in, c_in, r_in = measure(cfg, calls=True)
         floor = t_in["engine"] + t_in["node"]
-        print(f"  the same run again with its calls timed: CPU {c_in:.1f} s ({100 * (c_in / cpu - 1):+.0f} % for the "
-              f"timing), {'the same result' if same_result(r_in, res) else 'A DIFFERENT RESULT'}; inside pybullet (its "
+        print(f"  the same run again with its calls timed: CPU {c_in:.1f} s (untimed {cpu:.1f} s), "
+              f"{'the same result' if same_result(r_in, res) else 'A DIFFERENT RESULT'}; inside pybullet (its "
               f"step, the motor targets and joint states) {t_in['engine']:.1f} s, inside the daemon's allocation stack "
               f"(FleetNode and agent) {t_in['node']:.1f} s: with the executive, the sonar and every other line free the "
               f"run would still take {floor:.1f} s ({args.seconds / max(floor, 1e-9):.0f}x)")

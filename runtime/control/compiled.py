@@ -2,8 +2,8 @@
 
 Each kernel does, element by element, the same floating-point operations in the same order as the numpy code it
 stands in for (:mod:`runtime.control.behaviours`, :mod:`runtime.control.arbiter`,
-:mod:`runtime.control.pure_pursuit`), so the results are the same
-bit for bit; what numpy would hand to BLAS (a matrix product, which may fuse multiplies and adds) or to its own
+:mod:`runtime.control.pure_pursuit`, and the SITL's sonar ring, which registers its kernel with :func:`kernel`),
+so the results are the same bit for bit; what numpy would hand to BLAS (a matrix product, which may fuse multiplies and adds) or to its own
 vectorised transcendental functions (``exp``) stays in numpy and is passed in.  The callers take the kernels while
 :data:`ENABLED` is True, and their numpy code otherwise: ``tests/test_control_compiled.py`` holds the two paths to
 the same bits.

@@ -164,3 +164,12 @@ def test_estimate_runs_one_calibration_run_per_kind_and_writes_nothing(tmp_path,
     assert out.count("calibration: ") == 2                  # off-line and on-line cells cost apart
     assert "dr: 6 runs x" in out and "dr on-line: 6 runs x" in out and "CPU h" in out and "steady" in out
     assert not (tmp_path / "t5" / "dr_table5_runs.csv").exists()
+
+
+def test_a_table_without_an_object_count_is_estimated_to_its_time_limit_not_the_calibrations(tmp_path, capsys):
+    """Table 3 ends at its time limit (60 s quick): a 3 s calibration run is scaled to 60 s runs."""
+    assert cli.main(["experiment", "dr-table3", "--quick", "--seeds", "1", "--estimate", "--estimate-time", "3",
+                     "--out", str(tmp_path / "t3")]) == 0
+    out = capsys.readouterr().out
+    lines = [line for line in out.splitlines() if " runs x " in line]
+    assert lines and all("(60-60 simulated s each" in line for line in lines), out

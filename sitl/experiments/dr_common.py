@@ -321,7 +321,7 @@ def estimate(args, name: str, cells: Sequence[Cell], setup: Setup) -> int:
         n = sum(1 for c in cells if kind_of(c) == kind) * args.seeds
         want = setup.max_objects
         both = [run_length(k["finished"], k["sim"], want, steady) for steady in (True, False)]
-        sims = [min(setup.time_limit, needed) for _, needed in both]
+        sims = [min(setup.time_limit, needed) if want else setup.time_limit for _, needed in both]   # else the limit
         cpus = [k["cpu"] / k["sim"] * sim for sim in sims]
         total = [t + n * c for t, c in zip(total, cpus)]
         rate, needed = both[1]

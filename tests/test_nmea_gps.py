@@ -403,7 +403,8 @@ def test_the_emulators_enu_to_geodetic_is_pymap3ds_to_the_last_printed_digit():
     import pymap3d
 
     from runtime.config import Datum
-    from sitl.devices.nmea_gps import EnuToGeodetic, gga_sentence, rmc_sentence
+    from runtime.localization.enu import EnuToGeodetic
+    from sitl.devices.nmea_gps import gga_sentence, rmc_sentence
     rng = random.Random(7)
     for _ in range(40):
         d = Datum(lat=rng.uniform(-85, 85), lon=rng.uniform(-180, 180), alt=rng.uniform(-100, 3000))

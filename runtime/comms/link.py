@@ -687,22 +687,22 @@ class MavlinkLink:
         """A ground station's frame refused for its signature though signed with our key (so for its timestamp):
         if another address signed on the same link id, system and component (one replay window for both), say so
         once for this address."""
-        key = self.mav.signing.secret_key
-        if key is None or len(frame) < 25 or frame[0] != 0xFD or frame[1] + 25 != len(frame):
+        secret = self.mav.signing.secret_key
+        if secret is None or len(frame) < 25 or frame[0] != 0xFD or frame[1] + 25 != len(frame):
             return                                # not one whole signed MAVLink 2 frame
         if frame[5] <= MAX_ROBOT_ID:
             return
-        if hashlib.sha256(bytes(key) + frame[:-6]).digest()[:6] != frame[-6:]:
+        if hashlib.sha256(bytes(secret) + frame[:-6]).digest()[:6] != frame[-6:]:
             return                                # another key: not a clash
-        key = (frame[-13], frame[5], frame[6])
-        other = self._gcs_streams.get(key)
-        if other is None or other == addr or (key, addr) in self._clashes or len(self._clashes) >= MAX_GCS_STREAMS:
+        stream = (frame[-13], frame[5], frame[6])
+        other = self._gcs_streams.get(stream)
+        if other is None or other == addr or (stream, addr) in self._clashes or len(self._clashes) >= MAX_GCS_STREAMS:
             return
-        self._clashes.add((key, addr))
+        self._clashes.add((stream, addr))
         self.log.warning("ground station at %s:%s signs as system %d component %d on link id %d, as the one at "
                          "%s:%s does: one replay window for both, so the older timestamps are dropped as replays; "
-                         "give one of them another link id or system id", *addr[:2], key[1], key[2], key[0],
-                         *other[:2])
+                         "give one of them another link id or system id", *addr[:2], stream[1], stream[2],
+                         stream[0], *other[:2])
 
     def _unsigned_refusal(self, m, addr) -> str | None:
         """Why an unsigned frame other than a HEARTBEAT (let through by ``_allow_unsigned`` only from an

@@ -3,8 +3,9 @@
 Each kernel does, element by element, the same floating-point operations in the same order as the numpy code it
 stands in for (:mod:`runtime.control.behaviours`, :mod:`runtime.control.arbiter`,
 :mod:`runtime.control.pure_pursuit`, and the SITL's sonar ring, which registers its kernel with :func:`kernel`),
-so the results are the same bit for bit; what numpy would hand to BLAS (a matrix product, which may fuse multiplies and adds) or to its own
-vectorised transcendental functions (``exp``) stays in numpy and is passed in.  The callers take the kernels while
+so the results are the same bit for bit; what numpy would hand to BLAS (a matrix product, which may fuse
+multiplies and adds) or to its own vectorised transcendental functions (``exp``, ``arctan2``) stays in numpy and is
+passed in.  The callers take the kernels while
 :data:`ENABLED` is True, and their numpy code otherwise: ``tests/test_control_compiled.py`` holds the two paths to
 the same bits.
 
@@ -70,9 +71,6 @@ def kernel(fn):
     return first_call
 
 
-_jit = kernel
-
-
 def _compile_all() -> None:
     from numba import njit
     while _KERNELS:             # all at once: a kernel that calls another resolves it from its module's globals
@@ -80,7 +78,7 @@ def _compile_all() -> None:
         vars(sys.modules[fn.__module__])[fn.__name__] = njit(cache=True, nogil=True, error_model="numpy")(fn)
 
 
-@_jit
+@kernel
 def near_points(pts, reach, c2):
     """The range points within ``reach`` of the robot (``|p|^2 <= reach^2``) and, per point, ``min(c2 - |p|^2,
     -1e-12)``: the start of :meth:`runtime.control.behaviours.AvoidObstacles.time_to_collision`."""
@@ -100,7 +98,7 @@ def near_points(pts, reach, c2):
     return keep[:k], lim[:k]
 
 
-@_jit
+@kernel
 def first_hits(a, lim, g, speeds, first, nw, steps):
     """Per arc (speed-major), the time of the first sampled step that hits a range point, ``first[0]`` (inf) for
     none: :meth:`runtime.control.behaviours.AvoidObstacles.time_to_collision` from its product ``a`` (rows x
@@ -149,7 +147,7 @@ def first_hits(a, lim, g, speeds, first, nw, steps):
     return out
 
 
-@_jit
+@kernel
 def lane_gap(pts, clearance, before):
     """``min(x) - clearance`` over the points ahead (``x > 0``) within the clearance of the heading line
     (``|y| < clearance``) and short of ``before``; inf for none (``AvoidObstacles._lane_gap_of``)."""
@@ -161,14 +159,14 @@ def lane_gap(pts, clearance, before):
     return best - clearance
 
 
-@_jit
+@kernel
 def _clip01(t):
     """``np.minimum(np.maximum(t, 0.0), 1.0)`` of one value (a tie gives the second; NaN stays)."""
     t = 0.0 if t <= 0.0 else t
     return 1.0 if t >= 1.0 else t
 
 
-@_jit
+@kernel
 def project(a, d, len2_div, seg_len, len_div, start, end, x, y, fresh, lo, hi, look2, progress):
     """:meth:`runtime.control.pure_pursuit.PurePursuit._project` of a path of two or more points (its per-segment
     constants ``a`` .. ``end``), the robot at (``x``, ``y``): the arc length of the closest point, over the whole
@@ -216,7 +214,7 @@ def project(a, d, len2_div, seg_len, len_div, start, end, x, y, fresh, lo, hi, l
     return s[at] if math.isfinite(best) else progress
 
 
-@_jit
+@kernel
 def peak_exponent(vs, ws, v, w, sv, sw, width2):
     """``-0.5 * (((vs - v) / sv) ** 2 + ((ws - w) / sw) ** 2) / width2``: what
     :func:`runtime.control.behaviours.peak` takes the exponential of."""
@@ -228,7 +226,7 @@ def peak_exponent(vs, ws, v, w, sv, sw, width2):
     return out
 
 
-@_jit
+@kernel
 def range_votes(votes, veto, ttc, moving, right, veto_time, horizon, keep, push):
     """:meth:`AvoidObstacles.ballot`'s range part, in place: moving arcs hitting within ``veto_time`` vetoed, arcs
     that hit voted at most ``-(1 - ttc / horizon)`` (``np.minimum``: NaN wins, a tie gives the second), with
@@ -248,7 +246,7 @@ def range_votes(votes, veto, ttc, moving, right, veto_time, horizon, keep, push)
         votes[k] = min(max(x, -1.0), 1.0) if not math.isnan(x) else x
 
 
-@_jit
+@kernel
 def weighted_sum(total, votes, weight):
     """``total += weight * clip(votes, -1, 1)`` in place (the arbiter's sum of one ballot); NaN votes stay NaN."""
     for k in range(total.shape[0]):
@@ -258,7 +256,7 @@ def weighted_sum(total, votes, weight):
         total[k] += weight * x
 
 
-@_jit
+@kernel
 def best_arc(grid, veto):
     """(scores, index of the best): the smoothed sum with vetoed arcs at -inf, and its first maximum (-1 when every
     arc is vetoed)."""

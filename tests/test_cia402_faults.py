@@ -104,6 +104,21 @@ def test_a_silent_master_stops_both_drives(rig):
     assert rig.left.error_code == P.EMCY_HEARTBEAT
 
 
+def test_a_drive_allowed_a_clock_lag_waits_that_much_longer_for_a_silent_master(rig):
+    """Daemons in their own processes read the world's clock from a file; the world catching up on a lag runs
+    ahead of them, so the launcher widens each drive's consumer window by that lag (sitl.launcher.MAX_LAG)."""
+    lag = 0.25
+    rig.dev.allow_clock_lag(lag)
+    rig.polling = False
+    t0 = rig.t
+    t_silent = rig.step(2.0, until=lambda r: r.left.stats.consumer_timeouts > 0)
+    consumer = SILENT_PERIODS * rig.cfg.heartbeat
+    assert t_silent is not None
+    assert consumer + lag - rig.cfg.heartbeat < t_silent - t0 <= consumer + lag + rig.period
+    assert rig.right.stats.consumer_timeouts == 1
+    assert rig.step(2.0, until=lambda r: r.left.state == r.right.state == P.FAULT) is not None
+
+
 def test_a_drive_that_leaves_operational_is_a_fault(rig):
     with rig.base._receiving():
         rig.base.drives[0].node.nmt.state = "PRE-OPERATIONAL"       # as a second master might

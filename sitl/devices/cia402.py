@@ -160,6 +160,7 @@ class EmulatedDrive:
         self._heard = 0               # consumer heartbeats received (receive thread)
         self._heard_seen = 0
         self._heard_at: float | None = None                 # sim time; None: not monitoring yet
+        self.clock_lag = 0.0          # s of sim time the world may run ahead of the master's view of its clock
         self._last: float | None = None
         self._event_due: dict[int, float] = {}              # TPDO COB-ID -> next event-timer time
         self._syncs = 0
@@ -395,13 +396,13 @@ class EmulatedDrive:
         if self._heard != self._heard_seen:
             self._heard_seen = self._heard
             self._heard_at = now                     # monitoring starts with the first heartbeat
-        if self._heard_at is None or now - self._heard_at <= self._consumer[1]:
+        if self._heard_at is None or now - self._heard_at <= self._consumer[1] + self.clock_lag:
             return
         self._heard_at = None                        # re-armed by the next heartbeat
         self.stats.consumer_timeouts += 1
         option = struct.unpack("<h", self.node.get_data(0x6007, 0))[0]
         self.log.warning("drive %d: master (node %d) silent for more than %.2f s: abort connection option %d",
-                         self.id, self._consumer[0], self._consumer[1], option)
+                         self.id, self._consumer[0], self._consumer[1] + self.clock_lag, option)
         before = self.drive.state
         if option == P.ABORT_FAULT:
             self._fault(P.EMCY_HEARTBEAT)
@@ -477,6 +478,13 @@ class Cia402Device:
         if self.hub is None:
             self._thread = threading.Thread(target=self._pump_loop, name=f"cia402-{self.channel}", daemon=True)
             self._thread.start()
+
+    def allow_clock_lag(self, seconds: float) -> None:
+        """The world may run ``seconds`` of sim time ahead of the master's view of its clock (daemons in their own
+        processes read it from a file while the world catches up on a lag): the drives' heartbeat consumers
+        wait that much longer before they call the master silent, so a world catching up is no master fault."""
+        for d in self.drives.values():
+            d.clock_lag = seconds
 
     def pump(self) -> int:
         """Let both drives handle what waits on their buses."""

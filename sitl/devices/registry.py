@@ -13,7 +13,10 @@ A new base's emulator is one module plus one line in :data:`DEVICES`.  Its class
 * ``service(now)``: sample the body, act on the driver's bytes, send what is due at sim time ``now``;
 * ``close()``: close the link;
 * ``endpoint() -> dict``: the ``base:`` keys that point the driver at the device, e.g.
-  ``{"port": "/dev/pts/5", "baudrate": 115200}``; they must load as that driver's ``Config``.
+  ``{"port": "/dev/pts/5", "baudrate": 115200}``; they must load as that driver's ``Config``;
+* optionally ``allow_clock_lag(seconds)``: a device that times its driver's silence in sim time (a CiA 402 drive's
+  heartbeat consumer) adds ``seconds`` to the window.  The launcher calls it when each daemon runs in a process of
+  its own, where the world may run that far ahead of a daemon's last read of the clock.
 """
 from __future__ import annotations
 

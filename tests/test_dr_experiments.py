@@ -232,7 +232,8 @@ def test_fig3_bins_are_labelled_by_the_edge_nearer_the_deadline():
 
 def test_pm_is_mean_and_sample_sd():
     assert C.pm([1.0, 3.0]) == "2.0 ± 1.4"
-    assert C.pm([float("nan"), 2.0]) == "2.0 ± 0.0"
+    assert C.pm([float("nan"), 2.0]) == "2.0"                 # one value: no spread to give
+    assert C.pm([2.0, 2.0]) == "2.0 ± 0.0"
     assert C.pm([]) == "-"
 
 

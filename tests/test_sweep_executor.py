@@ -55,6 +55,12 @@ def test_cluster_local_returns_the_rows_of_jobs_1(local_rows, tmp_path, monkeypa
     assert len(C.load_checkpoint(checkpoint)) == 2                           # each run written as it finished
 
 
+def test_a_resumed_report_says_which_runs_its_wall_time_covers(local_rows):
+    resumed = C.Execution(local_rows, "shipped", "mrta experiment dr-table3", 12.0, [], kept=1).describe(2)
+    assert "wall time 12 s for the 1 of 2 runs this invocation ran; 1 came from an earlier one's checkpoint" in resumed
+    assert "checkpoint" not in C.Execution(local_rows, "shipped", "mrta experiment dr-table3", 12.0, []).describe(2)
+
+
 def test_resume_runs_only_what_a_stop_left(local_rows, tmp_path, monkeypatch):
     model = C.shipped_model()
     checkpoint = tmp_path / "done.jsonl"

@@ -244,6 +244,7 @@ class Execution:
     written: list[Path]
     late: str = "all"
     online: bool = False
+    kept: int = 0                 # runs taken from the checkpoint of an earlier invocation (--resume)
 
     @property
     def runs(self) -> list[dict]:
@@ -261,8 +262,12 @@ class Execution:
         if self.online:
             rule += ("Every cell that uses the model learns on-line (section 5.4: each finished task's sample is "
                      "shared and every robot refits on its newest 120), not off-line only as the paper's run. ")
-        return (rule + f"Command: `{self.command}` on commit {commit()}: wall time {self.wall:.0f} s ({per_run:.0f} s per "
-                f"run, {len(self.results)} runs, {jobs} jobs).")
+        n = len(self.results)
+        wall = (f"wall time {self.wall:.0f} s" if not self.kept else
+                f"wall time {self.wall:.0f} s for the {n - self.kept} of {n} runs this invocation ran; {self.kept} "
+                f"came from an earlier one's checkpoint (--resume), perhaps on an older commit")
+        return (rule + f"Command: `{self.command}` on commit {commit()}: {wall} ({per_run:.0f} s per run, {n} runs, "
+                f"{jobs} jobs).")
 
 
 def execute(args, name: str, cells: Sequence[Cell], setup: Setup, extra: str = "") -> Execution:
@@ -285,7 +290,8 @@ def execute(args, name: str, cells: Sequence[Cell], setup: Setup, extra: str = "
                + (f" --deadline {args.deadline:g}" if args.deadline else "")
                + (" --no-sonar" if args.no_sonar else "") + (f" --late {args.late}" if args.late != "all" else "")
                + (" --online" if online else ""))
-    return Execution(results, source, command, wall, write_rows(out, name, results), args.late, online)
+    kept = sum(run_key(cell, setup, seed, model) in done for cell, setup, seed in jobs)
+    return Execution(results, source, command, wall, write_rows(out, name, results), args.late, online, kept)
 
 
 def kind_of(cell: Cell) -> str:
@@ -490,12 +496,18 @@ QUICK = Setup(robots=5, objects=1, weight=4.0, deadline=60.0, time_limit=60.0, m
 # ---------------------------------------------------------------------- statistics and report
 
 def pm(values: Sequence[float], digits: int = 1) -> str:
-    """``mean +- sd`` over seeds (NaNs left out; sd 0 for one value; '-' for none)."""
+    """``mean +- sd`` over seeds (NaNs left out); the value alone for one, as one run has no spread; '-' for none."""
     v = [x for x in values if isinstance(x, (int, float)) and not math.isnan(x)]
     if not v:
         return "-"
-    sd = float(np.std(v, ddof=1)) if len(v) > 1 else 0.0
-    return f"{np.mean(v):.{digits}f} ± {sd:.{digits}f}"
+    if len(v) == 1:
+        return f"{v[0]:.{digits}f}"
+    return f"{np.mean(v):.{digits}f} ± {float(np.std(v, ddof=1)):.{digits}f}"
+
+
+def seeds_text(seeds: int, unit: str = "cell") -> str:
+    """How many seeds each cell ran, and what that means for the spread."""
+    return f"{seeds} seeds per {unit}" if seeds > 1 else f"1 seed per {unit}, so no spread is given"
 
 
 def by_cell(runs: Sequence[dict], label: str, key: str) -> list[float]:

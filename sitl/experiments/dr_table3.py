@@ -83,6 +83,10 @@ def histogram_table(runs: list[dict], objects: list[dict]) -> str:
     return report.markdown_table(rows)
 
 
+def spread_note(seeds: int) -> str:
+    return f"mean ± sd over {seeds} seeds" if seeds > 1 else "one seed, so no spread"
+
+
 def why(setup: C.Setup, runs: list[dict]) -> str:
     done = np.mean([r["objects_done"] for r in runs]) if runs else 0
     scaled = C.deadline_note(setup)
@@ -90,9 +94,8 @@ def why(setup: C.Setup, runs: list[dict]) -> str:
             f"discs (0.5 m) avoid each other with the real executive's sonar arbiter, a circuit round an object "
             f"drives at most three robots and three objects' circuits meet at D's area (the calibration's Fig. 2, "
             f"docs/foraging.md), so fewer tasks are done ({done:.1f} per run here) and their times are longer.{scaled} "
-            f"The paper gives no number of runs, we give mean ± sd over {len({r['seed'] for r in runs})} "
-            f"seeds; objects are placed at random in a {setup.size:g} x {setup.size:g} m arena (the paper's arena is not "
-            f"given).")
+            f"The paper gives no number of runs; ours: {spread_note(len({r['seed'] for r in runs}))}; objects are "
+            f"placed at random in a {setup.size:g} x {setup.size:g} m arena (the paper's arena is not given).")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -104,8 +107,9 @@ def run(args: argparse.Namespace) -> int:
     ex = C.execute(args, NAME, CELLS, setup)
     runs, objects, written = ex.runs, ex.objects, ex.written
     setup_text = (f"SR (single round; Greedy: every bidder awarded), hard deadline. {setup.describe()}. Interference "
-                  f"model: {ex.source}. {args.seeds} seeds per strategy (seed = robot starts, object places and the "
-                  f"bus). Percentages are of the tasks done in a run, then mean ± sd over seeds. "
+                  f"model: {ex.source}. {C.seeds_text(args.seeds, 'strategy')} (seed = robot "
+                  f"starts, object places and the bus). Percentages are of the tasks done in a run, then mean ± sd "
+                  f"over seeds. "
                   f"{ex.describe(args.jobs)}")
     sections = [("Setup", setup_text),
                 ("Table 3: % of tasks done within the deadline (SR, hard deadline)", table(runs) + "\n\n" + why(setup, runs)),

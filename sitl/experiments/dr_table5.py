@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
                      if fewer else ". ") +
                   f"With errors: eq. 5 with {C.ERROR_SPEED:.4f} m/s (0.8 du/tu). Each run starts from the off-line "
                   f"model ({ex.source}); on-line, every robot adds every finished task's sample (window 120). "
-                  f"{args.seeds} seeds per cell. {ex.describe(args.jobs)}")
+                  f"{C.seeds_text(args.seeds)}. {ex.describe(args.jobs)}")
     why = ("Why ours differ: " + ("fewer objects per run (so on-line learning has fewer samples to learn from: one "
                                   "per task done); " if fewer else "") + "RoboCoT's bodies and avoidance are not ours, so the off-line model (fitted on our calibration) "
            "and the interference met differ from the paper's; U_max distribution and run count not given."

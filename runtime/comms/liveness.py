@@ -77,6 +77,8 @@ class PeerLiveness:
         self.lost.discard(sender)
 
     def due(self, now: float, beats_lost: Iterable[int] = (), beats_alive: Iterable[int] = ()) -> list[int]:
+        if not self.beats_silent and isinstance(beats_lost, (list, tuple, set)) and not beats_lost:
+            return []                              # no heartbeat silent, none gone silent now: nobody is due
         peers = self.messages.peers
         self.beats_silent -= set(beats_alive)
         for p in beats_lost:

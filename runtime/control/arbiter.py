@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 from typing import Protocol
 
 import numpy as np
@@ -41,11 +41,26 @@ class ArcSet:
         """The fields' hash, computed once: the behaviours' caches look an arc set up several times a cycle."""
         return self._hash
 
+    def __eq__(self, other) -> bool:
+        """Equal axes; the same object at once (every robot with the same tunables shares one: :meth:`uniform`)."""
+        if self is other:
+            return True
+        if not isinstance(other, ArcSet):
+            return NotImplemented
+        return self._hash == other._hash and self.speeds == other.speeds and self.turn_rates == other.turn_rates
+
     @classmethod
     def uniform(cls, max_speed: float = 0.5, max_reverse: float = 0.2, max_turn_rate: float = 2.0,
                 n_speeds: int = 11, n_turns: int = 21) -> "ArcSet":
         """Evenly spaced forward speeds in [0, max_speed], plus reverse speeds down to -max_reverse at the same
-        spacing, and turn rates in [-max_turn_rate, max_turn_rate] (defaults fit an iRobot Create 2)."""
+        spacing, and turn rates in [-max_turn_rate, max_turn_rate] (defaults fit an iRobot Create 2).  One object
+        per set of arguments: an arc set is immutable, and the behaviours' caches keyed by it then find their
+        entries by identity instead of comparing its axes (several times a cycle per robot)."""
+        return _uniform(cls, float(max_speed), float(max_reverse), float(max_turn_rate), int(n_speeds), int(n_turns))
+
+    @classmethod
+    def _build_uniform(cls, max_speed: float, max_reverse: float, max_turn_rate: float, n_speeds: int,
+                       n_turns: int) -> "ArcSet":
         fwd = np.linspace(0.0, max_speed, n_speeds)
         dv = fwd[1] - fwd[0] if n_speeds > 1 else max_speed
         rev = -np.arange(dv, max_reverse + 1e-9, dv)[::-1] if max_reverse > 0 and dv > 0 else np.zeros(0)
@@ -72,6 +87,12 @@ class ArcSet:
         iv = _first_closest(self.speeds, v)
         iw = _first_closest(self.turn_rates, w)
         return iv * len(self.turn_rates) + iw
+
+
+@lru_cache(maxsize=64)
+def _uniform(cls, max_speed: float, max_reverse: float, max_turn_rate: float, n_speeds: int,
+             n_turns: int) -> ArcSet:
+    return cls._build_uniform(max_speed, max_reverse, max_turn_rate, n_speeds, n_turns)
 
 
 def _first_closest(axis: tuple[float, ...], x: float) -> int:
@@ -150,14 +171,16 @@ class Arbiter:
         ballots = [(b.ballot(arcs, now), b) for b in self.behaviours]
         total = np.zeros(len(arcs.v))
         veto = np.zeros(len(arcs.v), dtype=bool)
+        nan = False                                     # known to hold no NaN while every ballot went compiled
         for ballot, b in ballots:
             if fast and ballot.votes.dtype == np.float64:
-                compiled.weighted_sum(total, ballot.votes, float(b.weight))
+                nan = compiled.weighted_sum(total, ballot.votes, float(b.weight))
             else:
                 total += b.weight * _clip1(ballot.votes)  # clipping maps +-inf to +-1, as nan_to_num then clip does
+                nan = None
             if ballot.veto is not None:
                 veto |= ballot.veto
-        if np.isnan(total).any():                       # a NaN vote (or weight): sum again with NaN votes as 0
+        if nan or (nan is None and np.isnan(total).any()):   # a NaN vote (or weight): sum again, NaN votes as 0
             total[:] = 0.0
             for ballot, b in ballots:
                 total += b.weight * _clip1(np.nan_to_num(ballot.votes, nan=0.0))

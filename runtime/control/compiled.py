@@ -248,12 +248,18 @@ def range_votes(votes, veto, ttc, moving, right, veto_time, horizon, keep, push)
 
 @kernel
 def weighted_sum(total, votes, weight):
-    """``total += weight * clip(votes, -1, 1)`` in place (the arbiter's sum of one ballot); NaN votes stay NaN."""
+    """``total += weight * clip(votes, -1, 1)`` in place (the arbiter's sum of one ballot); NaN votes stay NaN.
+    Returns whether ``total`` holds a NaN afterwards (``np.isnan(total).any()`` without another pass)."""
+    nan = False
     for k in range(total.shape[0]):
         x = votes[k]
         if not math.isnan(x):
             x = min(max(x, -1.0), 1.0)
-        total[k] += weight * x
+        s = total[k] + weight * x
+        total[k] = s
+        if math.isnan(s):
+            nan = True
+    return nan
 
 
 @kernel

@@ -23,6 +23,7 @@ as ``(bearing, distance)`` from the robot centre, as the ARCOS driver does.
 from __future__ import annotations
 
 import math
+from itertools import compress
 
 import numpy as np
 
@@ -138,4 +139,4 @@ def readings_all(ranges: np.ndarray, max_range: float = MAX_RANGE) -> list[tuple
     py = _UY + ranges * _SH
     bearing, dist = np.arctan2(py, px).tolist(), np.hypot(px, py).tolist()
     keep = (ranges < max_range).tolist()
-    return [tuple((b, d) for b, d, k in zip(bs, ds, ks) if k) for bs, ds, ks in zip(bearing, dist, keep)]
+    return [tuple(compress(zip(bs, ds), ks)) for bs, ds, ks in zip(bearing, dist, keep)]

@@ -78,6 +78,7 @@ class DrAgent:
         self.lead: Leader | None = None
         self.membership: Membership | None = None
         self.carrying: int | None = None              # task of the load a carrier delivers
+        self._committed: tuple | None = None          # (task, partners, role, commitments) last returned
         self.carrier_requests = 0                      # times it asked to lead as a carrier (``carrier_leads``)
         self.offers = Offers()
         self.outboxes: dict[int, Outbox] = {}
@@ -153,10 +154,15 @@ class DrAgent:
         info = self.world.tasks.get(t) if t is not None else None
         if info is None or info.task is None:
             return ()
+        last = self._committed                  # read several times a cycle: the same answer, built once
+        if last is not None and last[0] is info.task and last[1] == partners and last[2] == role:
+            return last[3]
         params = (("delivery", tuple(self.o.delivery)), ("load", self.o.load_capacity),
                   ("load_time", self.o.load_time), ("reach", self.o.reach),
                   ("delivery_reach", self.o.delivery_reach or self.o.reach))
-        return (Commitment(info.task, partners, role, params),)
+        out = (Commitment(info.task, partners, role, params),)
+        self._committed = (info.task, partners, role, out)
+        return out
 
     @property
     def converged(self) -> bool:

@@ -510,6 +510,11 @@ def seeds_text(seeds: int, unit: str = "cell") -> str:
     return f"{seeds} seeds per {unit}" if seeds > 1 else f"1 seed per {unit}, so no spread is given"
 
 
+def spread_text(seeds: int) -> str:
+    """What the tables' ``mean ± sd`` is over, as :func:`pm` prints it."""
+    return f"mean ± sd over {seeds} seeds" if seeds > 1 else "one seed, so no spread"
+
+
 def by_cell(runs: Sequence[dict], label: str, key: str) -> list[float]:
     return [float(r[key]) for r in runs if r["cell"] == label]
 

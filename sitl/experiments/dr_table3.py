@@ -83,10 +83,6 @@ def histogram_table(runs: list[dict], objects: list[dict]) -> str:
     return report.markdown_table(rows)
 
 
-def spread_note(seeds: int) -> str:
-    return f"mean ± sd over {seeds} seeds" if seeds > 1 else "one seed, so no spread"
-
-
 def why(setup: C.Setup, runs: list[dict]) -> str:
     done = np.mean([r["objects_done"] for r in runs]) if runs else 0
     scaled = C.deadline_note(setup)
@@ -94,7 +90,7 @@ def why(setup: C.Setup, runs: list[dict]) -> str:
             f"discs (0.5 m) avoid each other with the real executive's sonar arbiter, a circuit round an object "
             f"drives at most three robots and three objects' circuits meet at D's area (the calibration's Fig. 2, "
             f"docs/foraging.md), so fewer tasks are done ({done:.1f} per run here) and their times are longer.{scaled} "
-            f"The paper gives no number of runs; ours: {spread_note(len({r['seed'] for r in runs}))}; objects are "
+            f"The paper gives no number of runs; ours: {C.spread_text(len({r['seed'] for r in runs}))}; objects are "
             f"placed at random in a {setup.size:g} x {setup.size:g} m arena (the paper's arena is not given).")
 
 

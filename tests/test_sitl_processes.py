@@ -98,9 +98,11 @@ def test_daemons_end_when_the_launcher_is_killed(tmp_path):
     while not (run_dir / "clock").exists():
         assert time.monotonic() < deadline and sitl.poll() is None
         time.sleep(0.05)
+    # the launcher's own children: a child a daemon forks (a subprocess between fork and exec) shows the daemon's
+    # command line for a moment too (a clean clone counted 5)
     pids = [int(p.name) for p in __import__("pathlib").Path("/proc").iterdir() if p.name.isdigit()
-            and str(run_dir) in _cmdline(p) and " daemon " in _cmdline(p)]
-    assert len(pids) == 4
+            and str(run_dir) in _cmdline(p) and " daemon " in _cmdline(p) and _ppid(p) == sitl.pid]
+    assert len(pids) == 4, pids
     sitl.kill()
     sitl.wait()
     deadline = time.monotonic() + 10
@@ -114,6 +116,16 @@ def _cmdline(proc_dir) -> str:
         return (proc_dir / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
     except OSError:
         return ""
+
+
+def _ppid(proc_dir) -> int | None:
+    try:
+        for line in (proc_dir / "status").read_text().splitlines():
+            if line.startswith("PPid:"):
+                return int(line.split()[1])
+    except (OSError, ValueError):
+        pass
+    return None
 
 
 def _alive(pid: int) -> bool:

@@ -56,11 +56,12 @@ class ArcSet:
         spacing, and turn rates in [-max_turn_rate, max_turn_rate] (defaults fit an iRobot Create 2).  One object
         per set of arguments: an arc set is immutable, and the behaviours' caches keyed by it then find their
         entries by identity instead of comparing its axes (several times a cycle per robot)."""
-        return _uniform(cls, float(max_speed), float(max_reverse), float(max_turn_rate), int(n_speeds), int(n_turns))
+        return cls._uniform(float(max_speed), float(max_reverse), float(max_turn_rate), int(n_speeds), int(n_turns))
 
     @classmethod
-    def _build_uniform(cls, max_speed: float, max_reverse: float, max_turn_rate: float, n_speeds: int,
-                       n_turns: int) -> "ArcSet":
+    @lru_cache(maxsize=64)
+    def _uniform(cls, max_speed: float, max_reverse: float, max_turn_rate: float, n_speeds: int,
+                 n_turns: int) -> "ArcSet":
         fwd = np.linspace(0.0, max_speed, n_speeds)
         dv = fwd[1] - fwd[0] if n_speeds > 1 else max_speed
         rev = -np.arange(dv, max_reverse + 1e-9, dv)[::-1] if max_reverse > 0 and dv > 0 else np.zeros(0)
@@ -87,12 +88,6 @@ class ArcSet:
         iv = _first_closest(self.speeds, v)
         iw = _first_closest(self.turn_rates, w)
         return iv * len(self.turn_rates) + iw
-
-
-@lru_cache(maxsize=64)
-def _uniform(cls, max_speed: float, max_reverse: float, max_turn_rate: float, n_speeds: int,
-             n_turns: int) -> ArcSet:
-    return cls._build_uniform(max_speed, max_reverse, max_turn_rate, n_speeds, n_turns)
 
 
 def _first_closest(axis: tuple[float, ...], x: float) -> int:

@@ -290,7 +290,8 @@ def execute(args, name: str, cells: Sequence[Cell], setup: Setup, extra: str = "
                + (f" --deadline {args.deadline:g}" if args.deadline else "")
                + (" --no-sonar" if args.no_sonar else "") + (f" --late {args.late}" if args.late != "all" else "")
                + (" --online" if online else ""))
-    kept = sum(run_key(cell, setup, seed, model) in done for cell, setup, seed in jobs)
+    from_checkpoint = {id(r) for r in done.values()}     # run_all hands those results back as they are
+    kept = sum(id(r) in from_checkpoint for r in results)
     return Execution(results, source, command, wall, write_rows(out, name, results), args.late, online, kept)
 
 
@@ -508,6 +509,13 @@ def pm(values: Sequence[float], digits: int = 1) -> str:
 def seeds_text(seeds: int, unit: str = "cell") -> str:
     """How many seeds each cell ran, and what that means for the spread."""
     return f"{seeds} seeds per {unit}" if seeds > 1 else f"1 seed per {unit}, so no spread is given"
+
+
+def objects_text(setup: Setup, paper_objects: int, runs: Sequence[dict], label: str, fewer: str) -> str:
+    """'The paper moves N objects per run; we stop at M (LABEL: done per run)', then ``fewer`` when M < N."""
+    short = not setup.max_objects or setup.max_objects < paper_objects
+    return (f"The paper moves {paper_objects} objects per run; we stop at {setup.max_objects or '-'} ({label}: "
+            f"{pm([r['objects_done'] for r in runs])})" + (fewer if short else ". "))
 
 
 def spread_text(seeds: int) -> str:

@@ -135,11 +135,9 @@ def run(args: argparse.Namespace) -> int:
         return C.estimate(args, NAME, CELLS, setup)
     ex = C.execute(args, NAME, CELLS, setup, f" --objects {args.objects}")
     runs, objects, written = ex.runs, ex.objects, ex.written
-    spread = C.pm([r["objects_done"] for r in runs])
-    fewer = not setup.max_objects or setup.max_objects < PAPER_OBJECTS
-    setup_text = (f"{setup.describe()}. The paper moves {PAPER_OBJECTS} objects per run; we stop at "
-                  f"{setup.max_objects or '-'} (objects done per run over all cells: {spread})"
-                  + (", so each run's shares rest on fewer tasks than the paper's. " if fewer else ". ") +
+    setup_text = (f"{setup.describe()}. "
+                  + C.objects_text(setup, PAPER_OBJECTS, runs, "objects done per run over all cells",
+                                   ", so each run's shares rest on fewer tasks than the paper's. ") +
                   f"Interference model: {ex.source}. {C.seeds_text(args.seeds)}. {ex.describe(args.jobs)}")
     why = ("Why ours differ: RoboCoT's robots and avoidance are not ours (Pioneer-sized discs under the real "
            "executive's sonar avoidance; a circuit round an object drives at most three robots and three circuits "

@@ -111,10 +111,10 @@ def run(args: argparse.Namespace) -> int:
     ex = C.execute(args, NAME, tuple(CELLS.values()), setup, f" --objects {args.objects}")
     runs, written = ex.runs, ex.written
     fewer = not setup.max_objects or setup.max_objects < PAPER_OBJECTS
-    setup_text = (f"DR, NM_I, soft deadline. {setup.describe()}. The paper moves {PAPER_OBJECTS} objects per run; "
-                  f"we stop at {setup.max_objects or '-'} (done per run: {C.pm([r['objects_done'] for r in runs])})"
-                  + (", so our totals are smaller by about that ratio: compare the utility per task done and the gains. "
-                     if fewer else ". ") +
+    setup_text = (f"DR, NM_I, soft deadline. {setup.describe()}. "
+                  + C.objects_text(setup, PAPER_OBJECTS, runs, "done per run",
+                                   ", so our totals are smaller by about that ratio: compare the utility per task "
+                                   "done and the gains. ") +
                   f"With errors: eq. 5 with {C.ERROR_SPEED:.4f} m/s (0.8 du/tu). Each run starts from the off-line "
                   f"model ({ex.source}); on-line, every robot adds every finished task's sample (window 120). "
                   f"{C.seeds_text(args.seeds)}. {ex.describe(args.jobs)}")
